@@ -1,0 +1,13 @@
+"""Errors a user can act on. The CLI prints their message on one line and exits non-zero."""
+
+
+class SerenityError(Exception):
+    """Base of every error Serenity reports to a user (bad input, missing system packages...)."""
+
+
+class SceneError(SerenityError, ValueError):
+    """A scene, mesh, material, camera, sun or file that cannot be used, with the reason."""
+
+
+class GLUnavailableError(SerenityError, RuntimeError):
+    """No headless OpenGL context could be created; the message names the packages to install."""

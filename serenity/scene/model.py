@@ -1,0 +1,418 @@
+"""The scene model: plain data, validated on construction.
+
+Conventions (everyone builds on these):
+- World space is right-handed, **y up, metres** (as glTF). Compass: **+x east, -z north**
+  (so +z is south). Azimuth is measured from north towards east.
+- Colours are **linear** RGB. Albedo textures are converted sRGB→linear on load
+  (:mod:`serenity.scene.texture`), with a full mip chain kept for GL and for the CPU ray tracer.
+- Radiometry: radiance in W·m⁻²·sr⁻¹ per RGB channel ("radiometric RGB"); the sun is given by
+  its irradiance on a surface facing it at the ground, in W·m⁻² per channel, and its angular
+  diameter. A diffuse surface of albedo ρ lit by the sun at zenith angle θ reflects
+  L = ρ/π · E · cos θ. The frame's HDR output is this radiance; exposure is applied only before
+  the tone map.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from serenity.errors import SceneError
+
+SUN_ANGULAR_DIAMETER_DEG = 0.53
+
+
+def _vec3(v, what: str) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise SceneError(f"{what} must be 3 finite numbers, got {v!r}")
+    return a
+
+
+def _unit(v, what: str) -> np.ndarray:
+    a = _vec3(v, what)
+    n = float(np.linalg.norm(a))
+    if n < 1e-12:
+        raise SceneError(f"{what} must be a non-zero vector")
+    return a / n
+
+
+@dataclass
+class Texture:
+    """A linear-RGB(A) texture with its full mip chain.
+
+    ``mips[0]`` is (H, W, C) float32 linear (C = 3 or 4); ``mips[k]`` is the 2×2 box filter of
+    ``mips[k-1]`` (odd sizes clamp), down to 1×1. ``name`` is the source (file path or label).
+    """
+
+    name: str
+    mips: list[np.ndarray]
+
+    @property
+    def width(self) -> int:
+        return int(self.mips[0].shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.mips[0].shape[0])
+
+    @property
+    def channels(self) -> int:
+        return int(self.mips[0].shape[2])
+
+
+@dataclass
+class Material:
+    """A Phong material with optional mirror reflection and glass transmission.
+
+    Attributes:
+        name: identifier (unique in a scene).
+        albedo: linear diffuse reflectance (3,), in [0, 1]; multiplied by ``albedo_texture``.
+        albedo_texture: optional linear texture (sRGB-decoded at load).
+        specular: Phong specular strength k_s in [0, 1] (energy-normalised lobe, see raster docs).
+        shininess: Phong exponent n ≥ 1.
+        reflectivity: mirror reflectance at normal incidence in [0, 1] (mirrors, polished metal);
+            pixels with reflectivity > 0 are ray traced.
+        transparency: fraction of light transmitted in [0, 1] (glass); pixels with
+            transparency > 0 are ray traced for refraction.
+        ior: index of refraction (glass ≈ 1.5), used for refraction and the Fresnel term.
+    """
+
+    name: str
+    albedo: np.ndarray = field(default_factory=lambda: np.array([0.8, 0.8, 0.8]))
+    albedo_texture: Texture | None = None
+    specular: float = 0.0
+    shininess: float = 32.0
+    reflectivity: float = 0.0
+    transparency: float = 0.0
+    ior: float = 1.5
+
+    def __post_init__(self):
+        self.albedo = _vec3(self.albedo, f"material {self.name!r} albedo")
+        if np.any(self.albedo < 0) or np.any(self.albedo > 1):
+            raise SceneError(f"material {self.name!r}: albedo must be in [0, 1], got {self.albedo.tolist()}")
+        for attr, lo, hi in (("specular", 0, 1), ("reflectivity", 0, 1), ("transparency", 0, 1)):
+            v = float(getattr(self, attr))
+            if not (lo <= v <= hi):
+                raise SceneError(f"material {self.name!r}: {attr} must be in [{lo}, {hi}], got {v}")
+            setattr(self, attr, v)
+        self.shininess = float(self.shininess)
+        if not (self.shininess >= 1.0 and math.isfinite(self.shininess)):
+            raise SceneError(f"material {self.name!r}: shininess must be >= 1, got {self.shininess}")
+        self.ior = float(self.ior)
+        if not (1.0 <= self.ior <= 4.0):
+            raise SceneError(f"material {self.name!r}: ior must be in [1, 4], got {self.ior}")
+
+    @property
+    def needs_ray_tracing(self) -> bool:
+        return self.reflectivity > 0.0 or self.transparency > 0.0
+
+
+@dataclass
+class Mesh:
+    """An indexed triangle mesh with per-vertex attributes and per-face materials.
+
+    Attributes:
+        name: identifier (for error messages).
+        positions: (V, 3) float32, metres, world space.
+        normals: (V, 3) float32, unit length.
+        uvs: (V, 2) float32 texture coordinates (zeros when the source has none).
+        faces: (F, 3) int32 vertex indices, counter-clockwise seen from the front.
+        face_material: (F,) int32 indices into ``Scene.materials``.
+    """
+
+    name: str
+    positions: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray
+    faces: np.ndarray
+    face_material: np.ndarray
+
+    def __post_init__(self):
+        self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
+        self.faces = np.ascontiguousarray(self.faces, dtype=np.int32).reshape(-1, 3)
+        v = len(self.positions)
+        if self.uvs is None:
+            self.uvs = np.zeros((v, 2), np.float32)
+        self.uvs = np.ascontiguousarray(self.uvs, dtype=np.float32).reshape(-1, 2)
+        self.face_material = np.ascontiguousarray(self.face_material, dtype=np.int32).reshape(-1)
+        if self.normals is None:
+            self.normals = vertex_normals(self.positions, self.faces)
+        self.normals = np.ascontiguousarray(self.normals, dtype=np.float32).reshape(-1, 3)
+        self.validate()
+
+    def validate(self) -> None:
+        n = self.name
+        if not np.all(np.isfinite(self.positions)):
+            bad = int(np.count_nonzero(~np.isfinite(self.positions).all(axis=1)))
+            raise SceneError(f"mesh {n!r}: {bad} vertices have NaN or infinite coordinates")
+        if len(self.faces) and (self.faces.min() < 0 or self.faces.max() >= len(self.positions)):
+            raise SceneError(f"mesh {n!r}: face indices out of range 0..{len(self.positions) - 1}")
+        if len(self.normals) != len(self.positions) or len(self.uvs) != len(self.positions):
+            raise SceneError(f"mesh {n!r}: normals/uvs must have one entry per vertex")
+        if len(self.face_material) != len(self.faces):
+            raise SceneError(f"mesh {n!r}: face_material must have one entry per face")
+        if not np.all(np.isfinite(self.normals)) or not np.all(np.isfinite(self.uvs)):
+            raise SceneError(f"mesh {n!r}: normals or uvs contain NaN or infinite values")
+
+    @property
+    def triangle_count(self) -> int:
+        return int(len(self.faces))
+
+
+def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals; vertices on no (non-degenerate) face get +y."""
+    p = np.asarray(positions, np.float64)
+    f = np.asarray(faces, np.int64)
+    n = np.zeros_like(p)
+    if len(f):
+        fn = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+        for k in range(3):
+            np.add.at(n, f[:, k], fn)
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    out = np.where(ln > 1e-20, n / np.maximum(ln, 1e-30), np.array([0.0, 1.0, 0.0]))
+    return out.astype(np.float32)
+
+
+@dataclass
+class Camera:
+    """A pinhole camera. ``fov_y_deg`` is the full vertical field of view; near/far in metres."""
+
+    position: np.ndarray
+    target: np.ndarray
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    fov_y_deg: float = 60.0
+    near: float = 0.1
+    far: float = 500.0
+
+    def __post_init__(self):
+        self.position = _vec3(self.position, "camera position")
+        self.target = _vec3(self.target, "camera target")
+        self.up = _unit(self.up, "camera up")
+        if np.linalg.norm(self.target - self.position) < 1e-9:
+            raise SceneError("camera target must differ from its position")
+        if abs(float(np.dot(self.forward, self.up))) > 0.9999:
+            raise SceneError("camera up vector is parallel to the view direction")
+        if not (0.1 < self.fov_y_deg < 179.0):
+            raise SceneError(f"camera fov_y_deg must be in (0.1, 179), got {self.fov_y_deg}")
+        if not (0 < self.near < self.far):
+            raise SceneError(f"camera needs 0 < near < far, got near={self.near}, far={self.far}")
+
+    @property
+    def forward(self) -> np.ndarray:
+        d = self.target - self.position
+        return d / np.linalg.norm(d)
+
+    def view_matrix(self) -> np.ndarray:
+        """World→camera (4,4) float64, OpenGL convention (camera looks down -z)."""
+        f = self.forward
+        r = np.cross(f, self.up)
+        r /= np.linalg.norm(r)
+        u = np.cross(r, f)
+        m = np.eye(4)
+        m[0, :3], m[1, :3], m[2, :3] = r, u, -f
+        m[:3, 3] = -m[:3, :3] @ self.position
+        return m
+
+    def projection_matrix(self, aspect: float) -> np.ndarray:
+        """Camera→clip (4,4) float64, OpenGL convention (NDC z in [-1, 1])."""
+        t = 1.0 / math.tan(math.radians(self.fov_y_deg) / 2)
+        n, f = self.near, self.far
+        m = np.zeros((4, 4))
+        m[0, 0] = t / aspect
+        m[1, 1] = t
+        m[2, 2] = (f + n) / (n - f)
+        m[2, 3] = 2 * f * n / (n - f)
+        m[3, 2] = -1.0
+        return m
+
+    def primary_rays(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """Rays through pixel centres: origins (H*W,3), unit directions (H*W,3), row 0 = top."""
+        t = math.tan(math.radians(self.fov_y_deg) / 2)
+        aspect = width / height
+        xs = ((np.arange(width) + 0.5) / width * 2 - 1) * t * aspect
+        ys = (1 - (np.arange(height) + 0.5) / height * 2) * t
+        f = self.forward
+        r = np.cross(f, self.up)
+        r /= np.linalg.norm(r)
+        u = np.cross(r, f)
+        d = f[None, None] + xs[None, :, None] * r[None, None] + ys[:, None, None] * u[None, None]
+        d = d.reshape(-1, 3)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        o = np.broadcast_to(self.position, d.shape).copy()
+        return o.astype(np.float32), d.astype(np.float32)
+
+
+@dataclass
+class Sun:
+    """The sun as seen from the scene.
+
+    Attributes:
+        direction: unit vector **towards** the sun (world space, y up).
+        irradiance: (3,) W·m⁻² per channel on a surface facing the sun, at the ground (after the
+            atmosphere's transmittance; the sky issue derives it from the atmosphere model).
+        angular_diameter_deg: the disc's apparent diameter (0.53° for the real sun).
+        elevation_deg / azimuth_deg: the same direction as angles (azimuth from north to east).
+    """
+
+    direction: np.ndarray
+    irradiance: np.ndarray = field(default_factory=lambda: np.array([1000.0, 960.0, 900.0]))
+    angular_diameter_deg: float = SUN_ANGULAR_DIAMETER_DEG
+
+    def __post_init__(self):
+        self.direction = _unit(self.direction, "sun direction")
+        self.irradiance = _vec3(self.irradiance, "sun irradiance")
+        if np.any(self.irradiance < 0):
+            raise SceneError("sun irradiance must be non-negative")
+        if not (0.0 < self.angular_diameter_deg < 30.0):
+            raise SceneError(f"sun angular diameter must be in (0, 30) degrees, got {self.angular_diameter_deg}")
+
+    @property
+    def elevation_deg(self) -> float:
+        return math.degrees(math.asin(max(-1.0, min(1.0, float(self.direction[1])))))
+
+    @property
+    def azimuth_deg(self) -> float:
+        # north = -z, east = +x
+        return math.degrees(math.atan2(float(self.direction[0]), float(-self.direction[2]))) % 360.0
+
+    @property
+    def solid_angle(self) -> float:
+        """Solid angle of the disc, sr."""
+        return 2 * math.pi * (1 - math.cos(math.radians(self.angular_diameter_deg) / 2))
+
+    @property
+    def radiance(self) -> np.ndarray:
+        """Radiance of the (uniform) disc, W·m⁻²·sr⁻¹ per channel."""
+        return self.irradiance / self.solid_angle
+
+    @property
+    def is_up(self) -> bool:
+        return self.direction[1] > 0.0
+
+
+def direction_from_angles(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
+    """Unit vector towards (elevation, azimuth): azimuth from north (-z) towards east (+x)."""
+    if not (-90.0 <= elevation_deg <= 90.0) or not math.isfinite(azimuth_deg):
+        raise SceneError(f"sun elevation must be in [-90, 90] degrees, got {elevation_deg}")
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    return np.array([math.cos(el) * math.sin(az), math.sin(el), -math.cos(el) * math.cos(az)])
+
+
+@dataclass
+class OcclusionQuad:
+    """A rectangle that blocks sky light (paper §7, Fig. 6).
+
+    centre ± half_up·up ± half_right·right; ``up`` and ``right`` are orthogonal unit vectors,
+    ``half_up``/``half_right`` half-lengths in metres. Two-sided.
+    """
+
+    center: np.ndarray
+    up: np.ndarray
+    right: np.ndarray
+    half_up: float
+    half_right: float
+
+    def __post_init__(self):
+        self.center = _vec3(self.center, "occlusion quad center")
+        self.up = _unit(self.up, "occlusion quad up")
+        self.right = _unit(self.right, "occlusion quad right")
+        if abs(float(np.dot(self.up, self.right))) > 1e-3:
+            raise SceneError("occlusion quad up and right vectors must be orthogonal")
+        self.half_up, self.half_right = float(self.half_up), float(self.half_right)
+        if not (self.half_up > 0 and self.half_right > 0):
+            raise SceneError("occlusion quad half lengths must be positive")
+
+    @property
+    def normal(self) -> np.ndarray:
+        return np.cross(self.right, self.up)
+
+    def corners(self) -> np.ndarray:
+        """(4,3) corners, counter-clockwise seen from ``normal``."""
+        c, u, r = self.center, self.up * self.half_up, self.right * self.half_right
+        return np.array([c - r - u, c + r - u, c + r + u, c - r + u])
+
+
+@dataclass
+class Sky:
+    """Sky description. Until the atmosphere model lands this is a constant-radiance sky.
+
+    ``radiance``: (3,) W·m⁻²·sr⁻¹ of a uniform sky (used by the placeholder and as the constant
+    ambient baseline). ``model``: "constant" or "atmosphere".
+    """
+
+    radiance: np.ndarray = field(default_factory=lambda: np.array([20.0, 30.0, 45.0]))
+    model: str = "atmosphere"
+
+    def __post_init__(self):
+        self.radiance = _vec3(self.radiance, "sky radiance")
+        if self.model not in ("constant", "atmosphere"):
+            raise SceneError(f"sky model must be 'constant' or 'atmosphere', got {self.model!r}")
+
+
+@dataclass
+class Scene:
+    """Everything a frame needs: geometry, materials, camera, sun, sky and occlusion quads."""
+
+    name: str
+    meshes: list[Mesh]
+    materials: list[Material]
+    camera: Camera
+    sun: Sun
+    sky: Sky = field(default_factory=Sky)
+    occlusion_quads: list[OcclusionQuad] = field(default_factory=list)
+    source: str | None = None  # file the scene was loaded from, if any
+
+    def __post_init__(self):
+        self.validate()
+
+    def validate(self) -> None:
+        where = f"scene {self.name!r}" + (f" ({self.source})" if self.source else "")
+        if not self.meshes or sum(m.triangle_count for m in self.meshes) == 0:
+            raise SceneError(f"{where} is empty: it has no triangles")
+        if not self.materials:
+            raise SceneError(f"{where} has no materials")
+        for m in self.meshes:
+            if len(m.face_material) and (m.face_material.min() < 0 or m.face_material.max() >= len(self.materials)):
+                raise SceneError(f"{where}: mesh {m.name!r} refers to a material that does not exist")
+        names = [m.name for m in self.materials]
+        if len(set(names)) != len(names):
+            raise SceneError(f"{where}: material names must be unique")
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2,3) float64 [min, max] over all vertices used by faces."""
+        pts = np.concatenate([m.positions[np.unique(m.faces)] for m in self.meshes if m.triangle_count])
+        return np.stack([pts.min(axis=0), pts.max(axis=0)]).astype(np.float64)
+
+    @property
+    def triangle_count(self) -> int:
+        return sum(m.triangle_count for m in self.meshes)
+
+    def material_index(self, name: str) -> int:
+        for i, m in enumerate(self.materials):
+            if m.name == name:
+                return i
+        raise SceneError(f"scene {self.name!r} has no material {name!r}")
+
+    def merged(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """All meshes as one: positions (V,3) f32, normals (V,3) f32, uvs (V,2) f32,
+        faces (F,3) i32, face_material (F,) i32 — the layout the ray tracer and GL upload use."""
+        pos, nrm, uv, fac, fm = [], [], [], [], []
+        base = 0
+        for m in self.meshes:
+            pos.append(m.positions)
+            nrm.append(m.normals)
+            uv.append(m.uvs)
+            fac.append(m.faces + base)
+            fm.append(m.face_material)
+            base += len(m.positions)
+        return (
+            np.concatenate(pos).astype(np.float32),
+            np.concatenate(nrm).astype(np.float32),
+            np.concatenate(uv).astype(np.float32),
+            np.concatenate(fac).astype(np.int32),
+            np.concatenate(fm).astype(np.int32),
+        )
