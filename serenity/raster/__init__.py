@@ -1,0 +1,1 @@
+"""moderngl passes: the rasterised half of Serenity. Never imports a kernel module (DESIGN.md §2)."""

@@ -1,0 +1,92 @@
+"""One headless OpenGL 4.3+ context per process (EGL: Mesa llvmpipe without a GPU, the
+vendor driver with one), and the shader-program loader every pass uses.
+
+Shaders live in ``serenity/raster/glsl/*.glsl``: one file per program, with
+``#if defined VERTEX_SHADER`` / ``FRAGMENT_SHADER`` sections; ``#include "file.glsl"`` pulls in
+shared code. ``load_program(ctx, "gbuffer.glsl", defines={...})`` builds it.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+from importlib import resources
+
+from serenity.errors import GLUnavailableError, SerenityError
+
+GLSL_VERSION = "#version 430 core"
+_SYSTEM_PACKAGES = "libegl1 libgl1-mesa-dri libgles2"
+
+_lock = threading.Lock()
+_context = None
+
+
+def get_context():
+    """The process-wide headless moderngl context (created on first use)."""
+    global _context
+    with _lock:
+        if _context is None:
+            _context = _create_context()
+        return _context
+
+
+def _create_context():
+    try:
+        import moderngl
+    except ImportError as e:  # pragma: no cover - dependency missing
+        raise GLUnavailableError(f"moderngl is not installed ({e}); run `make setup`") from None
+    try:
+        ctx = moderngl.create_standalone_context(backend="egl", require=430)
+    except Exception as e:
+        raise GLUnavailableError(
+            f"no headless OpenGL 4.3 context via EGL ({str(e).splitlines()[0] if str(e) else type(e).__name__}). "
+            f"On Debian/Ubuntu install the system packages: sudo apt-get install {_SYSTEM_PACKAGES}"
+        ) from None
+    return ctx
+
+
+def renderer_name() -> str:
+    ctx = get_context()
+    return f"{ctx.info['GL_RENDERER']} (OpenGL {ctx.info['GL_VERSION']})"
+
+
+def check_gl_error(ctx, where: str) -> None:
+    """Raise if the GL error flag is set (tests call this after every GL test)."""
+    err = ctx.error
+    if err != "GL_NO_ERROR":
+        raise SerenityError(f"OpenGL error after {where}: {err}")
+
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.M)
+
+
+def shader_source(name: str, _seen: frozenset = frozenset()) -> str:
+    """Text of ``glsl/<name>`` with its ``#include``s expanded (once each)."""
+    if name in _seen:
+        return ""
+    text = resources.files("serenity.raster").joinpath("glsl", name).read_text()
+
+    def sub(m):
+        return shader_source(m.group(1), _seen | {name})
+
+    return _INCLUDE.sub(sub, text)
+
+
+def load_program(ctx, name: str, defines: dict | None = None, stages=("VERTEX_SHADER", "FRAGMENT_SHADER")):
+    """Compile ``glsl/<name>`` for the given stages with ``#define``s prepended."""
+    body = shader_source(name)
+    head = [GLSL_VERSION] + [f"#define {k} {v}" for k, v in (defines or {}).items()]
+    srcs = {}
+    for stage in stages:
+        key = {"VERTEX_SHADER": "vertex_shader", "FRAGMENT_SHADER": "fragment_shader",
+               "GEOMETRY_SHADER": "geometry_shader"}[stage]
+        srcs[key] = "\n".join(head + [f"#define {stage} 1", "#line 1", body])
+    try:
+        return ctx.program(**srcs)
+    except Exception as e:
+        raise SerenityError(f"shader {name} failed to compile: {e}") from None
+
+
+def fullscreen_vao(ctx, program):
+    """A VAO with no buffers: fullscreen passes draw one triangle from gl_VertexID."""
+    return ctx.vertex_array(program, [])

@@ -1,0 +1,88 @@
+"""Deferred lighting (paper §3, §6): Phong direct light with the sun's shadow map, indirect terms,
+and the sky behind uncovered pixels, into linear HDR float targets (``glsl/deferred.glsl``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from serenity.raster.context import fullscreen_vao, load_program
+
+
+@dataclass
+class LightingInputs:
+    """What the deferred pass needs besides the G-buffer (all linear, radiometric units)."""
+
+    sun_direction: np.ndarray      # (3,) unit, towards the sun
+    sun_irradiance: np.ndarray     # (3,) W m^-2
+    sun_radiance: np.ndarray       # (3,) W m^-2 sr^-1 of the disc
+    sun_cos_radius: float
+    sky_radiance: np.ndarray       # (3,) constant sky placeholder
+    ambient_irradiance: np.ndarray  # (3,) constant ambient (baseline); zeros = off
+    camera_position: np.ndarray
+    inv_view_proj: np.ndarray
+    shadow_bias: float = 1.5
+    normal_offset: float = 1.0
+
+
+@dataclass
+class LitImage:
+    hdr: object     # rgba32f radiance
+    direct: object  # rgba32f direct-sun component
+
+
+class DeferredPass:
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.program = load_program(ctx, "deferred.glsl")
+        self.vao = fullscreen_vao(ctx, self.program)
+        self.size = None
+
+    def resize(self, width: int, height: int) -> None:
+        if self.size == (width, height):
+            return
+        if self.size is not None:
+            self.fbo.release()
+            self.hdr.release()
+            self.direct.release()
+        self.hdr = self.ctx.texture((width, height), 4, dtype="f4")
+        self.direct = self.ctx.texture((width, height), 4, dtype="f4")
+        self.fbo = self.ctx.framebuffer(color_attachments=[self.hdr, self.direct])
+        self.size = (width, height)
+
+    def render(self, gbuffer, shadow, light: LightingInputs) -> LitImage:
+        ctx, p = self.ctx, self.program
+        with ctx.debug_scope("deferred"):
+            self.fbo.use()
+            for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
+                t.use(location=i)
+            shadow.depth.use(location=4)
+            for name, loc in (("g_albedo", 0), ("g_normal", 1), ("g_position", 2), ("g_material", 3),
+                              ("u_shadow_map", 4)):
+                p[name].value = loc
+            p["u_light_view_proj"].write(shadow.view_proj.T.astype(np.float32).tobytes())
+            p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
+            self._set(p, "u_shadow_texel_world", shadow.texel_world)
+            self._set(p, "u_depth_range", shadow.depth_range)
+            self._set(p, "u_shadow_bias", light.shadow_bias)
+            self._set(p, "u_normal_offset", light.normal_offset)
+            self._set(p, "u_sun_dir", light.sun_direction)
+            self._set(p, "u_sun_irradiance", light.sun_irradiance)
+            self._set(p, "u_sun_radiance", light.sun_radiance)
+            self._set(p, "u_sun_cos_radius", light.sun_cos_radius)
+            self._set(p, "u_camera_pos", light.camera_position)
+            self._set(p, "u_sky_radiance", light.sky_radiance)
+            self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
+            self.vao.render(vertices=3)
+        return LitImage(self.hdr, self.direct)
+
+    @staticmethod
+    def _set(p, name, value):
+        if name not in p:
+            return
+        if np.ndim(value) == 0:
+            p[name].value = float(value)
+        else:
+            p[name].value = tuple(float(x) for x in np.asarray(value).reshape(-1))

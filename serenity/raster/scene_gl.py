@@ -1,0 +1,67 @@
+"""The scene's geometry and textures on the GL side, uploaded once (static scenes).
+
+Faces are sorted by material so that each material is one indexed draw range; vertex buffer
+layout: position (3 f4), normal (3 f4), uv (2 f4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from serenity.raster.interop import texture_from_array
+
+
+@dataclass
+class DrawRange:
+    material: int
+    first: int   # first index in the index buffer
+    count: int   # number of indices
+
+
+class SceneGL:
+    """VBO/IBO and per-material textures of a ``Scene``."""
+
+    def __init__(self, ctx, scene):
+        self.ctx = ctx
+        pos, nrm, uv, faces, fmat = scene.merged()
+        order = np.argsort(fmat, kind="stable")
+        faces, fmat = faces[order], fmat[order]
+        self.ranges: list[DrawRange] = []
+        if len(fmat):
+            bounds = np.flatnonzero(np.diff(fmat)) + 1
+            starts = np.concatenate([[0], bounds])
+            ends = np.concatenate([bounds, [len(fmat)]])
+            for s, e in zip(starts, ends, strict=True):
+                self.ranges.append(DrawRange(int(fmat[s]), int(s) * 3, int(e - s) * 3))
+        vertices = np.hstack([pos, nrm, uv]).astype(np.float32)
+        self.vbo = ctx.buffer(vertices.tobytes())
+        self.ibo = ctx.buffer(faces.astype(np.int32).tobytes())
+        self.materials = scene.materials
+        self.textures = {}
+        for i, m in enumerate(scene.materials):
+            if m.albedo_texture is not None:
+                t = m.albedo_texture
+                self.textures[i] = texture_from_array(ctx, t.mips[0][..., :3], dtype="f2",
+                                                      mips=[mm[..., :3] for mm in t.mips])
+        self.triangle_count = len(faces)
+
+    def vao(self, program, with_attributes=("in_position", "in_normal", "in_uv")):
+        """A VAO binding this scene's buffers to ``program``'s attributes (unused ones skipped)."""
+        fmt, names = [], []
+        for attr, f, skip in (("in_position", "3f", "12x"), ("in_normal", "3f", "12x"), ("in_uv", "2f", "8x")):
+            if attr in with_attributes and attr in program:
+                fmt.append(f)
+                names.append(attr)
+            else:
+                fmt.append(skip)
+        fmt = " ".join(fmt)
+        return self.ctx.vertex_array(program, [(self.vbo, fmt, *names)], index_buffer=self.ibo,
+                                     index_element_size=4)
+
+    def release(self):
+        self.vbo.release()
+        self.ibo.release()
+        for t in self.textures.values():
+            t.release()
