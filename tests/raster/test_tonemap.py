@@ -1,0 +1,30 @@
+import numpy as np
+
+from serenity.raster.interop import texture_from_array
+from serenity.raster.tonemap import TonemapPass, linear_to_srgb, reinhard, reinhard_srgb
+
+
+def test_reinhard_known_values():
+    # luminance 1 after exposure -> 0.5 display; grey stays grey
+    out = reinhard(np.full((1, 1, 3), 50.0), 0.02)
+    assert np.allclose(out, 0.5)
+    assert np.allclose(reinhard(np.zeros((2, 2, 3)), 1.0), 0.0)
+    big = reinhard(np.full((1, 1, 3), 1e9), 1.0)
+    assert np.all(big <= 1.0) and np.all(big > 0.999)
+
+
+def test_srgb_encode_known_values():
+    assert np.allclose(linear_to_srgb(np.array([0.0, 1.0, 0.0031308])), [0.0, 1.0, 0.0404500], atol=1e-6)
+    assert abs(float(linear_to_srgb(np.array(0.214041))) - 0.5) < 1e-4
+
+
+def test_gl_tonemap_matches_numpy_twin(gl_ctx):
+    rng = np.random.default_rng(1)
+    hdr = (rng.random((16, 24, 3)) ** 4 * 2000).astype(np.float32)
+    tex = texture_from_array(gl_ctx, hdr)
+    tp = TonemapPass(gl_ctx)
+    tp.resize(24, 16)
+    tp.render(tex, 0.02)
+    diff = np.abs(tp.read().astype(int) - reinhard_srgb(hdr, 0.02).astype(int))
+    assert diff.max() <= 1
+    tex.release()
