@@ -1,1 +1,35 @@
-"""Serenity."""
+"""Serenity: real-time global illumination by combining rasterisation and ray tracing
+(after Cabeleira, "Combining Rasterization and Ray Tracing Techniques to Approximate Global
+Illumination in Real-Time").
+
+Public API (re-exported lazily, so ``import serenity`` loads neither Warp nor OpenGL)::
+
+    import serenity
+    scene = serenity.load("courtyard")            # built-in name or .glb/.gltf/.obj/.ply/.toml
+    frame = serenity.Renderer(scene, 640, 360).render()
+    frame.hdr, frame.ldr, frame.aovs, frame.timings
+"""
+
+from __future__ import annotations
+
+__version__ = "0.1.0"
+
+_EXPORTS = {
+    "Renderer": "serenity.frame",
+    "Frame": "serenity.frame",
+    "RenderConfig": "serenity.config",
+    "ShadowConfig": "serenity.config",
+    "SerenityError": "serenity.errors",
+    "SceneError": "serenity.errors",
+    "load": "serenity.scene",
+}
+
+__all__ = [*_EXPORTS, "__version__"]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'serenity' has no attribute {name!r}")
