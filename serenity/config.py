@@ -10,12 +10,65 @@ from serenity.errors import SerenityError
 
 @dataclass(frozen=True)
 class ShadowConfig:
+    """Sun shadows: cascaded shadow maps + PCSS (paper §6). See ``serenity/raster/shadow.py``."""
+
     size: int = 2048
-    """Shadow map resolution (texels per side)."""
-    bias: float = 1.5
+    """Resolution of one cascade (texels per side); the atlas holds 2×2 tiles."""
+    cascades: int = 4
+    """Number of cascades, 1–4."""
+    split_lambda: float = 0.75
+    """Practical split scheme blend: 0 uniform, 1 logarithmic."""
+    max_distance: float = 200.0
+    """Farthest view depth (m) that receives cascaded shadows (also clamped to the scene)."""
+    cascade_blend: float = 0.1
+    """Fraction of each cascade's depth range cross-faded into the next (hides the seam)."""
+    filter: str = "pcss"
+    """"hard" (1 tap), "pcf" (fixed radius), or "pcss" (penumbra from the sun's angular size)."""
+    pcf_radius: float = 2.0
+    """PCF filter radius in texels ("pcf" mode)."""
+    blocker_samples: int = 16
+    """PCSS blocker-search taps."""
+    filter_samples: int = 32
+    """PCF / PCSS filter taps."""
+    pcss_max_blocker: float = 20.0
+    """Farthest blocker (m above the receiver) the PCSS blocker search is sized for."""
+    bias: float = 1.0
     """Constant depth bias, in shadow-map texels (converted to depth units in the shader)."""
     normal_offset: float = 1.0
-    """Normal offset of the lookup point, in shadow-map texels, scaled by the slope (clamped 1–4)."""
+    """Normal offset of the lookup point, in texels, scaled by the slope tan θ (clamped 1–4)."""
+
+    def __post_init__(self):
+        if not 16 <= self.size <= 8192:
+            raise SerenityError(f"shadow map size must be in 16..8192, got {self.size}")
+        if not 1 <= self.cascades <= 4:
+            raise SerenityError(f"shadow cascades must be 1..4, got {self.cascades}")
+        if self.filter not in ("hard", "pcf", "pcss"):
+            raise SerenityError(f"shadow filter must be hard, pcf or pcss, got {self.filter!r}")
+        if not (1 <= self.blocker_samples <= 128 and 1 <= self.filter_samples <= 256):
+            raise SerenityError("shadow sample counts must be in 1..128 (blocker) and 1..256 (filter)")
+
+
+@dataclass(frozen=True)
+class SSAOConfig:
+    """Screen-space ambient occlusion (main view only; multiplies indirect light only)."""
+
+    enabled: bool = True
+    radius: float = 1.0
+    """Occlusion radius, metres (the ray-traced AO it approximates uses the same)."""
+    directions: int = 12
+    """Cosine-distributed directions per pixel."""
+    steps: int = 4
+    """March points per direction."""
+    bias: float = 0.03
+    """Metres: offset along the normal and depth tolerance (avoids self-occlusion)."""
+    thickness: float = 2.0
+    """Metres: a march point further behind the depth buffer than this is not blocked."""
+    blur_radius: int = 4
+    """Bilateral blur half-width in pixels (0 = off)."""
+
+    def __post_init__(self):
+        if not (self.radius > 0 and 1 <= self.directions <= 256 and 1 <= self.steps <= 64):
+            raise SerenityError("SSAO needs radius > 0, 1..256 directions and 1..64 steps")
 
 
 @dataclass(frozen=True)
@@ -27,6 +80,7 @@ class RenderConfig:
     """Indirect term while the GI techniques are absent: "none", or "constant" (the classic flat
     ambient hack, irradiance π·L_sky on every surface — the baseline the GI must beat)."""
     shadow: ShadowConfig = field(default_factory=ShadowConfig)
+    ssao: SSAOConfig = field(default_factory=SSAOConfig)
     sync_stages: bool = True
     """Wait for the GL queue after each stage so per-stage wall times are exact (costs overlap)."""
 
@@ -35,5 +89,3 @@ class RenderConfig:
             raise SerenityError(f"exposure must be positive, got {self.exposure}")
         if self.ambient not in ("none", "constant"):
             raise SerenityError(f"ambient must be 'none' or 'constant', got {self.ambient!r}")
-        if self.shadow.size < 16 or self.shadow.size > 16384:
-            raise SerenityError(f"shadow map size must be in 16..16384, got {self.shadow.size}")

@@ -26,6 +26,7 @@ from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.interop import read_texture
 from serenity.raster.scene_gl import SceneGL
 from serenity.raster.shadow import ShadowPass
+from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
 
 MAX_SIZE = 8192
@@ -38,7 +39,8 @@ class Frame:
     hdr: (H, W, 3) float32 linear radiance, W·m⁻²·sr⁻¹ (row 0 = top).
     ldr: (H, W, 3) uint8 sRGB after exposure + Reinhard.
     aovs: named (H, W, C) float32 layers: albedo, normal (world), position (world, m),
-        depth (H, W, 1; view-space distance along the camera axis, m; inf = background), direct.
+        depth (H, W, 1; view-space distance along the camera axis, m; inf = background), direct,
+        ao (H, W, 1; SSAO, 1 = open; when enabled).
     timings: stage name → milliseconds, in pipeline order.
     """
 
@@ -68,11 +70,12 @@ class Renderer:
         self._timings: dict[str, float] = {}
         with self._stage("upload"):
             self.scene_gl = SceneGL(self.ctx, scene)
-            self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, self.config.shadow.size)
+            self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, self.config.shadow.size, self.config.shadow.cascades)
             self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl)
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
-            for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass):
+            self.ssao_pass = SSAOPass(self.ctx, self.config.ssao)
+            for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass):
                 p.resize(self.width, self.height)
         self._upload_ms = self._timings.pop("upload")
         self._first = True
@@ -99,8 +102,9 @@ class Renderer:
             ambient_irradiance=ambient,
             camera_position=cam.position,
             inv_view_proj=np.linalg.inv(view_proj),
-            shadow_bias=self.config.shadow.bias,
-            normal_offset=self.config.shadow.normal_offset,
+            camera_forward=cam.forward,
+            sun_tan_half=math.tan(math.radians(sun.angular_diameter_deg) / 2),
+            shadow=self.config.shadow,
         )
 
     def render(self) -> Frame:
@@ -112,17 +116,25 @@ class Renderer:
         view = cam.view_matrix()
         view_proj = cam.projection_matrix(self.width / self.height) @ view
         with self._stage("shadow"):
-            shadow = self.shadow_pass.render(self.scene.sun.direction, self.scene.bounds)
+            sc = self.config.shadow
+            shadow = self.shadow_pass.render(cam, self.width / self.height, self.scene.sun.direction,
+                                             self.scene.bounds, sc.split_lambda, sc.max_distance)
         with self._stage("gbuffer"):
             gbuf = self.gbuffer_pass.render(view_proj, cam.position)
+        ao = None
+        if self.config.ssao.enabled:
+            with self._stage("ssao"):
+                ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward)
         with self._stage("deferred"):
-            lit = self.deferred_pass.render(gbuf, shadow, self._lighting_inputs(view_proj))
+            lit = self.deferred_pass.render(gbuf, shadow, self._lighting_inputs(view_proj), ao)
         with self._stage("tonemap"):
             self.tonemap_pass.render(lit.hdr, self.config.exposure)
         with self._stage("readback"):
             hdr = read_texture(lit.hdr, 3)
             ldr = self.tonemap_pass.read()
             aovs = self._read_aovs(gbuf, lit, cam)
+            if ao is not None:
+                aovs["ao"] = read_texture(ao, 1)
         return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=dict(self._timings), exposure=self.config.exposure)
 
     def _read_aovs(self, gbuf, lit, cam) -> dict[str, np.ndarray]:

@@ -23,8 +23,9 @@ class LightingInputs:
     ambient_irradiance: np.ndarray  # (3,) constant ambient (baseline); zeros = off
     camera_position: np.ndarray
     inv_view_proj: np.ndarray
-    shadow_bias: float = 1.5
-    normal_offset: float = 1.0
+    camera_forward: np.ndarray
+    sun_tan_half: float            # tan of the sun's angular radius
+    shadow: object                 # ShadowConfig
 
 
 @dataclass
@@ -52,7 +53,7 @@ class DeferredPass:
         self.fbo = self.ctx.framebuffer(color_attachments=[self.hdr, self.direct])
         self.size = (width, height)
 
-    def render(self, gbuffer, shadow, light: LightingInputs) -> LitImage:
+    def render(self, gbuffer, shadow, light: LightingInputs, ao=None) -> LitImage:
         ctx, p = self.ctx, self.program
         with ctx.debug_scope("deferred"):
             self.fbo.use()
@@ -62,12 +63,12 @@ class DeferredPass:
             for name, loc in (("g_albedo", 0), ("g_normal", 1), ("g_position", 2), ("g_material", 3),
                               ("u_shadow_map", 4)):
                 p[name].value = loc
-            p["u_light_view_proj"].write(shadow.view_proj.T.astype(np.float32).tobytes())
+            self._set_shadow_uniforms(p, shadow, light)
+            p["u_use_ao"].value = ao is not None
+            if ao is not None:
+                ao.use(location=5)
+                p["u_ao"].value = 5
             p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
-            self._set(p, "u_shadow_texel_world", shadow.texel_world)
-            self._set(p, "u_depth_range", shadow.depth_range)
-            self._set(p, "u_shadow_bias", light.shadow_bias)
-            self._set(p, "u_normal_offset", light.normal_offset)
             self._set(p, "u_sun_dir", light.sun_direction)
             self._set(p, "u_sun_irradiance", light.sun_irradiance)
             self._set(p, "u_sun_radiance", light.sun_radiance)
@@ -77,6 +78,32 @@ class DeferredPass:
             self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
             self.vao.render(vertices=3)
         return LitImage(self.hdr, self.direct)
+
+    def _set_shadow_uniforms(self, p, shadow, light: LightingInputs) -> None:
+        cfg = light.shadow
+        cs = shadow.cascades
+        n = len(cs)
+        mats = np.zeros((4, 4, 4), np.float32)
+        for i, c in enumerate(cs):
+            mats[i] = c.view_proj.T
+        p["u_cascade_vp"].write(mats.tobytes())
+
+        def vec4(vals):
+            return tuple(float(v) for v in list(vals) + [vals[-1]] * (4 - len(vals)))
+
+        p["u_cascade_count"].value = n
+        p["u_atlas_tiles"].value = float(shadow.depth.width // shadow.tile_size)
+        p["u_cascade_far"].value = vec4([c.far for c in cs])
+        p["u_cascade_texel"].value = vec4([c.texel_world for c in cs])
+        p["u_cascade_depth_range"].value = vec4([c.depth_range for c in cs])
+        p["u_shadow_filter"].value = {"hard": 0, "pcf": 1, "pcss": 2}[cfg.filter]
+        p["u_blocker_samples"].value = int(cfg.blocker_samples)
+        p["u_filter_samples"].value = int(cfg.filter_samples)
+        for name, v in (("u_shadow_bias", cfg.bias), ("u_normal_offset", cfg.normal_offset),
+                        ("u_pcf_radius", cfg.pcf_radius), ("u_sun_tan_half", light.sun_tan_half),
+                        ("u_pcss_max_blocker", cfg.pcss_max_blocker), ("u_cascade_blend", cfg.cascade_blend)):
+            self._set(p, name, v)
+        self._set(p, "u_camera_forward", light.camera_forward)
 
     @staticmethod
     def _set(p, name, value):

@@ -1,22 +1,38 @@
-"""Sun shadow map: one orthographic depth map fitted to the scene's bounding sphere.
+"""Sun shadows: cascaded shadow maps (paper §6, Dimitrov's CSM) in one depth atlas.
 
-(Cascaded shadow maps + PCSS replace the single map in issue #7; overlapped shadow maps for the
-ray-traced views in #5.) Biases, applied where the map is read (``deferred.glsl``): a constant
-depth bias and a normal offset, both in units of one shadow-map texel, the normal offset scaled
-by the slope tan(θ) (clamped to [1, 4]) so grazing surfaces do not acne.
+Cascades. The view range [near, min(far, max_distance, scene extent)] is split by the
+"practical" scheme (Zhang et al. 2006): d_i = λ·n·(f/n)^(i/N) + (1-λ)·(n + (f-n)·i/N), λ =
+``split_lambda`` (0 = uniform, 1 = logarithmic). Each cascade is the bounding sphere of its frustum
+slice; the sphere of a slice depends only on the slice distances, fov and aspect, so its size does
+not change when the camera turns, and its centre is snapped to whole shadow-map texels in light
+space, so shadows do not shimmer as the camera moves (a one-texel camera move changes no texel of
+the map's content, only which texels are used). The light-space depth range is extended to the
+whole scene's bounds so casters outside the slice still cast.
+
+Atlas. Cascade i occupies tile (i % 2, i // 2) of a (2S × 2S) depth texture (S = ``size``).
+
+Biases, applied where the map is read (``glsl/shadow_sampling.glsl``): a constant depth bias and a
+normal offset, both in units of one shadow-map texel of the cascade used, the normal offset scaled
+by the slope tan θ (clamped to [1, 4]) so grazing surfaces do not acne.
+
+Filtering (``ShadowConfig.filter``): "hard" (one tap), "pcf" (fixed-radius Vogel-disc PCF), "pcss"
+(Fernando 2005: blocker search → penumbra from the sun's angular diameter → variable PCF).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from serenity.raster.context import load_program
 
+MAX_CASCADES = 4
+
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
-    f = target - eye
+    f = np.asarray(target, np.float64) - eye
     f = f / np.linalg.norm(f)
     if abs(float(np.dot(f, up))) > 0.999:
         up = np.array([1.0, 0.0, 0.0]) if abs(f[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
@@ -40,50 +56,101 @@ def ortho(left, right, bottom, top, near, far) -> np.ndarray:
     return m
 
 
+def split_distances(near: float, far: float, count: int, lam: float) -> np.ndarray:
+    """count+1 view depths from near to far (practical split scheme)."""
+    i = np.arange(count + 1) / count
+    log = near * (far / near) ** i
+    uni = near + (far - near) * i
+    return lam * log + (1 - lam) * uni
+
+
 @dataclass
-class ShadowMap:
-    depth: object            # depth texture
-    view_proj: np.ndarray    # world → light clip (4,4)
-    texel_world: float       # one texel in metres
-    depth_range: float       # light-space depth extent in metres
-    size: int
+class Cascade:
+    view_proj: np.ndarray  # world → light clip (4,4)
+    far: float             # view depth (m) where this cascade ends
+    texel_world: float     # one texel, metres
+    depth_range: float     # light-space depth extent (m) of the [0,1] depth
+
+
+@dataclass
+class ShadowMaps:
+    depth: object               # the atlas depth texture
+    cascades: list[Cascade]
+    tile_size: int
+
+
+def fit_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, count: int,
+                 size: int, lam: float, max_distance: float) -> list[Cascade]:
+    sun = np.asarray(sun_direction, np.float64)
+    center_scene = bounds.mean(axis=0)
+    scene_radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2, 1e-3)
+    light_view = look_at(np.zeros(3), -sun, np.array([0.0, 1.0, 0.0]))  # rotation only
+    # how far from the camera anything in the scene can be
+    corners = np.array([[bounds[i][0], bounds[j][1], bounds[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    reach = float(np.max((corners - camera.position) @ camera.forward))
+    far = max(min(camera.far, max_distance, reach), camera.near * 2)
+    splits = split_distances(camera.near, far, count, lam)
+    t = math.tan(math.radians(camera.fov_y_deg) / 2)
+    # scene depth range along the sun direction (light view looks down -sun, so z_light = -dot)
+    zc = -(corners @ (light_view[:3, :3].T))[:, 2]
+    z_min, z_max = float(zc.min()), float(zc.max())
+    out = []
+    for i in range(count):
+        n, f = splits[i], splits[i + 1]
+        # bounding sphere of the slice: centre on the axis at distance c minimising the radius
+        k2 = t * t * (1 + aspect * aspect)  # squared tan of the half-diagonal
+        c = min(f, 0.5 * (n + f) * (1 + k2))
+        radius = math.sqrt((f - c) ** 2 + (f * f) * k2)
+        radius = math.sqrt(max(radius * radius, (c - n) ** 2 + n * n * k2))
+        radius = min(radius, scene_radius * 1.01 + 1e-3)
+        centre = camera.position + camera.forward * c
+        if radius >= scene_radius:  # the scene fits: centre on it (still texel-snapped)
+            centre = center_scene
+        texel = 2 * radius / size
+        lc = light_view[:3, :3] @ centre
+        lc[:2] = np.floor(lc[:2] / texel) * texel  # snap to whole texels
+        depth_lo, depth_hi = z_min - 1e-3 - 0.01 * scene_radius, z_max + 1e-3 + 0.01 * scene_radius
+        proj = ortho(lc[0] - radius, lc[0] + radius, lc[1] - radius, lc[1] + radius, depth_lo, depth_hi)
+        # the light view looks down -z: a point at distance d along -sun from the origin has z = -d
+        out.append(Cascade(proj @ light_view, float(f), texel, depth_hi - depth_lo))
+    return out
 
 
 class ShadowPass:
-    def __init__(self, ctx, scene_gl, size: int = 2048):
+    """Renders the cascades of the sun into one depth atlas."""
+
+    def __init__(self, ctx, scene_gl, size: int = 2048, cascades: int = 4):
+        if not 1 <= cascades <= MAX_CASCADES:
+            raise ValueError(f"1..{MAX_CASCADES} cascades")
         self.ctx = ctx
         self.size = size
+        self.count = cascades
         self.program = load_program(ctx, "shadow_depth.glsl")
         self.vao = scene_gl.vao(self.program, with_attributes=("in_position",))
-        self.depth = ctx.depth_texture((size, size))
+        tiles = 2 if cascades > 1 else 1
+        self.depth = ctx.depth_texture((size * tiles, size * tiles))
         import moderngl
 
         self.depth.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth.repeat_x = self.depth.repeat_y = False
-        self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF)
+        self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF/PCSS)
         self.fbo = ctx.framebuffer(depth_attachment=self.depth)
 
-    @staticmethod
-    def fit(sun_direction: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, float]:
-        """Light view-projection covering the bounding sphere of ``bounds``; returns (M, radius)."""
-        center = bounds.mean(axis=0)
-        radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2, 1e-3) * 1.01
-        eye = center + np.asarray(sun_direction, np.float64) * radius * 2
-        view = look_at(eye, center, np.array([0.0, 1.0, 0.0]))
-        proj = ortho(-radius, radius, -radius, radius, radius * 0.5, radius * 3.5)
-        return proj @ view, radius
-
-    def render(self, sun_direction: np.ndarray, bounds: np.ndarray) -> ShadowMap:
+    def render(self, camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, lam: float = 0.75,
+               max_distance: float = 200.0) -> ShadowMaps:
         import moderngl
 
         ctx = self.ctx
-        vp, radius = self.fit(sun_direction, bounds)
+        cascades = fit_cascades(camera, aspect, sun_direction, bounds, self.count, self.size, lam, max_distance)
         with ctx.debug_scope("shadow"):
             self.fbo.use()
             self.fbo.clear(depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
-            self.program["u_light_view_proj"].write(vp.T.astype(np.float32).tobytes())
-            self.vao.render(moderngl.TRIANGLES)
+            for i, c in enumerate(cascades):
+                self.fbo.viewport = ((i % 2) * self.size, (i // 2) * self.size, self.size, self.size)
+                self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
+                self.vao.render(moderngl.TRIANGLES)
+            self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)
             ctx.disable(moderngl.DEPTH_TEST)
-        return ShadowMap(self.depth, vp, 2 * radius / self.size, 3.0 * radius, self.size)
+        return ShadowMaps(self.depth, cascades, self.size)

@@ -12,16 +12,12 @@ void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_positi
 #endif
 
 #if defined FRAGMENT_SHADER
+#include "shadow_sampling.glsl"
 in vec2 v_uv;
 uniform sampler2D g_albedo;
 uniform sampler2D g_normal;
 uniform sampler2D g_position;
 uniform sampler2D g_material;
-uniform sampler2D u_shadow_map;     // depth in [0,1] of the sun's orthographic view
-uniform mat4 u_light_view_proj;
-uniform float u_shadow_texel_world; // one shadow-map texel in metres
-uniform float u_shadow_bias;        // constant depth bias, in shadow-map texels of depth
-uniform float u_normal_offset;      // normal-offset, in shadow-map texels
 uniform vec3 u_sun_dir;             // unit, towards the sun
 uniform vec3 u_sun_irradiance;      // W m^-2 per channel
 uniform vec3 u_sun_radiance;        // disc radiance, W m^-2 sr^-1
@@ -30,28 +26,11 @@ uniform vec3 u_camera_pos;
 uniform mat4 u_inv_view_proj;
 uniform vec3 u_sky_radiance;        // constant sky (placeholder until the sky map)
 uniform vec3 u_ambient_irradiance;  // constant ambient term (baseline hack; 0 = off)
-uniform float u_depth_range;        // light-space depth extent (m), to convert the bias
+uniform vec3 u_camera_forward;
+uniform sampler2D u_ao;             // SSAO, 1 = open (multiplies indirect light only)
+uniform bool u_use_ao;
 layout(location = 0) out vec4 o_hdr;
 layout(location = 1) out vec4 o_direct;
-
-float sun_visibility(vec3 p, vec3 n) {
-    float ndl = dot(n, u_sun_dir);
-    // normal offset grows towards grazing angles (slope), in world units
-    float slope = sqrt(max(0.0, 1.0 - ndl * ndl)) / max(ndl, 0.05);
-    vec3 q = p + n * u_shadow_texel_world * u_normal_offset * clamp(slope, 1.0, 4.0);
-    vec4 lp = u_light_view_proj * vec4(q, 1.0);
-    vec3 s = lp.xyz / lp.w * 0.5 + 0.5;
-    if (any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0)))) return 1.0;
-    float bias = u_shadow_bias * u_shadow_texel_world / u_depth_range;
-    vec2 texel = 1.0 / vec2(textureSize(u_shadow_map, 0));
-    float lit = 0.0;
-    for (int y = -1; y <= 1; ++y)
-        for (int x = -1; x <= 1; ++x) {
-            float d = texture(u_shadow_map, s.xy + vec2(x, y) * texel).r;
-            lit += (s.z - bias <= d) ? 1.0 : 0.0;
-        }
-    return lit / 9.0;
-}
 
 vec3 sky(vec3 dir) {
     if (dot(dir, u_sun_dir) >= u_sun_cos_radius && u_sun_dir.y > 0.0) return u_sun_radiance;
@@ -76,12 +55,13 @@ void main() {
     float ndl = dot(n, u_sun_dir);
     vec3 direct = vec3(0.0);
     if (ndl > 0.0 && u_sun_dir.y > -0.02) {
-        float vis = sun_visibility(p, n);
+        float vis = sun_visibility(p, n, ndl, dot(p - u_camera_pos, u_camera_forward));
         vec3 r = reflect(-u_sun_dir, n);
         float spec = nrm.w * (mat.x + 2.0) / (2.0 * PI) * pow(max(dot(r, v), 0.0), mat.x);
         direct = (albedo / PI + vec3(spec)) * u_sun_irradiance * ndl * vis;
     }
     vec3 indirect = albedo / PI * u_ambient_irradiance;
+    if (u_use_ao) indirect *= texture(u_ao, v_uv).r;
     o_hdr = vec4(direct + indirect, 1.0);
     o_direct = vec4(direct, 1.0);
 }

@@ -1,0 +1,107 @@
+// Sun visibility from the cascaded shadow-map atlas: hard, PCF or PCSS (Fernando 2005).
+// See serenity/raster/shadow.py for the cascade fitting, atlas layout and bias units.
+#ifndef SERENITY_SHADOW_SAMPLING_GLSL
+#define SERENITY_SHADOW_SAMPLING_GLSL
+#include "common.glsl"
+
+#define SHADOW_HARD 0
+#define SHADOW_PCF 1
+#define SHADOW_PCSS 2
+
+uniform sampler2D u_shadow_map;       // depth atlas, cascade i at tile (i % 2, i / 2)
+uniform int u_cascade_count;
+uniform float u_atlas_tiles;          // tiles per side (1 or 2)
+uniform mat4 u_cascade_vp[4];         // world -> light clip
+uniform vec4 u_cascade_far;           // view depth (m) where each cascade ends
+uniform vec4 u_cascade_texel;         // one texel, metres
+uniform vec4 u_cascade_depth_range;   // light depth extent, metres
+uniform float u_shadow_bias;          // texels
+uniform float u_normal_offset;        // texels
+uniform int u_shadow_filter;
+uniform float u_pcf_radius;           // texels (PCF mode)
+uniform float u_sun_tan_half;         // tan of the sun's angular radius
+uniform float u_pcss_max_blocker;     // metres: farthest blocker the search looks for
+uniform int u_blocker_samples;
+uniform int u_filter_samples;
+uniform float u_cascade_blend;        // fraction of a cascade's depth blended into the next
+
+float interleaved_gradient_noise(vec2 pixel) {
+    return fract(52.9829189 * fract(dot(pixel, vec2(0.06711056, 0.00583715))));
+}
+
+// Vogel (golden-angle) disc: i-th of n points in the unit disc, rotated by phi.
+vec2 vogel_disc(int i, int n, float phi) {
+    float r = sqrt((float(i) + 0.5) / float(n));
+    float a = float(i) * 2.39996323 + phi;
+    return r * vec2(cos(a), sin(a));
+}
+
+vec2 atlas_uv(int cascade, vec2 uv) {
+    vec2 tile = vec2(cascade % 2, cascade / 2);
+    return (tile + uv) / u_atlas_tiles;
+}
+
+float atlas_depth(int cascade, vec2 uv, vec2 texel) {
+    uv = clamp(uv, 0.5 * texel, 1.0 - 0.5 * texel);  // stay inside this cascade's tile
+    return texture(u_shadow_map, atlas_uv(cascade, uv)).r;
+}
+
+float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
+    float texel_w = u_cascade_texel[c];
+    float range = u_cascade_depth_range[c];
+    float slope = clamp(sqrt(max(0.0, 1.0 - ndl * ndl)) / max(ndl, 0.05), 1.0, 4.0);
+    vec3 q = p + n * texel_w * u_normal_offset * slope;
+    vec4 lp = u_cascade_vp[c] * vec4(q, 1.0);
+    vec3 s = lp.xyz / lp.w * 0.5 + 0.5;
+    if (any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0))) || s.z > 1.0) return 1.0;
+    vec2 texel = vec2(1.0 / size);
+    float phi = 6.2831853 * interleaved_gradient_noise(gl_FragCoord.xy);
+    float radius = 0.0;  // filter radius, texels
+    if (u_shadow_filter == SHADOW_PCF) radius = u_pcf_radius;
+    if (u_shadow_filter == SHADOW_PCSS) {
+        float recv_m = s.z * range;
+        float search = clamp(u_pcss_max_blocker * 2.0 * u_sun_tan_half / texel_w, 1.0, 16.0);
+        float sum = 0.0;
+        int found = 0;
+        float bias0 = (u_shadow_bias + search * 0.5) * texel_w / range;
+        for (int i = 0; i < u_blocker_samples; ++i) {
+            float d = atlas_depth(c, s.xy + vogel_disc(i, u_blocker_samples, phi) * search * texel, texel);
+            if (d < s.z - bias0) { sum += d; found++; }
+        }
+        if (found == 0) return 1.0;
+        float blocker_m = sum / float(found) * range;
+        float penumbra_m = max(recv_m - blocker_m, 0.0) * 2.0 * u_sun_tan_half;  // full width
+        radius = clamp(0.5 * penumbra_m / texel_w, 0.5, 24.0);
+    }
+    // the farther a filter tap is, the more a sloped receiver rises above the lookup depth
+    float bias = (u_shadow_bias + radius * slope) * texel_w / range;
+    if (u_shadow_filter == SHADOW_HARD) {
+        return s.z - bias <= atlas_depth(c, s.xy, texel) ? 1.0 : 0.0;
+    }
+    float lit = 0.0;
+    for (int i = 0; i < u_filter_samples; ++i) {
+        vec2 o = vogel_disc(i, u_filter_samples, phi) * radius * texel;
+        lit += (s.z - bias <= atlas_depth(c, s.xy + o, texel)) ? 1.0 : 0.0;
+    }
+    return lit / float(u_filter_samples);
+}
+
+// view_depth: distance along the camera axis (m); n: shading normal; ndl = dot(n, sun) > 0.
+float sun_visibility(vec3 p, vec3 n, float ndl, float view_depth) {
+    float size = float(textureSize(u_shadow_map, 0).x) / u_atlas_tiles;
+    for (int c = 0; c < u_cascade_count; ++c) {
+        float far_c = u_cascade_far[c];
+        if (view_depth <= far_c || c == u_cascade_count - 1) {
+            float v = cascade_visibility(c, p, n, ndl, size);
+            float near_c = c == 0 ? 0.0 : u_cascade_far[c - 1];
+            float band = u_cascade_blend * (far_c - near_c);
+            if (c + 1 < u_cascade_count && view_depth > far_c - band) {
+                float w = (view_depth - (far_c - band)) / max(band, 1e-6);
+                v = mix(v, cascade_visibility(c + 1, p, n, ndl, size), w);
+            }
+            return v;
+        }
+    }
+    return 1.0;
+}
+#endif

@@ -1,0 +1,76 @@
+"""Screen-space ambient occlusion with a bilateral blur (paper §3; ``glsl/ssao.glsl``).
+
+Main view only: the ray-traced views skip it (paper §9), because their pixels' neighbours are not
+their neighbours in the scene. The AO multiplies indirect light only (sky volume, LPV, ambient).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from serenity.raster.context import fullscreen_vao, load_program
+
+
+class SSAOPass:
+    def __init__(self, ctx, config):
+        self.ctx = ctx
+        self.config = config
+        self.program = load_program(ctx, "ssao.glsl")
+        self.blur = load_program(ctx, "bilateral_blur.glsl")
+        self.vao = fullscreen_vao(ctx, self.program)
+        self.blur_vao = fullscreen_vao(ctx, self.blur)
+        self.size = None
+
+    def resize(self, width: int, height: int) -> None:
+        import moderngl
+
+        if self.size == (width, height):
+            return
+        if self.size is not None:
+            for o in (self.fbo_a, self.fbo_b, self.tex_a, self.tex_b):
+                o.release()
+        self.tex_a = self.ctx.texture((width, height), 1, dtype="f2")
+        self.tex_b = self.ctx.texture((width, height), 1, dtype="f2")
+        for t in (self.tex_a, self.tex_b):
+            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            t.repeat_x = t.repeat_y = False
+        self.fbo_a = self.ctx.framebuffer(color_attachments=[self.tex_a])
+        self.fbo_b = self.ctx.framebuffer(color_attachments=[self.tex_b])
+        self.size = (width, height)
+
+    def render(self, gbuffer, view_proj: np.ndarray, camera_pos, camera_forward):
+        """AO texture (r16f, 1 = unoccluded) of the G-buffer."""
+        cfg = self.config
+        cam = tuple(float(x) for x in camera_pos)
+        fwd = tuple(float(x) for x in camera_forward)
+        with self.ctx.debug_scope("ssao"):
+            p = self.program
+            self.fbo_a.use()
+            gbuffer.position.use(location=0)
+            gbuffer.normal.use(location=1)
+            p["g_position"].value = 0
+            p["g_normal"].value = 1
+            p["u_view_proj"].write(view_proj.T.astype(np.float32).tobytes())
+            p["u_camera_pos"].value = cam
+            p["u_camera_forward"].value = fwd
+            p["u_radius"].value = float(cfg.radius)
+            p["u_bias"].value = float(cfg.bias)
+            p["u_thickness"].value = float(cfg.thickness)
+            p["u_directions"].value = int(cfg.directions)
+            p["u_steps"].value = int(cfg.steps)
+            self.vao.render(vertices=3)
+            if cfg.blur_radius <= 0:
+                return self.tex_a
+            b = self.blur
+            b["g_position"].value = 0
+            b["g_normal"].value = 1
+            b["u_src"].value = 2
+            b["u_radius"].value = int(cfg.blur_radius)
+            b["u_camera_pos"].value = cam
+            b["u_camera_forward"].value = fwd
+            for src, dst, axis in ((self.tex_a, self.fbo_b, (1.0, 0.0)), (self.tex_b, self.fbo_a, (0.0, 1.0))):
+                dst.use()
+                src.use(location=2)
+                b["u_axis"].value = axis
+                self.blur_vao.render(vertices=3)
+        return self.tex_a
