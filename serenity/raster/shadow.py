@@ -4,7 +4,8 @@ Cascades. The view range [near, min(far, max_distance, scene extent)] is split b
 "practical" scheme (Zhang et al. 2006): d_i = λ·n·(f/n)^(i/N) + (1-λ)·(n + (f-n)·i/N), λ =
 ``split_lambda`` (0 = uniform, 1 = logarithmic). Each cascade is the bounding sphere of its frustum
 slice; the sphere of a slice depends only on the slice distances, fov and aspect, so its size does
-not change when the camera turns, and its centre is snapped to whole shadow-map texels in light
+not change when the camera turns (the far end is the farthest scene corner's *distance*, in 5 %
+steps), and its centre is snapped to whole shadow-map texels in light
 space, so shadows do not shimmer as the camera moves (a one-texel camera move changes no texel of
 the map's content, only which texels are used). The light-space depth range is extended to the
 whole scene's bounds so casters outside the slice still cast.
@@ -85,10 +86,12 @@ def fit_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.nd
     center_scene = bounds.mean(axis=0)
     scene_radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2, 1e-3)
     light_view = look_at(np.zeros(3), -sun, np.array([0.0, 1.0, 0.0]))  # rotation only
-    # how far from the camera anything in the scene can be
+    # how far from the camera anything in the scene can be: a distance, not a depth, so that it does
+    # not change as the camera turns; quantised to 5 % steps so that it changes rarely as it moves
     corners = np.array([[bounds[i][0], bounds[j][1], bounds[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-    reach = float(np.max((corners - camera.position) @ camera.forward))
+    reach = float(np.max(np.linalg.norm(corners - camera.position, axis=1)))
     far = max(min(camera.far, max_distance, reach), camera.near * 2)
+    far = camera.near * 1.05 ** math.ceil(math.log(far / camera.near) / math.log(1.05))
     splits = split_distances(camera.near, far, count, lam)
     t = math.tan(math.radians(camera.fov_y_deg) / 2)
     # scene depth range along the sun direction (light view looks down -sun, so z_light = -dot)
