@@ -25,7 +25,7 @@ from serenity.raster.deferred import DeferredPass, LightingInputs
 from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.interop import read_texture
 from serenity.raster.scene_gl import SceneGL
-from serenity.raster.shadow import ShadowPass
+from serenity.raster.shadow import ShadowPass, fit_cascades
 from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
 
@@ -117,8 +117,9 @@ class Renderer:
         view_proj = cam.projection_matrix(self.width / self.height) @ view
         with self._stage("shadow"):
             sc = self.config.shadow
-            shadow = self.shadow_pass.render(cam, self.width / self.height, self.scene.sun.direction,
-                                             self.scene.bounds, sc.split_lambda, sc.max_distance)
+            cascades = fit_cascades(cam, self.width / self.height, self.scene.sun.direction, self.scene.bounds,
+                                    sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
+            shadow = self.shadow_pass.render(cascades)
         with self._stage("gbuffer"):
             gbuf = self.gbuffer_pass.render(view_proj, cam.position)
         ao = None

@@ -119,6 +119,36 @@ def fit_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.nd
     return out
 
 
+def fit_overlapped(camera_position, sun_direction: np.ndarray, bounds: np.ndarray, count: int = 3,
+                   size: int = 512, ratio: float = 4.0) -> list[Cascade]:
+    """Overlapped shadow maps (paper §9, Fig. 17): ``count`` concentric spheres around the camera,
+    each ``ratio`` times the radius of the previous, the largest reaching the farthest scene corner.
+
+    Unlike view-fitted cascades they cover every direction, so surfaces seen only in a reflection
+    or refraction (behind the camera, off screen) still get sun shadows; the price is the overlap
+    (each map re-covers the smaller ones). ``Cascade.far`` is here a *distance* from the camera:
+    the shader picks the first map whose sphere contains the point.
+    """
+    sun = np.asarray(sun_direction, np.float64)
+    cam = np.asarray(camera_position, np.float64)
+    light_view = look_at(np.zeros(3), -sun, np.array([0.0, 1.0, 0.0]))
+    corners = np.array([[bounds[i][0], bounds[j][1], bounds[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    reach = max(float(np.max(np.linalg.norm(corners - cam, axis=1))), 1e-2)
+    reach = 1.05 ** math.ceil(math.log(reach) / math.log(1.05))  # changes rarely as the camera moves
+    zc = -(corners @ (light_view[:3, :3].T))[:, 2]
+    scene_radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2, 1e-3)
+    depth_lo, depth_hi = float(zc.min()) - 0.01 * scene_radius, float(zc.max()) + 0.01 * scene_radius
+    out = []
+    for i in range(count):
+        radius = reach / ratio ** (count - 1 - i)
+        texel = 2 * radius / size
+        lc = light_view[:3, :3] @ cam
+        lc[:2] = np.floor(lc[:2] / texel) * texel
+        proj = ortho(lc[0] - radius, lc[0] + radius, lc[1] - radius, lc[1] + radius, depth_lo, depth_hi)
+        out.append(Cascade(proj @ light_view, float(radius), texel, depth_hi - depth_lo))
+    return out
+
+
 class ShadowPass:
     """Renders the cascades of the sun into one depth atlas."""
 
@@ -139,21 +169,21 @@ class ShadowPass:
         self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF/PCSS)
         self.fbo = ctx.framebuffer(depth_attachment=self.depth)
 
-    def render(self, camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, lam: float = 0.75,
-               max_distance: float = 200.0) -> ShadowMaps:
+    def render(self, cascades: list[Cascade]) -> ShadowMaps:
+        """Draw the scene's depth into one atlas tile per cascade (from ``fit_cascades`` or
+        ``fit_overlapped``)."""
         import moderngl
 
         ctx = self.ctx
-        cascades = fit_cascades(camera, aspect, sun_direction, bounds, self.count, self.size, lam, max_distance)
         with ctx.debug_scope("shadow"):
             self.fbo.use()
             self.fbo.clear(depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
-            for i, c in enumerate(cascades):
+            for i, c in enumerate(cascades[: self.count]):
                 self.fbo.viewport = ((i % 2) * self.size, (i // 2) * self.size, self.size, self.size)
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
                 self.vao.render(moderngl.TRIANGLES)
             self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)
             ctx.disable(moderngl.DEPTH_TEST)
-        return ShadowMaps(self.depth, cascades, self.size)
+        return ShadowMaps(self.depth, list(cascades[: self.count]), self.size)

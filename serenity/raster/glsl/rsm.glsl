@@ -1,0 +1,47 @@
+// Reflective shadow map of the sun (Dachsbacher & Stamminger 2005; paper §8): every texel is a
+// virtual point light. Orthographic view from the sun, so each texel covers an area A (m^2)
+// perpendicular to the sun and receives power E*A; a diffuse surface re-emits rho*E*A (W).
+//   0 flux     rgb = rho * E * A (W), a = 1 where covered
+//   1 normal   xyz = world normal facing the sun
+//   2 position xyz = world position (m)
+#include "common.glsl"
+
+#if defined VERTEX_SHADER
+in vec3 in_position;
+in vec3 in_normal;
+in vec2 in_uv;
+uniform mat4 u_light_view_proj;
+out vec3 v_world;
+out vec3 v_normal;
+out vec2 v_uv;
+void main() {
+    v_world = in_position;
+    v_normal = in_normal;
+    v_uv = in_uv;
+    gl_Position = u_light_view_proj * vec4(in_position, 1.0);
+}
+#endif
+
+#if defined FRAGMENT_SHADER
+in vec3 v_world;
+in vec3 v_normal;
+in vec2 v_uv;
+uniform vec3 u_albedo;
+uniform bool u_has_texture;
+uniform sampler2D u_albedo_tex;
+uniform vec3 u_sun_dir;
+uniform vec3 u_sun_irradiance;
+uniform float u_texel_area;
+layout(location = 0) out vec4 o_flux;
+layout(location = 1) out vec4 o_normal;
+layout(location = 2) out vec4 o_position;
+void main() {
+    vec3 albedo = u_albedo;
+    if (u_has_texture) albedo *= textureLod(u_albedo_tex, v_uv, 2.0).rgb;
+    vec3 n = normalize(v_normal);
+    if (dot(n, u_sun_dir) < 0.0) n = -n;
+    o_flux = vec4(albedo * u_sun_irradiance * u_texel_area, 1.0);
+    o_normal = vec4(n, 0.0);
+    o_position = vec4(v_world, 1.0);
+}
+#endif

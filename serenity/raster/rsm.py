@@ -1,0 +1,88 @@
+"""Reflective shadow map of the sun (paper §8): the light propagation volumes' virtual point lights.
+
+The sun's orthographic view of the scene's bounding sphere (``ShadowPass``'s single-map fit),
+``size``² texels; each covered texel becomes a VPL at its surface point with normal n and flux
+ρ·E·A (W), A = the texel's area perpendicular to the sun. The sum of all VPL fluxes is therefore
+the sun power the scene's directly lit surfaces reflect diffusely.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from serenity.raster.context import load_program
+from serenity.raster.interop import read_texture
+from serenity.raster.shadow import look_at, ortho
+
+
+@dataclass
+class VPLs:
+    """Virtual point lights: positions (N,3) m, normals (N,3), flux (N,3) W, texel_area m²."""
+
+    positions: np.ndarray
+    normals: np.ndarray
+    flux: np.ndarray
+    texel_area: float
+
+    @property
+    def count(self) -> int:
+        return int(len(self.positions))
+
+
+def fit_sun_view(sun_direction, bounds) -> tuple[np.ndarray, float]:
+    """World → light clip for an orthographic sun view of the bounds' sphere; returns (M, radius)."""
+    center = bounds.mean(axis=0)
+    radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2, 1e-3) * 1.01
+    eye = center + np.asarray(sun_direction, np.float64) * radius * 2
+    view = look_at(eye, center, np.array([0.0, 1.0, 0.0]))
+    return ortho(-radius, radius, -radius, radius, radius * 0.5, radius * 3.5) @ view, radius
+
+
+class RSMPass:
+    def __init__(self, ctx, scene_gl, size: int = 256):
+        import moderngl
+
+        self.ctx = ctx
+        self.scene_gl = scene_gl
+        self.size = size
+        self.program = load_program(ctx, "rsm.glsl")
+        self.vao = scene_gl.vao(self.program)
+        self.targets = [ctx.texture((size, size), 4, dtype="f4") for _ in range(3)]
+        for t in self.targets:
+            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.depth = ctx.depth_texture((size, size))
+        self.fbo = ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
+
+    def render(self, sun_direction, sun_irradiance, bounds) -> None:
+        import moderngl
+
+        ctx, p = self.ctx, self.program
+        vp, radius = fit_sun_view(sun_direction, bounds)
+        self.texel_area = (2 * radius / self.size) ** 2
+        with ctx.debug_scope("rsm"):
+            self.fbo.use()
+            self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.CULL_FACE)
+            p["u_light_view_proj"].write(vp.T.astype(np.float32).tobytes())
+            p["u_sun_dir"].value = tuple(float(x) for x in sun_direction)
+            p["u_sun_irradiance"].value = tuple(float(x) for x in sun_irradiance)
+            p["u_texel_area"].value = float(self.texel_area)
+            for r in self.scene_gl.ranges:
+                m = self.scene_gl.materials[r.material]
+                p["u_albedo"].value = tuple(float(x) for x in m.albedo)
+                tex = self.scene_gl.textures.get(r.material)
+                p["u_has_texture"].value = tex is not None
+                if tex is not None:
+                    tex.use(location=0)
+                    p["u_albedo_tex"].value = 0
+                self.vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
+            ctx.disable(moderngl.DEPTH_TEST)
+
+    def read(self) -> VPLs:
+        flux, nrm, pos = (read_texture(t, 4).reshape(-1, 4) for t in self.targets)
+        keep = (flux[:, 3] > 0) & (flux[:, :3].max(axis=1) > 0)
+        return VPLs(np.ascontiguousarray(pos[keep, :3]), np.ascontiguousarray(nrm[keep, :3]),
+                    np.ascontiguousarray(flux[keep, :3]), float(self.texel_area))
