@@ -1,0 +1,102 @@
+"""The `serenity` command: it renders what it says, and bad input ends in one line, not a traceback."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from serenity.cli import main
+
+
+def _run(args, capsys):
+    code = main(args)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_render_writes_png_and_multilayer_exr(tmp_path, capsys):
+    from PIL import Image
+
+    from serenity.io.exr import read_exr
+
+    png = tmp_path / "out" / "plane.png"
+    code, out, err = _run(["render", "plane", "--size", "48x32", "-o", str(png), "--frames", "1"], capsys)
+    assert code == 0, err
+    assert Image.open(png).size == (48, 32)
+    layers = read_exr(str(png.with_suffix(".exr")))
+    assert {"beauty", "albedo", "normal", "depth", "direct"} <= set(layers)
+    assert layers["beauty"].shape == (32, 48, 3)
+    assert np.all(np.isfinite(layers["beauty"]))
+    for stage in ("gbuffer", "deferred", "total"):
+        assert stage in out
+
+
+def _one_line_error(code, err, *words):
+    assert code == 2
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("serenity: error:")
+    assert "Traceback" not in err
+    for w in words:
+        assert w.lower() in lines[0].lower(), lines[0]
+
+
+def test_missing_file(tmp_path, capsys):
+    path = tmp_path / "nope.glb"
+    code, _, err = _run(["render", str(path), "--size", "16x16"], capsys)
+    _one_line_error(code, err, "nope.glb")
+
+
+def test_corrupt_mesh(tmp_path, capsys):
+    path = tmp_path / "broken.glb"
+    path.write_bytes(b"glTF\x02\x00\x00\x00garbage-that-is-not-a-gltf" * 3)
+    code, _, err = _run(["render", str(path), "--size", "16x16"], capsys)
+    _one_line_error(code, err, "broken.glb")
+
+
+def test_nan_vertices(tmp_path, capsys):
+    path = tmp_path / "nan.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nv 0 1 1\nf 1 2 3\nf 1 2 4\n")
+    code, _, err = _run(["render", str(path), "--size", "16x16"], capsys)
+    _one_line_error(code, err, "nan")
+
+
+def test_empty_scene(tmp_path, capsys):
+    path = tmp_path / "empty.obj"
+    path.write_text("# nothing here\nv 0 0 0\n")
+    code, _, err = _run(["render", str(path), "--size", "16x16"], capsys)
+    _one_line_error(code, err, "empty.obj")
+
+
+@pytest.mark.parametrize("when", ["2026-13-01 12:00", "2026-02-30 12:00", "2026-06-01 25:00", "noon"])
+def test_impossible_time(when, capsys):
+    code, _, err = _run(["render", "plane", "--size", "16x16", "--time", when], capsys)
+    _one_line_error(code, err)
+
+
+def test_bad_size(capsys):
+    code, _, err = _run(["render", "plane", "--size", "big"], capsys)
+    _one_line_error(code, err, "size")
+
+
+def test_unknown_scene_name(capsys):
+    code, _, err = _run(["render", "no-such-scene", "--size", "16x16"], capsys)
+    _one_line_error(code, err, "no-such-scene")
+
+
+def test_scenes_lists_builtins(capsys):
+    code, out, _ = _run(["scenes"], capsys)
+    assert code == 0
+    for name in ("courtyard", "cornell"):
+        assert name in out
+
+
+def test_console_script_exit_status(tmp_path):
+    """The installed entry point (a real process): error → status 2, one line, no traceback."""
+    r = subprocess.run([sys.executable, "-m", "serenity", "render", str(tmp_path / "missing.obj")],
+                       capture_output=True, text=True, timeout=120, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert "missing.obj" in r.stderr
