@@ -31,9 +31,36 @@ def init_warp():
                 wp.config.quiet = True
                 if hasattr(wp, "LOG_WARNING"):  # Warp >= 1.13 logs by level
                     wp.config.log_level = wp.LOG_WARNING
-                wp.init()
+                _init_quietly(wp)
                 _initialised = True
     return wp
+
+
+def _init_quietly(wp) -> None:
+    """``wp.init()`` with the native "no CUDA driver" notice filtered out of stderr: on a machine
+    without a GPU that is the expected state, not news (other native messages pass through)."""
+    import sys
+    import tempfile
+
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # stderr replaced (pytest capture, notebooks)
+        wp.init()
+        return
+    sys.stderr.flush()
+    saved = os.dup(fd)
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        os.dup2(tmp.fileno(), fd)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, fd)
+            os.close(saved)
+        tmp.seek(0)
+        text = tmp.read().decode(errors="replace")
+    kept = [ln for ln in text.splitlines() if ln.strip() and "Could not find or load the NVIDIA CUDA driver" not in ln]
+    if kept:
+        print("\n".join(kept), file=sys.stderr)
 
 
 def available_devices() -> list[str]:
