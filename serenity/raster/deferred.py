@@ -53,7 +53,10 @@ class DeferredPass:
         self.fbo = self.ctx.framebuffer(color_attachments=[self.hdr, self.direct])
         self.size = (width, height)
 
-    def render(self, gbuffer, shadow, light: LightingInputs, ao=None) -> LitImage:
+    def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None) -> LitImage:
+        """Light ``gbuffer``. ``rt_view`` (an object with ``eye`` and ``ray_dir`` textures) marks a
+        ray-traced G-buffer: each pixel's viewer is its ray origin, misses show the sky along the
+        ray, untraced pixels are black, and SSAO is not applied."""
         ctx, p = self.ctx, self.program
         with ctx.debug_scope("deferred"):
             self.fbo.use()
@@ -64,8 +67,14 @@ class DeferredPass:
                               ("u_shadow_map", 4)):
                 p[name].value = loc
             self._set_shadow_uniforms(p, shadow, light)
-            p["u_use_ao"].value = ao is not None
-            if ao is not None:
+            p["u_use_ao"].value = ao is not None and rt_view is None
+            p["u_rt_view"].value = rt_view is not None
+            if rt_view is not None:
+                rt_view.eye.use(location=6)
+                rt_view.ray_dir.use(location=7)
+                p["g_eye"].value = 6
+                p["g_ray_dir"].value = 7
+            if ao is not None and rt_view is None:
                 ao.use(location=5)
                 p["u_ao"].value = 5
             p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())

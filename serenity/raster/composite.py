@@ -1,0 +1,38 @@
+"""Fresnel composite of the reflection/refraction effect buffers over the main view
+(``glsl/composite.glsl``)."""
+
+from __future__ import annotations
+
+from serenity.raster.context import fullscreen_vao, load_program
+
+
+class CompositePass:
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.program = load_program(ctx, "composite.glsl")
+        self.vao = fullscreen_vao(ctx, self.program)
+        self.size = None
+
+    def resize(self, width: int, height: int) -> None:
+        if self.size == (width, height):
+            return
+        if self.size is not None:
+            self.fbo.release()
+            self.hdr.release()
+        self.hdr = self.ctx.texture((width, height), 4, dtype="f4")
+        self.fbo = self.ctx.framebuffer(color_attachments=[self.hdr])
+        self.size = (width, height)
+
+    def render(self, surface, reflection, refraction, gbuffer, flags, camera_pos):
+        p = self.program
+        with self.ctx.debug_scope("composite"):
+            self.fbo.use()
+            for loc, (name, tex) in enumerate((("u_surface", surface), ("u_reflection", reflection),
+                                               ("u_refraction", refraction), ("g_normal", gbuffer.normal),
+                                               ("g_position", gbuffer.position), ("g_material", gbuffer.material),
+                                               ("u_flags", flags))):
+                tex.use(location=loc)
+                p[name].value = loc
+            p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
+            self.vao.render(vertices=3)
+        return self.hdr

@@ -1,0 +1,53 @@
+// Composite of the ray-traced effect buffers over the lit main view (paper §9, Fig. 18-19), with
+// Schlick's Fresnel term. Per pixel (material from the main G-buffer, v = view direction):
+//   glass (transparency T > 0): F = schlick(((ior-1)/(ior+1))^2, cos) (1 under total internal
+//        reflection);  L = F * L_reflection + (1 - F) * (T * L_refraction + (1 - T) * L_surface)
+//   mirror / metal (reflectivity R > 0, T = 0): F = schlick(R, cos);
+//        L = F * L_reflection + (1 - F) * L_surface
+// Drawn as one fullscreen pass over the G-buffer rather than a second forward pass over the
+// reflective meshes: the G-buffer already holds every attribute the forward pass would compute.
+#include "common.glsl"
+
+#if defined VERTEX_SHADER
+out vec2 v_uv;
+void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_position(gl_VertexID); }
+#endif
+
+#if defined FRAGMENT_SHADER
+in vec2 v_uv;
+uniform sampler2D u_surface;      // lit main view (HDR)
+uniform sampler2D u_reflection;   // reflection effect buffer (HDR)
+uniform sampler2D u_refraction;   // refraction effect buffer (HDR)
+uniform sampler2D g_normal;
+uniform sampler2D g_position;
+uniform sampler2D g_material;     // shininess, reflectivity, transparency, ior
+uniform sampler2D u_flags;        // ray-casting flags: 1 reflect, 2 refract, 4 TIR
+uniform vec3 u_camera_pos;
+out vec4 o_hdr;
+
+float schlick(float f0, float cos_theta) {
+    float m = clamp(1.0 - cos_theta, 0.0, 1.0);
+    return f0 + (1.0 - f0) * m * m * m * m * m;
+}
+
+void main() {
+    vec3 surface = texture(u_surface, v_uv).rgb;
+    vec4 pos = texture(g_position, v_uv);
+    float flags = texture(u_flags, v_uv).r;
+    if (pos.w == 0.0 || flags == 0.0) { o_hdr = vec4(surface, 1.0); return; }
+    vec4 mat = texture(g_material, v_uv);
+    vec3 n = normalize(texture(g_normal, v_uv).xyz);
+    float cos_t = abs(dot(n, normalize(u_camera_pos - pos.xyz)));
+    vec3 refl = texture(u_reflection, v_uv).rgb;
+    float transparency = mat.z;
+    if (transparency > 0.0) {
+        float f0 = pow((mat.w - 1.0) / (mat.w + 1.0), 2.0);
+        float F = mod(floor(flags / 4.0), 2.0) > 0.5 ? 1.0 : schlick(f0, cos_t);
+        vec3 refr = texture(u_refraction, v_uv).rgb;
+        o_hdr = vec4(F * refl + (1.0 - F) * (transparency * refr + (1.0 - transparency) * surface), 1.0);
+    } else {
+        float F = schlick(mat.y, cos_t);
+        o_hdr = vec4(F * refl + (1.0 - F) * surface, 1.0);
+    }
+}
+#endif
