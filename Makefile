@@ -4,6 +4,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN     = $(VENV)/bin
 EXTRAS ?= test,eval
+comma  := ,
+STAMP   = $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
 
 .PHONY: setup sysdeps render test test-all bench lint clean
 
@@ -13,16 +15,15 @@ $(BIN)/python:
 	  $(PYTHON) -m pip install -q --user virtualenv && $(PYTHON) -m virtualenv -q $(VENV); }
 	$(BIN)/python -m pip install -q --upgrade pip
 
-$(VENV)/.installed-$(subst $(comma),-,$(EXTRAS)): pyproject.toml | $(BIN)/python
+$(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install -q -e '.[$(EXTRAS)]'
 	@touch $@
 
-comma := ,
 
 sysdeps:
 	@sh tools/check_sysdeps.sh
 
-setup: sysdeps $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
+setup: sysdeps $(STAMP)
 
 render: setup
 	$(BIN)/serenity render
