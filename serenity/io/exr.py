@@ -36,7 +36,7 @@ def write_exr(path: str, layers: dict[str, np.ndarray]) -> None:
         if shape is None:
             shape = a.shape[:2]
         elif a.shape[:2] != shape:
-            raise SerenityError(f"{path}: layer {name!r} is {a.shape[:2]}, other layers are {shape}")
+            raise SerenityError(f"{path}: layer {name!r} is {a.shape[:2]}, other layers are {shape} (shape mismatch)")
         for c, suffix in enumerate(_SUFFIXES[a.shape[2]]):
             key = suffix if name == "beauty" else f"{name}.{suffix}"
             channels[key] = np.ascontiguousarray(a[..., c])
