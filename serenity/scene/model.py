@@ -364,6 +364,8 @@ class Scene:
     sky: Sky = field(default_factory=Sky)
     occlusion_quads: list[OcclusionQuad] = field(default_factory=list)
     source: str | None = None  # file the scene was loaded from, if any
+    #: (latitude, longitude) in degrees where the scene stands (north/east positive), for suns set by time
+    location: tuple[float, float] | None = None
 
     def __post_init__(self):
         self.validate()
