@@ -28,7 +28,7 @@ def scenes_equal(a, b) -> list[str]:
             diffs.append(what)
     if [m.name for m in a.materials] != [m.name for m in b.materials]:
         diffs.append("material names")
-    for m, n in zip(a.materials, b.materials):
+    for m, n in zip(a.materials, b.materials, strict=False):
         for k in ("albedo", "specular", "shininess", "reflectivity", "transparency", "ior"):
             if not np.allclose(getattr(m, k), getattr(n, k), rtol=0, atol=1e-9):
                 diffs.append(f"material {m.name}.{k}")
@@ -47,7 +47,7 @@ def scenes_equal(a, b) -> list[str]:
         diffs.append("sky")
     if len(a.occlusion_quads) != len(b.occlusion_quads):
         diffs.append("occlusion quad count")
-    for qa, qb in zip(a.occlusion_quads, b.occlusion_quads):
+    for qa, qb in zip(a.occlusion_quads, b.occlusion_quads, strict=False):
         if not all(np.allclose(getattr(qa, k), getattr(qb, k)) for k in ("center", "up", "right", "half_up",
                                                                          "half_right")):
             diffs.append("occlusion quads")

@@ -50,10 +50,14 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import fields
 
 import numpy as np
+
+try:
+    import tomllib
+except ImportError:  # Python 3.10
+    import tomli as tomllib
 
 from serenity.errors import SceneError
 from serenity.scene.model import Camera, Material, OcclusionQuad, Scene, Sky, Sun, direction_from_angles
