@@ -123,3 +123,34 @@ def test_save_toml_then_load_is_exact(tmp_path):
     back = load(str(tmp_path / "a.toml"))
     np.testing.assert_array_equal(back.sun.direction, scene.sun.direction)
     np.testing.assert_array_equal(back.camera.position, scene.camera.position)
+
+
+def _corners(v, n, uv, f):
+    """Each triangle as a sorted tuple of its rounded (position, normal, uv) corners, order-free."""
+    rows = np.concatenate([v[f], n[f], uv[f]], axis=2).astype(np.float64).round(3) + 0.0  # -0 -> 0
+    return np.array(sorted(tuple(sorted(map(tuple, tri))) for tri in rows))
+
+
+@pytest.mark.parametrize("ext", [".glb", ".obj"])
+def test_trimesh_written_file_keeps_triangles_normals_uvs_and_material(ext, tmp_path):
+    from PIL import Image
+
+    mesh = trimesh.creation.box(extents=(2.0, 1.0, 3.0))
+    mesh.unmerge_vertices()  # in place: flat normals, one uv per corner
+    uv = np.random.default_rng(0).random((len(mesh.vertices), 2))
+    tex = Image.fromarray(np.full((4, 4, 3), (200, 120, 40), np.uint8))
+    mesh.visual = trimesh.visual.TextureVisuals(uv=uv, material=trimesh.visual.material.SimpleMaterial(
+        image=tex, diffuse=(255, 255, 255, 255)))
+    normals = np.asarray(mesh.vertex_normals)
+    path = tmp_path / f"t{ext}"
+    mesh.export(path)
+    scene = load(str(path))
+    v, n, u, f, fm = scene.merged()
+    np.testing.assert_allclose(_corners(v, n, u, f), _corners(np.asarray(mesh.vertices), normals, uv,
+                                                              np.asarray(mesh.faces)), atol=2e-3)
+    mat = scene.materials[fm[0]]
+    assert mat.albedo_texture is not None
+    from serenity.scene.texture import srgb_to_linear
+
+    np.testing.assert_allclose(mat.albedo_texture.mips[0][0, 0, :3] * mat.albedo,
+                               srgb_to_linear(np.array([200, 120, 40]) / 255), atol=2e-3)
