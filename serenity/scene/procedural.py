@@ -522,6 +522,25 @@ def plane_scene(elevation_deg: float = 60.0, azimuth_deg: float = 180.0, albedo:
     return b.scene("plane", camera, sun, Sky(radiance=(0.0, 0.0, 0.0), model="constant"), [], None)
 
 
+def penumbra_scene() -> Scene:
+    """A 6 m pole and a 1 m cube on a grey plane, the sun 30° high: the pole's shadow tip lies 10 m
+    from its base, where the real sun's 0.53° disc spreads a ~9 cm penumbra (paper Fig. 4)."""
+    b = _Builder()
+    b.material("ground", albedo=(0.5, 0.5, 0.5))
+    b.material("pole", albedo=(0.7, 0.7, 0.7))
+    b.rect("ground", (0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, -20.0), 0.25)
+    b.box("pole", (-0.15, 0.0, -0.15), (0.15, 6.0, 0.15), skip=("-y",))
+    b.box("pole", (1.5, 0.0, -1.5), (2.5, 1.0, -0.5), skip=("-y",))
+    sun = Sun(direction_from_angles(30.0, 200.0))
+    along = -np.array([sun.direction[0], 0.0, sun.direction[2]])
+    along /= np.linalg.norm(along)
+    tip = along * 6.0 / math.tan(math.radians(30.0))
+    side = np.cross(along, _Y)
+    camera = Camera(position=tip - along * 1.0 + side * 2.5 + _Y * 2.0, target=tip - along * 0.8,
+                    fov_y_deg=40.0, near=0.05, far=100.0)
+    return b.scene("penumbra", camera, sun, Sky(radiance=(0.0, 0.0, 0.0), model="constant"), [], None)
+
+
 _SCENES: dict[str, tuple[Callable[[], Scene], str]] = {
     "courtyard": (courtyard_scene, "outdoor square enclosed by buildings: arches, glass windows, a mirror door "
                                    "(default)"),
@@ -531,6 +550,7 @@ _SCENES: dict[str, tuple[Callable[[], Scene], str]] = {
     "mirror-box": (mirror_box_scene, "a roofless room with a mirror reflecting objects behind the camera"),
     "glass": (glass_scene, "glass slab, sphere and prism: refraction and total internal reflection"),
     "night": (night_scene, "the courtyard at 23:30, the sun below the horizon"),
+    "penumbra": (penumbra_scene, "a 6 m pole's shadow under the 0.53 deg sun: hard vs PCF vs PCSS (paper Fig. 4)"),
     "plane": (lambda: plane_scene(), "one diffuse plane (albedo 0.5), sun at 60 deg elevation, black sky"),
 }
 
