@@ -1,0 +1,105 @@
+"""Speed-vs-accuracy charts (DESIGN.md §4): x = frame or stage time in milliseconds (log scale),
+y = error against the reference (lower is better), one colour per technique, every point labelled,
+the Pareto front (no other point is both faster and more accurate) drawn as a step line, and the
+paper's settings ringed.
+
+    points = [{"technique": "LPV", "label": "32³, 8 it", "ms": 12.0, "error": 0.08, "paper": True}, ...]
+    save_speed_accuracy_chart(points, "chart.png", error_name="relMSE (indirect)")
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+from serenity.errors import SerenityError
+
+
+def _validate(points: list[dict]) -> list[dict]:
+    out = []
+    for i, p in enumerate(points):
+        try:
+            q = {"technique": str(p["technique"]), "label": str(p.get("label", "")), "ms": float(p["ms"]),
+                 "error": float(p["error"]), "paper": bool(p.get("paper", False))}
+        except (KeyError, TypeError, ValueError) as exc:
+            raise SerenityError(f"chart point {i} needs technique, ms and error ({exc})") from None
+        if not (q["ms"] > 0 and math.isfinite(q["ms"]) and math.isfinite(q["error"])):
+            raise SerenityError(f"chart point {i} ({q['label']!r}): ms must be > 0 and error finite")
+        out.append(q)
+    if not out:
+        raise SerenityError("a chart needs at least one point")
+    return out
+
+
+def pareto_front(points: list[dict]) -> list[int]:
+    """Indices of the points no other point dominates (≤ ms and ≤ error, one strictly), by rising ms."""
+    order = sorted(range(len(points)), key=lambda i: (points[i]["ms"], points[i]["error"]))
+    front, best = [], math.inf
+    for i in order:
+        if points[i]["error"] < best:
+            front.append(i)
+            best = points[i]["error"]
+    return front
+
+
+def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: str | None = None):
+    """A matplotlib Figure of the chart (Agg backend; the caller saves or closes it)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    pts = _validate(points)
+    techniques = list(dict.fromkeys(p["technique"] for p in pts))
+    cmap = plt.get_cmap("tab10")
+    colour = {t: cmap(k % 10) for k, t in enumerate(techniques)}
+    fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=120)
+    front = pareto_front(pts)
+    fx = [pts[i]["ms"] for i in front]
+    fy = [pts[i]["error"] for i in front]
+    ax.step(fx, fy, where="post", color="0.55", lw=1.2, ls="--", zorder=1, label="Pareto front")
+    for t in techniques:
+        sel = [p for p in pts if p["technique"] == t]
+        ax.scatter([p["ms"] for p in sel], [p["error"] for p in sel], color=colour[t], s=36, zorder=3, label=t)
+    on_front = set(front)
+    for i, p in enumerate(pts):
+        if i in on_front:
+            ax.scatter([p["ms"]], [p["error"]], facecolors="none", edgecolors="0.2", s=90, lw=1.0, zorder=4)
+        if p["paper"]:
+            ax.scatter([p["ms"]], [p["error"]], marker="*", color="gold", edgecolors="black", s=260, lw=0.8,
+                       zorder=5)
+        if p["label"]:
+            ax.annotate(p["label"], (p["ms"], p["error"]), textcoords="offset points", xytext=(6, 5), fontsize=7.5,
+                        color=colour[p["technique"]], zorder=6)
+    if any(p["paper"] for p in pts):
+        ax.scatter([], [], marker="*", color="gold", edgecolors="black", s=160, label="paper's settings")
+    ax.set_xscale("log")
+    ax.set_xlabel("time (ms, log scale)")
+    ax.set_ylabel(f"{error_name} (lower is better)")
+    ymax = max(p["error"] for p in pts)
+    ax.set_ylim(bottom=min(0.0, min(p["error"] for p in pts)), top=ymax * 1.15 if ymax > 0 else 1.0)
+    lo, hi = min(p["ms"] for p in pts), max(p["ms"] for p in pts)
+    ax.set_xlim(lo / 1.6, hi * 2.2)
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=8, loc="best")
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def save_speed_accuracy_chart(points: list[dict], path: str, error_name: str = "error",
+                              title: str | None = None) -> str:
+    """Write the chart of ``points`` as a PNG to ``path``; returns ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = speed_accuracy_figure(points, error_name, title)
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    try:
+        fig.savefig(path)
+    except OSError as exc:
+        raise SerenityError(f"{path}: cannot write chart ({exc})") from exc
+    finally:
+        plt.close(fig)
+    return path
