@@ -1,0 +1,159 @@
+// Light propagation volume lookups (paper §8, Fig. 10): the GLSL twin of lookup_irradiance and
+// lookup_glossy in serenity/kernels/lpv.py, whose module docstring states the SH convention and
+// units. Mirror any change there. Include it in a fragment shader and call
+//   vec3 lpv_irradiance(vec3 p, vec3 n)           // W m^-2, >= 0: diffuse irradiance at p, normal n
+//   vec3 lpv_glossy(vec3 p, vec3 r, float m)      // W m^-2 sr^-1: radiance from around direction r,
+//                                                 // prefiltered by a normalised Phong lobe cos^m
+// Uniforms are set by serenity.raster.lpv_gl.LPVTexturesGL.bind.
+//
+// Per cascade c (finest first, u_lpv_count of them active) three RGBA32F 3-D textures, one per
+// colour channel: RGBA = L1 SH (Y0, x, y, z) of the accumulated radiant intensity in W/sr, texel
+// (x, y, z) = cell (x, y, z), LINEAR filtering, CLAMP_TO_EDGE. Cell of world point p:
+// u = (p - origin) / cell_size (in cells), texture coordinate u / res.
+#ifndef SERENITY_LPV_GLSL
+#define SERENITY_LPV_GLSL
+
+uniform sampler3D u_lpv_r0;
+uniform sampler3D u_lpv_g0;
+uniform sampler3D u_lpv_b0;
+uniform sampler3D u_lpv_r1;
+uniform sampler3D u_lpv_g1;
+uniform sampler3D u_lpv_b1;
+uniform sampler3D u_lpv_r2;
+uniform sampler3D u_lpv_g2;
+uniform sampler3D u_lpv_b2;
+uniform vec4 u_lpv_geom[3];           // xyz: grid min corner (m), w: cell size (m)
+uniform int u_lpv_res[3];             // cells per axis
+uniform int u_lpv_count;              // active cascades, 0..3 (0: the LPV adds nothing)
+uniform float u_lpv_lookup_offset;    // cells along the normal (irradiance)
+uniform bool u_lpv_leak_guard;        // irradiance: drop cells behind the surface (lpv.py's leak guard)
+uniform float u_lpv_margin;           // cells at a non-last cascade's border with zero weight
+uniform float u_lpv_band;             // cells of the blend band (0: hard switch)
+uniform int u_lpv_glossy_steps;       // samples along the reflected direction
+uniform float u_lpv_glossy_step;      // metres between glossy samples
+
+const float LPV_C0 = 0.28209479177387814;   // 1 / (2 sqrt(pi))
+const float LPV_C1 = 0.48860251190291992;   // sqrt(3) / (2 sqrt(pi))
+const float LPV_E0 = 0.88622692545275801;   // sqrt(pi) / 2
+const float LPV_E1 = 1.02332670794648848;   // sqrt(pi / 3)
+
+// alpha of cascade c at grid coordinate u (cells): smoothstep(margin, margin + band, d), or a
+// step when band = 0; the last active cascade: clamp(d + 1, 0, 1). d = distance to the box border.
+float lpv_cascade_weight(vec3 u, int res, bool last) {
+    float fr = float(res);
+    float d = min(min(min(u.x, u.y), u.z), min(min(fr - u.x, fr - u.y), fr - u.z));
+    if (last) return clamp(d + 1.0, 0.0, 1.0);
+    if (u_lpv_band > 0.0) {
+        float t = clamp((d - u_lpv_margin) / u_lpv_band, 0.0, 1.0);
+        return t * t * (3.0 - 2.0 * t);
+    }
+    return d > u_lpv_margin ? 1.0 : 0.0;
+}
+
+// SH of cascade c, channels R, G, B, trilinear at grid coordinate u.
+void lpv_fetch(int c, vec3 u, out vec4 sr, out vec4 sg, out vec4 sb) {
+    vec3 t = u / float(u_lpv_res[c]);
+    if (c == 0) {
+        sr = textureLod(u_lpv_r0, t, 0.0); sg = textureLod(u_lpv_g0, t, 0.0); sb = textureLod(u_lpv_b0, t, 0.0);
+    } else if (c == 1) {
+        sr = textureLod(u_lpv_r1, t, 0.0); sg = textureLod(u_lpv_g1, t, 0.0); sb = textureLod(u_lpv_b1, t, 0.0);
+    } else {
+        sr = textureLod(u_lpv_r2, t, 0.0); sg = textureLod(u_lpv_g2, t, 0.0); sb = textureLod(u_lpv_b2, t, 0.0);
+    }
+}
+
+// One texel (no filtering) of cascade c's R, G, B textures.
+void lpv_texel(int c, ivec3 i, out vec4 sr, out vec4 sg, out vec4 sb) {
+    if (c == 0) {
+        sr = texelFetch(u_lpv_r0, i, 0); sg = texelFetch(u_lpv_g0, i, 0); sb = texelFetch(u_lpv_b0, i, 0);
+    } else if (c == 1) {
+        sr = texelFetch(u_lpv_r1, i, 0); sg = texelFetch(u_lpv_g1, i, 0); sb = texelFetch(u_lpv_b1, i, 0);
+    } else {
+        sr = texelFetch(u_lpv_r2, i, 0); sg = texelFetch(u_lpv_g2, i, 0); sb = texelFetch(u_lpv_b2, i, 0);
+    }
+}
+
+// Trilinear with each of the 8 cells also weighted by g = clamp(4 n.(centre - us) + 1, 0, 1):
+// cells whose centre lies over 1/4 cell behind the surface point us (cells) do not light it.
+void lpv_fetch_guarded(int c, vec3 u, vec3 us, vec3 n, out vec4 sr, out vec4 sg, out vec4 sb) {
+    int res = u_lpv_res[c];
+    vec3 p = u - vec3(0.5);
+    vec3 f = floor(p);
+    vec3 t = p - f;
+    ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1));
+    ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1));
+    sr = vec4(0.0); sg = vec4(0.0); sb = vec4(0.0);
+    float wsum = 0.0;
+    for (int k = 0; k < 8; ++k) {
+        bool bx = (k & 1) != 0, by = (k & 2) != 0, bz = (k & 4) != 0;
+        ivec3 ii = ivec3(bx ? i1.x : i0.x, by ? i1.y : i0.y, bz ? i1.z : i0.z);
+        float g = clamp(4.0 * dot(n, vec3(ii) + vec3(0.5) - us) + 1.0, 0.0, 1.0);
+        float w = (bx ? t.x : 1.0 - t.x) * (by ? t.y : 1.0 - t.y) * (bz ? t.z : 1.0 - t.z) * g;
+        vec4 a, b, d;
+        lpv_texel(c, ii, a, b, d);
+        sr += w * a; sg += w * b; sb += w * d;
+        wsum += w;
+    }
+    if (wsum < 1.0e-4) {
+        lpv_fetch(c, u, sr, sg, sb);
+        return;
+    }
+    sr /= wsum; sg /= wsum; sb /= wsum;
+}
+
+float lpv_eval_irradiance(vec4 s, vec3 n, float inv_area) {
+    return max((LPV_E0 * s.x - LPV_E1 * dot(s.yzw, n)) * inv_area, 0.0);
+}
+
+float lpv_eval_radiance(vec4 s, vec3 w, float a1, float inv_area) {
+    return max((LPV_C0 * s.x + a1 * LPV_C1 * dot(s.yzw, w)) * inv_area, 0.0);
+}
+
+vec3 lpv_irradiance(vec3 p, vec3 n_in) {
+    vec3 n = normalize(n_in);
+    vec3 e = vec3(0.0);
+    float keep = 1.0;
+    for (int c = 0; c < u_lpv_count; ++c) {
+        float cell = u_lpv_geom[c].w;
+        vec3 us = (p - u_lpv_geom[c].xyz) / cell;
+        vec3 u = us + n * u_lpv_lookup_offset;
+        float alpha = lpv_cascade_weight(u, u_lpv_res[c], c == u_lpv_count - 1) * keep;
+        if (alpha > 0.0) {
+            vec4 sr, sg, sb;
+            if (u_lpv_leak_guard) lpv_fetch_guarded(c, u, us, n, sr, sg, sb);
+            else lpv_fetch(c, u, sr, sg, sb);
+            float inv_area = 1.0 / (cell * cell);
+            e += alpha * vec3(lpv_eval_irradiance(sr, n, inv_area), lpv_eval_irradiance(sg, n, inv_area),
+                              lpv_eval_irradiance(sb, n, inv_area));
+            keep -= alpha;
+        }
+    }
+    return e;
+}
+
+vec3 lpv_glossy(vec3 p, vec3 r_in, float shininess) {
+    vec3 r = normalize(r_in);
+    float a1 = (shininess + 1.0) / (shininess + 2.0);
+    vec3 w = -r;
+    vec3 acc = vec3(0.0);
+    for (int k = 0; k < u_lpv_glossy_steps; ++k) {
+        vec3 q = p + r * (u_lpv_glossy_step * float(k + 1));
+        float keep = 1.0;
+        for (int c = 0; c < u_lpv_count; ++c) {
+            float cell = u_lpv_geom[c].w;
+            vec3 u = (q - u_lpv_geom[c].xyz) / cell;
+            float alpha = lpv_cascade_weight(u, u_lpv_res[c], c == u_lpv_count - 1) * keep;
+            if (alpha > 0.0) {
+                vec4 sr, sg, sb;
+                lpv_fetch(c, u, sr, sg, sb);
+                float inv_area = 1.0 / (cell * cell);
+                acc += alpha * vec3(lpv_eval_radiance(sr, w, a1, inv_area), lpv_eval_radiance(sg, w, a1, inv_area),
+                                    lpv_eval_radiance(sb, w, a1, inv_area));
+                keep -= alpha;
+            }
+        }
+    }
+    return u_lpv_glossy_steps > 0 ? acc / float(u_lpv_glossy_steps) : vec3(0.0);
+}
+
+#endif

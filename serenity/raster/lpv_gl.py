@@ -1,0 +1,176 @@
+"""Light propagation volumes on the GL side (paper §8): the cascades as 3-D textures for
+``glsl/lpv.glsl``'s ``lpv_irradiance`` / ``lpv_glossy``, and a probe pass that evaluates them at
+arbitrary points (tests, debugging).
+
+``LPVTexturesGL.upload(lpv)`` takes any object shaped like ``serenity.kernels.lpv
+.LightPropagationVolume`` (``grids``, ``textures(c)``, ``config``, ``glossy_step_length()``) — this
+module never imports a kernel module (DESIGN.md §2). Per active cascade: three RGBA32F textures
+(R, G, B), RGBA = L1 SH (Y0, x, y, z) of intensity in W/sr, LINEAR, CLAMP_TO_EDGE.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.interop import texture3d_from_array
+
+MAX_CASCADES = 3
+CHANNELS = ("r", "g", "b")
+UNITS = MAX_CASCADES * len(CHANNELS)  # texture units ``bind`` uses, from ``first_unit`` on
+
+
+class LPVTexturesGL:
+    """The LPV's cascades as 9 sampler3D (3 cascades × RGB) plus the lookup uniforms of lpv.glsl."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        zero = np.zeros((1, 1, 1, 4), np.float32)
+        self._empty = texture3d_from_array(ctx, zero)
+        self.textures: list[list] = [[self._empty] * 3 for _ in range(MAX_CASCADES)]
+        self.count = 0
+        self.geom = np.zeros((MAX_CASCADES, 4), np.float32)
+        self.res = np.ones(MAX_CASCADES, np.int32)
+        self.lookup_offset = 0.5
+        self.leak_guard = True
+        self.margin = 0.5
+        self.band = 2.0
+        self.glossy_steps = 8
+        self.glossy_step = 1.0
+
+    def upload(self, lpv) -> None:
+        """Copy the active cascades' accumulated SH (``lpv.textures(c)``) and their placement."""
+        cfg = lpv.config
+        grids = list(lpv.grids)[:MAX_CASCADES]
+        self.count = len(grids)
+        for c in range(MAX_CASCADES):
+            if c >= self.count:
+                self._drop(c)
+                continue
+            g = grids[c]
+            self.geom[c, :3], self.geom[c, 3] = g.origin, g.cell_size
+            self.res[c] = g.resolution
+            for k, arr in enumerate(lpv.textures(c)):
+                tex = self.textures[c][k]
+                shape = (arr.shape[2], arr.shape[1], arr.shape[0])
+                if tex is not self._empty and tex.size == shape:
+                    tex.write(np.ascontiguousarray(arr, np.float32).tobytes())
+                else:
+                    if tex is not self._empty:
+                        tex.release()
+                    self.textures[c][k] = texture3d_from_array(self.ctx, arr)
+        self.lookup_offset = float(cfg.lookup_offset)
+        self.leak_guard = bool(cfg.leak_guard)
+        self.margin = float(cfg.edge_margin)
+        self.band = float(cfg.blend_cells)
+        self.glossy_steps = int(cfg.glossy_steps)
+        self.glossy_step = float(lpv.glossy_step_length())
+
+    def _drop(self, c: int) -> None:
+        for k in range(3):
+            if self.textures[c][k] is not self._empty:
+                self.textures[c][k].release()
+                self.textures[c][k] = self._empty
+
+    def bind(self, program, first_unit: int = 8) -> None:
+        """Bind the 9 textures to units first_unit..first_unit+8 and set lpv.glsl's uniforms on
+        ``program`` (uniforms the compiler optimised away are skipped)."""
+        for c in range(MAX_CASCADES):
+            for k, ch in enumerate(CHANNELS):
+                unit = first_unit + 3 * c + k
+                self.textures[c][k].use(location=unit)
+                name = f"u_lpv_{ch}{c}"
+                if name in program:
+                    program[name].value = unit
+        self._write(program, "u_lpv_geom", self.geom, 4)
+        self._write(program, "u_lpv_res", self.res, 1)
+        for name, value in (("u_lpv_count", int(self.count)), ("u_lpv_leak_guard", self.leak_guard),
+                            ("u_lpv_glossy_steps", int(self.glossy_steps)),
+                            ("u_lpv_lookup_offset", self.lookup_offset), ("u_lpv_margin", self.margin),
+                            ("u_lpv_band", self.band), ("u_lpv_glossy_step", self.glossy_step)):
+            if name in program:
+                program[name].value = value
+
+    @staticmethod
+    def _write(program, name: str, values: np.ndarray, width: int) -> None:
+        if name not in program:
+            return
+        n = max(1, int(program[name].array_length))
+        program[name].write(np.ascontiguousarray(values.reshape(-1)[: n * width]).tobytes())
+
+    def release(self) -> None:
+        for c in range(MAX_CASCADES):
+            self._drop(c)
+        self._empty.release()
+
+
+class LPVProbeGL:
+    """Evaluate ``lpv_irradiance`` and ``lpv_glossy`` at given points with a fullscreen pass
+    (``glsl/lpv_probe.glsl``): the GL half of the Warp-vs-GLSL lookup check."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.program = load_program(ctx, "lpv_probe.glsl")
+        self.vao = fullscreen_vao(ctx, self.program)
+        self.textures = LPVTexturesGL(ctx)
+        self._size = None
+        self._inputs: list = []
+        self._outputs: list = []
+        self._fbo = None
+
+    def _release_targets(self) -> None:
+        if self._fbo is not None:
+            # never leave a deleted framebuffer bound: moderngl re-binds the current one after
+            # creating a framebuffer, which fails (GL_INVALID_OPERATION) if it was deleted
+            if self.ctx.fbo is self._fbo:
+                self.ctx.detect_framebuffer(0).use()
+            self._fbo.release()
+        for t in (*self._inputs, *self._outputs):
+            t.release()
+        self._fbo, self._inputs, self._outputs, self._size = None, [], [], None
+
+    def evaluate(self, lpv, points, directions, shininess, width: int = 64) -> tuple[np.ndarray, np.ndarray]:
+        """(irradiance (N,3) W/m², glossy radiance (N,3)) at points (N,3) with unit directions (N,3)
+        (the normal for irradiance, the reflected direction for glossy) and Phong exponents."""
+        import moderngl
+
+        ctx = self.ctx
+        p = np.asarray(points, np.float32).reshape(-1, 3)
+        n = p.shape[0]
+        h = -(-n // width)
+        pts = np.zeros((h * width, 4), np.float32)
+        dirs = np.zeros((h * width, 4), np.float32)
+        dirs[:, 1] = 1.0
+        pts[:n, :3] = p
+        dirs[:n, :3] = np.asarray(directions, np.float32).reshape(-1, 3)
+        dirs[:n, 3] = np.broadcast_to(np.asarray(shininess, np.float32), (n,))
+        # raw rows in, raw rows out: pixel (x, y) <-> item y·width + x (no flips needed)
+        if self._size != (width, h):
+            self._release_targets()
+            self._inputs = [ctx.texture((width, h), 4, dtype="f4") for _ in range(2)]
+            self._outputs = [ctx.texture((width, h), 4, dtype="f4") for _ in range(2)]
+            for t in (*self._inputs, *self._outputs):
+                t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._fbo = ctx.framebuffer(color_attachments=self._outputs)
+            self._size = (width, h)
+        tp, td = self._inputs
+        tp.write(pts.tobytes())
+        td.write(dirs.tobytes())
+        with ctx.debug_scope("lpv_probe"):
+            self.textures.upload(lpv)
+            self._fbo.use()
+            self._fbo.clear(0.0, 0.0, 0.0, 0.0)
+            tp.use(location=0)
+            td.use(location=1)
+            self.program["u_points"].value = 0
+            self.program["u_dirs"].value = 1
+            self.textures.bind(self.program, first_unit=2)
+            self.vao.render(moderngl.TRIANGLES, vertices=3)
+            res = [np.frombuffer(o.read(), np.float32).reshape(-1, 4)[:n, :3].copy() for o in self._outputs]
+        return res[0], res[1]
+
+    def release(self) -> None:
+        self._release_targets()
+        self.textures.release()
+        self.vao.release()
+        self.program.release()
