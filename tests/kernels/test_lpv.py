@@ -161,8 +161,7 @@ def _random_volume(device, **kw):
 
 def test_lookups_never_negative(device):
     v, bounds, rng = _random_volume(device)
-    # the propagated SH has negative lobes (L1 ringing) — the lookups must clamp them
-    assert min(float(v.level_grid(g.level)[..., 0].min()) for g in v.grids) < 0 or True
+    # random lobes: irradiance behind each lobe is negative before the clamp — the lookups clamp it
     q = rng.uniform(bounds[0] - 2, bounds[1] + 2, (20000, 3))
     n = rng.normal(size=(20000, 3))
     e = v.irradiance(q, n)
