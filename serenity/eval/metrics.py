@@ -64,9 +64,20 @@ def rel_mse_per_channel(img, ref, mask=None, eps: float = REL_MSE_EPS) -> np.nda
     return e.reshape(-1, a.shape[-1]).mean(axis=0)
 
 
-def rel_mse(img, ref, mask=None, eps: float = REL_MSE_EPS) -> float:
-    """Relative MSE on linear HDR, averaged over (masked) pixels and channels (see the module doc)."""
-    return float(rel_mse_per_channel(img, ref, mask, eps).mean())
+def rel_mse(img, ref, mask=None, eps: float = REL_MSE_EPS, trim: float = 0.0) -> float:
+    """Relative MSE on linear HDR, averaged over (masked) pixels and channels (see the module doc).
+
+    ``trim``: fraction of the pixels with the largest error left out (e.g. 1e-3, the usual outlier
+    rejection: one light leak onto a pixel whose reference is nearly black can otherwise outweigh
+    every other pixel together)."""
+    if trim <= 0.0:
+        return float(rel_mse_per_channel(img, ref, mask, eps).mean())
+    a, b = _pair(img, ref)
+    m = _mask(mask, a.shape[:2])
+    e = ((a - b) ** 2 / (b * b + eps)).mean(axis=-1)
+    e = np.sort(e[m] if m is not None else e.reshape(-1))
+    keep = max(1, int(round(len(e) * (1.0 - min(trim, 1.0)))))
+    return float(e[:keep].mean())
 
 
 def tonemap(hdr, exposure: float = DEFAULT_EXPOSURE) -> np.ndarray:

@@ -38,6 +38,14 @@ def test_rel_mse_of_relative_scale_and_epsilon():
     assert M.rel_mse(zero + 0.1, zero) == pytest.approx(0.01 / M.REL_MSE_EPS, rel=1e-5)
 
 
+def test_rel_mse_trim_drops_the_worst_pixels(ref):
+    img = ref.copy()
+    img[0, 0] = 1e4  # one light leak
+    assert M.rel_mse(img, ref) > 10.0
+    assert M.rel_mse(img, ref, trim=1e-3) == 0.0
+    assert M.rel_mse(ref + 3.0, ref, trim=1e-3) == pytest.approx(M.rel_mse(ref + 3.0, ref), rel=0.01)
+
+
 def test_mask_restricts_both_metrics(ref):
     img = ref.copy()
     img[:, 32:] *= 3.0  # error on the right half only
