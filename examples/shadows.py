@@ -32,7 +32,7 @@ def render_modes(width: int = 480, height: int = 270, frames: int = 3) -> list[t
         times = []
         for _ in range(frames):
             f = r.render()
-            times.append(f.timings["shadow"] + f.timings["deferred"])
+            times.append(f.timings["shadow maps (CSM)"] + f.timings["direct lighting"])
         out.append((mode, f.ldr, float(np.median(times))))
     return out
 

@@ -61,7 +61,7 @@ def cmd_render(args) -> int:
     stem = os.path.splitext(os.path.basename(args.scene))[0] if os.path.exists(args.scene) else args.scene
     png = args.output or os.path.join(DEFAULT_OUT_DIR, f"{stem}.png")
     exr = args.exr or os.path.splitext(png)[0] + ".exr"
-    config = RenderConfig(exposure=args.exposure, ambient=args.ambient)
+    config = RenderConfig(exposure=args.exposure, ambient=args.ambient, overlap=not args.serial)
     renderer = Renderer(scene, width, height, device=args.device, config=config)
     frame = None
     for _ in range(max(1, args.frames)):
@@ -76,7 +76,7 @@ def cmd_render(args) -> int:
     print(f"scene {scene.name}: {scene.triangle_count} triangles, {width}x{height}, device {renderer.device}, "
           f"sun elevation {sun.elevation_deg:.1f} deg azimuth {sun.azimuth_deg:.1f} deg")
     print(f"loaded in {load_ms:.0f} ms")
-    print(format_timings(frame.timings))
+    print(format_timings(frame.timings, frame.wall_ms))
     print(f"wrote {png}")
     print(f"wrote {exr} (layers: {', '.join(layers)})")
     return 0
@@ -87,6 +87,16 @@ def cmd_scenes(args) -> int:
 
     for name, desc in scene_descriptions().items():
         print(f"{name:<12} {desc}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from serenity.bench import bench
+
+    width, height = parse_size(args.size)
+    if args.frames < 2:
+        raise SerenityError("--frames must be at least 2 (the first frame builds and uploads)")
+    bench(args.scene, width, height, args.frames, args.device, args.json, args.chart)
     return 0
 
 
@@ -106,12 +116,24 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--exposure", type=float, default=0.02, help="exposure before Reinhard (default %(default)s)")
     r.add_argument("--ambient", choices=("none", "constant"), default="none",
                    help="constant ambient baseline term (default %(default)s)")
+    r.add_argument("--serial", action="store_true",
+                   help="trace rays before the GL work instead of beside it (paper §10's comparison)")
     r.add_argument("--frames", type=int, default=2,
                    help="frames to render; timings are those of the last (default %(default)s)")
     r.set_defaults(func=cmd_render)
 
     s = sub.add_parser("scenes", help="list the built-in scenes")
     s.set_defaults(func=cmd_scenes)
+
+    b = sub.add_parser("bench", help="frame benchmark: Table-1-style stage timings, overlapped vs serial, "
+                                     "timeline chart, memory")
+    b.add_argument("scene", nargs="?", default=DEFAULT_SCENE)
+    b.add_argument("--frames", type=int, default=30, help="frames per schedule (default %(default)s)")
+    b.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}", help="WxH (default %(default)s)")
+    b.add_argument("--device", help="cpu | cuda:0")
+    b.add_argument("--json", default=os.path.join(DEFAULT_OUT_DIR, "bench.json"), help="JSON output path")
+    b.add_argument("--chart", default=os.path.join(DEFAULT_OUT_DIR, "timeline.png"), help="timeline PNG path")
+    b.set_defaults(func=cmd_bench)
 
     try:
         from serenity.eval.commands import add_subcommands

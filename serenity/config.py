@@ -83,9 +83,27 @@ class RenderConfig:
     ssao: SSAOConfig = field(default_factory=SSAOConfig)
     sync_stages: bool = True
     """Wait for the GL queue after each stage so per-stage wall times are exact (costs overlap)."""
+    ray_tracing: bool = True
+    """Ray-traced reflections and refractions for mirror/metal/glass pixels (paper §9)."""
+    overlap: bool = True
+    """Run the CPU ray tracing in a worker thread while the GL work proceeds (paper §10); False
+    traces inline first (the serial schedule, for comparison)."""
+    osm_size: int = 512
+    """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
+    lpv: bool = True
+    """Light propagation volumes: one-bounce diffuse + glossy light from the sun's RSM and the
+    sky-lit G-buffer (paper §8)."""
+    lpv_settings: object = None
+    """A ``serenity.kernels.lpv.LPVConfig`` (None: its defaults — 3 cascades of 32³, 8 iterations)."""
+    rsm_size: int = 256
+    """Texels per side of the sun's reflective shadow map (one VPL per texel)."""
+    sky_vpl_stride: int = 4
+    """One sky-light VPL per stride×stride block of G-buffer pixels (paper Fig. 11)."""
 
     def __post_init__(self):
         if not (self.exposure > 0):
             raise SerenityError(f"exposure must be positive, got {self.exposure}")
+        if not (16 <= self.osm_size <= 8192):
+            raise SerenityError(f"osm_size must be in 16..8192, got {self.osm_size}")
         if self.ambient not in ("none", "constant"):
             raise SerenityError(f"ambient must be 'none' or 'constant', got {self.ambient!r}")

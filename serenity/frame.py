@@ -1,17 +1,34 @@
-"""The frame pipeline of DESIGN.md §1 as code: named stages, no maths, each stage timed.
+"""The frame pipeline of DESIGN.md §1 and paper §10 as code: named stages, no maths, each timed.
 
     renderer = Renderer(scene, 640, 360)
-    frame = renderer.render()          # Frame(hdr, ldr, aovs, timings)
+    frame = renderer.render()          # Frame(hdr, ldr, aovs, timings, events)
 
-Stages present today: upload (first frame only), shadow, gbuffer, deferred, tonemap, readback.
-The ray-casting buffer, CPU ray tracing, sky volume and LPV stages slot in as their issues land.
+The schedule (paper §10): the ray-casting buffer is drawn first and read back (sync 1); the CPU
+ray tracing of the reflective/refractive pixels starts in a worker thread; meanwhile the main
+thread issues the GL work (shadow cascades, G-buffer, RSM, SSAO, the lighting passes) and the
+volume kernels (LPV, the sky volume's next layer); then it joins the tracer (sync 2), uploads the
+ray-traced G-buffers, lights them with the overlapped shadow maps and composites them with a
+Fresnel blend; last the tone map. ``RenderConfig.overlap=False`` (``--serial``) runs the ray
+tracing inline before the GL work, for comparison.
+
+Stage names follow the paper's Table 1 where it has one. ``Frame.timings`` holds each stage's
+milliseconds (the worker's ``cpu ray tracing`` included); ``Frame.wall_ms`` is the frame's real
+duration, less than the sum when the tracer overlaps the GL work; ``Frame.events`` is the
+timeline (lane, stage, start, end in ms from the frame start) that ``serenity bench`` charts.
+
+Stage timing: GL is asynchronous, so with ``RenderConfig.sync_stages`` (default) each GL stage
+ends with ``ctx.finish()`` and is timed by the wall clock. GL timer queries would not perturb the
+pipeline, but Mesa's llvmpipe returns garbage for them (elapsed = 0xFFFFFFFF), and the CPU
+"GPU" of this project's CI runs the GL work synchronously anyway.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -20,16 +37,21 @@ import numpy as np
 from serenity.config import RenderConfig
 from serenity.device import resolve_device
 from serenity.errors import SerenityError
+from serenity.raster.composite import CompositePass
 from serenity.raster.context import get_context
 from serenity.raster.deferred import DeferredPass, LightingInputs
 from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.interop import read_texture
+from serenity.raster.raycast import RayCastingBuffer, RayCastPass
+from serenity.raster.rt_gbuffer import RTGBufferUpload
 from serenity.raster.scene_gl import SceneGL
-from serenity.raster.shadow import ShadowPass, fit_cascades
+from serenity.raster.shadow import ShadowPass, fit_cascades, fit_overlapped
 from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
 
 MAX_SIZE = 8192
+MAIN_LANE = "main (GL + volumes)"
+RT_LANE = "worker (CPU ray tracing)"
 
 
 @dataclass
@@ -40,8 +62,10 @@ class Frame:
     ldr: (H, W, 3) uint8 sRGB after exposure + Reinhard.
     aovs: named (H, W, C) float32 layers: albedo, normal (world), position (world, m),
         depth (H, W, 1; view-space distance along the camera axis, m; inf = background), direct,
-        ao (H, W, 1; SSAO, 1 = open; when enabled).
-    timings: stage name → milliseconds, in pipeline order.
+        ao (H, W, 1; SSAO, 1 = open; when enabled), rt_mask (H, W, 1; 1 where rays were traced).
+    timings: stage name → milliseconds, in pipeline order (the worker's stages included).
+    wall_ms: the frame's duration; below ``sum(timings)`` when ray tracing overlapped GL work.
+    events: (lane, stage, start_ms, end_ms) from the frame's start — the timeline.
     """
 
     hdr: np.ndarray
@@ -49,14 +73,19 @@ class Frame:
     aovs: dict[str, np.ndarray]
     timings: dict[str, float] = field(default_factory=dict)
     exposure: float = 1.0
+    wall_ms: float = 0.0
+    events: list[tuple[str, str, float, float]] = field(default_factory=list)
+    rays: int = 0
 
     @property
     def total_ms(self) -> float:
+        """Sum of the stage timings (the serial cost)."""
         return float(sum(self.timings.values()))
 
 
 class Renderer:
-    """Renders a ``Scene`` at a fixed size. Static data (geometry, textures) is uploaded once."""
+    """Renders a ``Scene`` at a fixed size. Static data (geometry, textures, the kd-tree) is
+    built and uploaded once; each ``render()`` redoes only what the frame's changes need."""
 
     def __init__(self, scene, width: int, height: int, device: str | None = None,
                  config: RenderConfig | None = None):
@@ -68,25 +97,132 @@ class Renderer:
         self.device = resolve_device(device)
         self.ctx = get_context()
         self._timings: dict[str, float] = {}
+        self._events: list[tuple[str, str, float, float]] = []
+        self._lock = threading.Lock()
+        self._t_frame = time.perf_counter()
         with self._stage("upload"):
+            cfg = self.config
             self.scene_gl = SceneGL(self.ctx, scene)
-            self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, self.config.shadow.size, self.config.shadow.cascades)
+            self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, cfg.shadow.size, cfg.shadow.cascades)
             self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl)
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
-            self.ssao_pass = SSAOPass(self.ctx, self.config.ssao)
+            self.ssao_pass = SSAOPass(self.ctx, cfg.ssao)
             for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass):
                 p.resize(self.width, self.height)
+            # ray tracing only where a material needs it (paper §9); the kd-tree waits for the
+            # first frame that actually shows such a pixel
+            self.traces = cfg.ray_tracing and any(m.needs_ray_tracing for m in scene.materials)
+            self.tracer = None
+            if self.traces:
+                self.raycast_pass = RayCastPass(self.ctx, self.scene_gl)
+                self.raycast_pass.resize(self.width, self.height)
+                self.osm_pass = ShadowPass(self.ctx, self.scene_gl, cfg.osm_size, 3)
+                self.rt_upload = RTGBufferUpload(self.ctx)
+                self.rt_upload.resize(self.width, self.height)
+                self.rt_deferred = DeferredPass(self.ctx)
+                self.rt_deferred.resize(self.width, 2 * self.height)
+                self.composite_pass = CompositePass(self.ctx)
+                self.composite_pass.resize(self.width, self.height)
+                self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-rt")
+            self._init_gi()
         self._upload_ms = self._timings.pop("upload")
         self._first = True
 
+    # ------------------------------------------------------------------------------------ timing
+
+    def _record(self, lane: str, name: str, t0: float, t1: float) -> None:
+        with self._lock:
+            self._timings[name] = self._timings.get(name, 0.0) + (t1 - t0) * 1e3
+            self._events.append((lane, name, (t0 - self._t_frame) * 1e3, (t1 - self._t_frame) * 1e3))
+
     @contextmanager
-    def _stage(self, name: str) -> Iterator[None]:
+    def _stage(self, name: str, gl: bool = True) -> Iterator[None]:
         t0 = time.perf_counter()
         yield
-        if self.config.sync_stages:
+        if gl and self.config.sync_stages:
             self.ctx.finish()
-        self._timings[name] = (time.perf_counter() - t0) * 1e3
+        self._record(MAIN_LANE, name, t0, time.perf_counter())
+
+    def _init_gi(self) -> None:
+        """The volumes: light propagation volumes (paper §8) when enabled."""
+        cfg, ctx = self.config, self.ctx
+        self.lpv = None
+        self._lpv_key = None
+        if cfg.lpv:
+            from serenity.kernels.lpv import LightPropagationVolume, LPVConfig
+            from serenity.raster.indirect import IndirectPass
+            from serenity.raster.lpv_gl import LPVTexturesGL
+            from serenity.raster.rsm import RSMPass
+
+            self.rsm_pass = RSMPass(ctx, self.scene_gl, cfg.rsm_size)
+            self.lpv = LightPropagationVolume(cfg.lpv_settings or LPVConfig(), self.device)
+            self.lpv_gl = LPVTexturesGL(ctx)
+            self.lpv_pass = IndirectPass(ctx, "lpv")
+
+    def _sky_irradiance_at(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray | None:
+        """Sky irradiance (W/m²) at G-buffer points for the sky-light VPLs; None without a sky volume."""
+        return None
+
+    def _update_lpv(self, gbuf, sun_irradiance: np.ndarray) -> None:
+        """Re-inject and propagate only when the sun, the sky or the camera changed (the RSM and the
+        G-buffer, the VPLs' sources, change only then)."""
+        from serenity.kernels.lpv import gbuffer_surfels, rsm_surfels, sky_vpls_from_gbuffer
+
+        scene, cam, cfg = self.scene, self.scene.camera, self.config
+        key = b"".join(np.asarray(a, np.float64).tobytes() for a in (
+            scene.sun.direction, sun_irradiance, cam.position, cam.target, [cam.fov_y_deg], self._sky_version()))
+        if key == self._lpv_key:
+            return
+        self.rsm_pass.render(scene.sun.direction, sun_irradiance, scene.bounds)
+        rsm = self.rsm_pass.read()
+        vpls = [(rsm.positions, rsm.normals, rsm.flux)]
+        surfels = [rsm_surfels(rsm, scene.sun.direction)]
+        s = max(1, int(cfg.sky_vpl_stride))
+        c = s // 2
+        pos = read_texture(gbuf.position, 4)[c::s, c::s]
+        nrm = read_texture(gbuf.normal, 3)[c::s, c::s]
+        covered = pos[..., 3] > 0
+        surfels.append(gbuffer_surfels(pos, nrm, cam.position, cam.forward, cam.fov_y_deg, stride=1, valid=covered))
+        e_sky = self._sky_irradiance_at(pos[..., :3], nrm)
+        if e_sky is not None:
+            alb = read_texture(gbuf.albedo, 3)[c::s, c::s]
+            vpls.append(sky_vpls_from_gbuffer(pos, nrm, alb, e_sky, cam.position, cam.forward, cam.fov_y_deg,
+                                              stride=1, valid=covered))
+        self.lpv.update(cam, scene.bounds, vpls, surfels, key=key)
+        self.lpv_gl.upload(self.lpv)
+        self._lpv_key = key
+
+    def _sky_version(self) -> np.ndarray:
+        return np.zeros(1)
+
+    # ------------------------------------------------------------------------------ ray tracing
+
+    def _ensure_tracer(self):
+        if self.tracer is None:
+            from serenity.kernels.raytrace import RayTracer
+
+            t0 = time.perf_counter()
+            self.tracer = RayTracer(self.scene, device=self.device)
+            self._record(MAIN_LANE, "kd-tree build", t0, time.perf_counter())
+        return self.tracer
+
+    def _trace(self, rcb: RayCastingBuffer) -> tuple[dict | None, dict | None]:
+        """CPU ray tracing of the reflected and refracted rays (the worker's job)."""
+        t0 = time.perf_counter()
+        refl = refr = None
+        sel = (rcb.flags & 1) != 0
+        if sel.any():
+            refl = self.tracer.trace(rcb.origins[sel], rcb.reflect_dirs[sel], rcb.cone_width[sel],
+                                     rcb.cone_spread[sel])
+        sel = ((rcb.flags & 2) != 0) & np.any(rcb.refract_dirs != 0, axis=1)
+        if sel.any():
+            refr = self.tracer.trace(rcb.origins[sel], rcb.refract_dirs[sel], rcb.cone_width[sel],
+                                     rcb.cone_spread[sel])
+        self._record(RT_LANE, "cpu ray tracing", t0, time.perf_counter())
+        return refl, refr
+
+    # ---------------------------------------------------------------------------------- lighting
 
     def _lighting_inputs(self, view_proj: np.ndarray) -> LightingInputs:
         sun, sky, cam = self.scene.sun, self.scene.sky, self.scene.camera
@@ -107,36 +243,88 @@ class Renderer:
             shadow=self.config.shadow,
         )
 
+    # ------------------------------------------------------------------------------------ frame
+
     def render(self) -> Frame:
-        self._timings = {}
+        self._timings, self._events = {}, []
+        self._t_frame = time.perf_counter()
         if self._first:
             self._timings["upload"] = self._upload_ms
             self._first = False
-        cam = self.scene.camera
+        cfg, scene, cam = self.config, self.scene, self.scene.camera
         view = cam.view_matrix()
         view_proj = cam.projection_matrix(self.width / self.height) @ view
-        with self._stage("shadow"):
-            sc = self.config.shadow
-            cascades = fit_cascades(cam, self.width / self.height, self.scene.sun.direction, self.scene.bounds,
+        light = self._lighting_inputs(view_proj)
+
+        # 1. which pixels need rays, read back (sync 1); the tracer starts at once
+        rcb, job, traced = None, None, (None, None)
+        if self.traces:
+            with self._stage("ray casting buffer"):
+                self.raycast_pass.render(view_proj, cam)
+                rcb = self.raycast_pass.read()
+            if rcb.count:
+                self._ensure_tracer()
+                if cfg.overlap:
+                    job = self._pool.submit(self._trace, rcb)
+                else:
+                    traced = self._trace(rcb)
+
+        # 2. the GL work of the main view, while the tracer runs
+        with self._stage("shadow maps (CSM)"):
+            sc = cfg.shadow
+            cascades = fit_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
                                     sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
             shadow = self.shadow_pass.render(cascades)
-        with self._stage("gbuffer"):
+        with self._stage("g-buffer"):
             gbuf = self.gbuffer_pass.render(view_proj, cam.position)
         ao = None
-        if self.config.ssao.enabled:
+        if cfg.ssao.enabled:
             with self._stage("ssao"):
                 ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward)
-        with self._stage("deferred"):
-            lit = self.deferred_pass.render(gbuf, shadow, self._lighting_inputs(view_proj), ao)
-        with self._stage("tonemap"):
-            self.tonemap_pass.render(lit.hdr, self.config.exposure)
+        if self.lpv is not None:
+            with self._stage("lpv update"):
+                self._update_lpv(gbuf, light.sun_irradiance)
+        with self._stage("direct lighting"):
+            lit = self.deferred_pass.render(gbuf, shadow, light, ao)
+        if self.lpv is not None and self.lpv_gl.count:
+            with self._stage("lpv lighting"):
+                self.lpv_pass.render(lit.hdr, gbuf, self.lpv_gl.bind, cam.position, ao)
+        out_hdr = lit.hdr
+
+        # 3. join the tracer (sync 2), light the ray-traced views, Fresnel composite
+        if rcb is not None and rcb.count:
+            if job is not None:
+                with self._stage("wait for ray tracing", gl=False):
+                    traced = _result(job)
+            with self._stage("rt g-buffer upload"):
+                view_rt = self.rt_upload.upload(rcb, *traced)
+            with self._stage("shadow maps (OSM)"):
+                osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, scene.bounds, 3,
+                                                          cfg.osm_size))
+            with self._stage("rt direct lighting"):
+                rt_lit = self.rt_deferred.render(view_rt, osm, light, None, rt_view=view_rt)
+            if self.lpv is not None and self.lpv_gl.count:
+                with self._stage("rt lpv lighting"):
+                    self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt)
+            with self._stage("composite"):
+                out_hdr = self.composite_pass.render(out_hdr, rt_lit.hdr, gbuf, self.raycast_pass.targets[2],
+                                                     cam.position)
+        with self._stage("tone map"):
+            self.tonemap_pass.render(out_hdr, cfg.exposure)
         with self._stage("readback"):
-            hdr = read_texture(lit.hdr, 3)
+            hdr = read_texture(out_hdr, 3)
             ldr = self.tonemap_pass.read()
             aovs = self._read_aovs(gbuf, lit, cam)
             if ao is not None:
                 aovs["ao"] = read_texture(ao, 1)
-        return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=dict(self._timings), exposure=self.config.exposure)
+            if rcb is not None:
+                aovs["rt_mask"] = rcb.mask()[..., None].astype(np.float32)
+        wall = (time.perf_counter() - self._t_frame) * 1e3
+        if "upload" in self._timings:
+            wall += self._timings["upload"]
+        return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=dict(self._timings), exposure=cfg.exposure,
+                     wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
+                     rays=0 if rcb is None else rcb.count)
 
     def _read_aovs(self, gbuf, lit, cam) -> dict[str, np.ndarray]:
         pos = read_texture(gbuf.position, 4)
@@ -150,11 +338,23 @@ class Renderer:
             "direct": read_texture(lit.direct, 3),
         }
 
+    def close(self) -> None:
+        """Stop the ray-tracing worker (the GL objects go with the process's context)."""
+        pool = getattr(self, "_pool", None)
+        if pool is not None:
+            pool.shutdown(wait=True)
 
-def format_timings(timings: dict[str, float]) -> str:
-    """A small table: stage, ms; then the total."""
-    width = max([len(k) for k in timings] + [5])
+
+def _result(job: Future):
+    return job.result()
+
+
+def format_timings(timings: dict[str, float], wall_ms: float | None = None) -> str:
+    """A small table: stage, ms; then the sum, and the frame's wall time when it differs."""
+    width = max([len(k) for k in timings] + [len("total (sum of stages)")])
     lines = [f"{'stage':<{width}}  {'ms':>9}"]
     lines += [f"{k:<{width}}  {v:9.2f}" for k, v in timings.items()]
-    lines.append(f"{'total':<{width}}  {sum(timings.values()):9.2f}")
+    lines.append(f"{'total (sum of stages)':<{width}}  {sum(timings.values()):9.2f}")
+    if wall_ms is not None:
+        lines.append(f"{'frame (wall clock)':<{width}}  {wall_ms:9.2f}")
     return "\n".join(lines)

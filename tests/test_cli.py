@@ -29,7 +29,7 @@ def test_render_writes_png_and_multilayer_exr(tmp_path, capsys):
     assert {"beauty", "albedo", "normal", "depth", "direct"} <= set(layers)
     assert layers["beauty"].shape == (32, 48, 3)
     assert np.all(np.isfinite(layers["beauty"]))
-    for stage in ("gbuffer", "deferred", "total"):
+    for stage in ("g-buffer", "direct lighting", "total"):
         assert stage in out
 
 

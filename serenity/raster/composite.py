@@ -23,12 +23,15 @@ class CompositePass:
         self.fbo = self.ctx.framebuffer(color_attachments=[self.hdr])
         self.size = (width, height)
 
-    def render(self, surface, reflection, refraction, gbuffer, flags, camera_pos):
+    def render(self, surface, effects, gbuffer, flags, camera_pos):
+        """``effects``: the lit ray-traced views, stacked (W, 2H): reflection on top, refraction
+        below (see :mod:`serenity.raster.rt_gbuffer`). ``flags``: the ray-casting buffer target
+        whose alpha holds the per-pixel flags."""
         p = self.program
         with self.ctx.debug_scope("composite"):
             self.fbo.use()
-            for loc, (name, tex) in enumerate((("u_surface", surface), ("u_reflection", reflection),
-                                               ("u_refraction", refraction), ("g_normal", gbuffer.normal),
+            for loc, (name, tex) in enumerate((("u_surface", surface), ("u_effects", effects),
+                                               ("g_normal", gbuffer.normal),
                                                ("g_position", gbuffer.position), ("g_material", gbuffer.material),
                                                ("u_flags", flags))):
                 tex.use(location=loc)

@@ -5,7 +5,6 @@ render (depth 2, black sky) of a diffuse plane under the sun and of the courtyar
 the mean over lit pixels, and their silhouettes (depth discontinuities) align with IoU >= 0.99.
 """
 
-import dataclasses
 import math
 
 import numpy as np
@@ -172,10 +171,7 @@ def our_direct(scene):
     from serenity.config import RenderConfig
     from serenity.frame import Renderer
 
-    kw = {"ambient": "none"}
-    if "ray_tracing" in {f.name for f in dataclasses.fields(RenderConfig)}:
-        kw["ray_tracing"] = False
-    frame = Renderer(scene, W, H, config=RenderConfig(**kw)).render()
+    frame = Renderer(scene, W, H, config=RenderConfig(ambient="none", ray_tracing=False, lpv=False)).render()
     return frame.hdr, frame.aovs["depth"][..., 0]
 
 

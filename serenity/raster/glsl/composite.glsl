@@ -16,12 +16,11 @@ void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_positi
 #if defined FRAGMENT_SHADER
 in vec2 v_uv;
 uniform sampler2D u_surface;      // lit main view (HDR)
-uniform sampler2D u_reflection;   // reflection effect buffer (HDR)
-uniform sampler2D u_refraction;   // refraction effect buffer (HDR)
+uniform sampler2D u_effects;      // lit ray-traced views (HDR), (W, 2H): reflection top, refraction bottom
 uniform sampler2D g_normal;
 uniform sampler2D g_position;
 uniform sampler2D g_material;     // shininess, reflectivity, transparency, ior
-uniform sampler2D u_flags;        // ray-casting flags: 1 reflect, 2 refract, 4 TIR
+uniform sampler2D u_flags;        // ray-casting target whose alpha holds flags: 1 reflect, 2 refract, 4 TIR
 uniform vec3 u_camera_pos;
 out vec4 o_hdr;
 
@@ -33,17 +32,17 @@ float schlick(float f0, float cos_theta) {
 void main() {
     vec3 surface = texture(u_surface, v_uv).rgb;
     vec4 pos = texture(g_position, v_uv);
-    float flags = texture(u_flags, v_uv).r;
+    float flags = texture(u_flags, v_uv).a;
     if (pos.w == 0.0 || flags == 0.0) { o_hdr = vec4(surface, 1.0); return; }
     vec4 mat = texture(g_material, v_uv);
     vec3 n = normalize(texture(g_normal, v_uv).xyz);
     float cos_t = abs(dot(n, normalize(u_camera_pos - pos.xyz)));
-    vec3 refl = texture(u_reflection, v_uv).rgb;
+    vec3 refl = texture(u_effects, vec2(v_uv.x, 0.5 + 0.5 * v_uv.y)).rgb;
     float transparency = mat.z;
     if (transparency > 0.0) {
         float f0 = pow((mat.w - 1.0) / (mat.w + 1.0), 2.0);
         float F = mod(floor(flags / 4.0), 2.0) > 0.5 ? 1.0 : schlick(f0, cos_t);
-        vec3 refr = texture(u_refraction, v_uv).rgb;
+        vec3 refr = texture(u_effects, vec2(v_uv.x, 0.5 * v_uv.y)).rgb;
         o_hdr = vec4(F * refl + (1.0 - F) * (transparency * refr + (1.0 - transparency) * surface), 1.0);
     } else {
         float F = schlick(mat.y, cos_t);

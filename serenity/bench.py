@@ -1,0 +1,189 @@
+"""``serenity bench``: a frame benchmark in the manner of the paper's Table 1 (§10).
+
+Renders N frames along a camera path (a slow orbit-and-dolly around the camera's target) with the
+sun moving (a few minutes of the day per frame), first with the overlapped schedule and then
+serially, and reports per stage the median milliseconds, the total, FPS, the serial total and the
+overlap gain. Writes JSON and a timeline chart of one overlapped frame (paper Fig. 21): one lane
+for the main thread (GL passes and volume kernels), one for the CPU ray-tracing worker.
+
+Also tracked, for the "frame to frame" contract: the process's resident memory after each frame
+(it must stay flat: no per-frame allocation growth) and that no frame contains NaN.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import platform
+import time
+
+import numpy as np
+
+from serenity.scene.model import Camera, direction_from_angles
+
+#: the paper's Table 1 (ms), for the README comparison: stage → (paper's name, ms)
+PAPER_TABLE1 = {
+    "lpv update": ("Light Propagation Volumes Update (3 cascades)", 5.0),
+    "direct lighting": ("Direct Lighting (Phong + CSM + PCSS)", 6.5),
+    "sky lighting": ("Sky Lighting", 2.4),
+    "lpv lighting": ("Light Propagation Volumes Rendering (diffuse + glossy)", 6.8),
+    "ssao": ("Screen Space Ambient Occlusion", 6.0),
+    "cpu ray tracing": ("CPU Ray Tracing", 36.0),
+    "rt direct lighting": ("RT: Direct Lighting (Phong + OSM + PCSS)", 0.8),
+    "rt sky lighting": ("RT: Sky Lighting", 0.6),
+    "rt lpv lighting": ("RT: Light Propagation Volumes Rendering", 1.0),
+    "frame": ("Total Frame Time (without sky lighting update)", 42.6),
+}
+
+
+def rss_mb() -> float:
+    """Resident set size of this process now, MiB (Linux /proc; 0 where unavailable)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError):
+        return 0.0
+
+
+def camera_path(base: Camera, t: float) -> Camera:
+    """The base camera orbited by up to ±12° around its target and dollied by ±10 %, t ∈ [0, 1]."""
+    offset = base.position - base.target
+    ang = math.radians(12.0) * math.sin(2 * math.pi * t)
+    c, s = math.cos(ang), math.sin(ang)
+    rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    pos = base.target + (rot @ offset) * (1.0 + 0.1 * math.sin(4 * math.pi * t))
+    return Camera(position=pos, target=base.target, up=base.up, fov_y_deg=base.fov_y_deg, near=base.near,
+                  far=base.far)
+
+
+def sun_path(base_dir: np.ndarray, t: float, degrees: float = 20.0) -> np.ndarray:
+    """The sun swept ``degrees`` of azimuth and half that of elevation over the run."""
+    el = math.degrees(math.asin(np.clip(base_dir[1], -1, 1)))
+    az = math.degrees(math.atan2(base_dir[0], base_dir[2])) % 360.0
+    return direction_from_angles(max(-5.0, el - degrees / 2 * t), az + degrees * t)
+
+
+def run_frames(scene, width, height, frames, device=None, overlap=True, progress=True):
+    """Render ``frames`` frames of the path; returns per-frame records and the last Frame."""
+    from tqdm import tqdm
+
+    from serenity.config import RenderConfig
+    from serenity.frame import Renderer
+
+    scene = copy.deepcopy(scene)
+    base_cam, base_sun = scene.camera, scene.sun.direction.copy()
+    renderer = Renderer(scene, width, height, device=device, config=RenderConfig(overlap=overlap))
+    records, frame, sample = [], None, None
+    label = "overlapped" if overlap else "serial"
+    for i in tqdm(range(frames), desc=f"bench {scene.name} ({label})", disable=not progress, unit="frame"):
+        t = i / max(1, frames - 1)
+        scene.camera = camera_path(base_cam, t)
+        scene.sun.direction = sun_path(base_sun, t)
+        frame = renderer.render()
+        records.append({"timings": frame.timings, "wall_ms": frame.wall_ms, "rss_mb": rss_mb(),
+                        "nan": bool(not np.all(np.isfinite(frame.hdr))), "rays": frame.rays})
+        if i == frames // 2:
+            sample = frame
+    renderer.close()
+    return records, sample or frame
+
+
+def summarise(records: list[dict], skip_first: int = 1) -> dict:
+    """Median ms per stage over the frames after the first ``skip_first`` (uploads, builds)."""
+    recs = records[skip_first:] or records
+    names: list[str] = []
+    for r in recs:
+        names += [k for k in r["timings"] if k not in names]
+    stages = {k: float(np.median([r["timings"].get(k, 0.0) for r in recs])) for k in names}
+    wall = float(np.median([r["wall_ms"] for r in recs]))
+    return {"stages_ms": stages, "frame_ms": wall, "fps": 1e3 / wall if wall > 0 else 0.0,
+            "sum_of_stages_ms": float(np.median([sum(r["timings"].values()) for r in recs]))}
+
+
+def timeline_chart(frame, path: str, title: str) -> None:
+    """Lanes of one frame's stages over time (paper Fig. 21)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lanes = []
+    for lane, *_ in frame.events:
+        if lane not in lanes:
+            lanes.append(lane)
+    names = []
+    for _, n, *_ in frame.events:
+        if n not in names:
+            names.append(n)
+    cmap = plt.get_cmap("tab20")
+    colours = {n: cmap(i % 20) for i, n in enumerate(names)}
+    fig, ax = plt.subplots(figsize=(12, 1.2 + 0.9 * len(lanes)))
+    for lane, name, t0, t1 in frame.events:
+        y = len(lanes) - 1 - lanes.index(lane)
+        ax.barh(y, t1 - t0, left=t0, height=0.6, color=colours[name], edgecolor="black", linewidth=0.4)
+        if t1 - t0 > 0.03 * max(e[3] for e in frame.events):
+            ax.text((t0 + t1) / 2, y, name, ha="center", va="center", fontsize=7, rotation=0, clip_on=True)
+    ax.set_yticks(range(len(lanes)), list(reversed(lanes)))
+    ax.set_xlabel("ms from the frame's start")
+    ax.set_title(title)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[n]) for n in names]
+    ax.legend(handles, names, fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.35 - 0.05 * len(lanes)))
+    fig.tight_layout()
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+
+def format_table(over: dict, serial: dict) -> str:
+    rows = [("stage", "ms (overlapped)", "ms (serial)", "paper ms")]
+    for k, v in over["stages_ms"].items():
+        paper = PAPER_TABLE1.get(k, ("", None))[1]
+        rows.append((k, f"{v:.2f}", f"{serial['stages_ms'].get(k, float('nan')):.2f}",
+                     "" if paper is None else f"{paper:.1f}"))
+    rows.append(("sum of stages", f"{over['sum_of_stages_ms']:.2f}", f"{serial['sum_of_stages_ms']:.2f}", "65.1"))
+    rows.append(("frame (wall)", f"{over['frame_ms']:.2f}", f"{serial['frame_ms']:.2f}", "42.6 / 68"))
+    rows.append(("FPS", f"{over['fps']:.1f}", f"{serial['fps']:.1f}", "23 / 14"))
+    w = [max(len(r[i]) for r in rows) for i in range(4)]
+    return "\n".join("  ".join(c.ljust(w[i]) if i == 0 else c.rjust(w[i]) for i, c in enumerate(r)) for r in rows)
+
+
+def bench(scene_name: str, width: int, height: int, frames: int, device=None, json_path=None,
+          chart_path=None) -> dict:
+    from serenity.device import resolve_device
+    from serenity.scene import load
+
+    scene = load(scene_name)
+    device = resolve_device(device)
+    t0 = time.perf_counter()
+    over_recs, sample = run_frames(scene, width, height, frames, device, overlap=True)
+    serial_recs, _ = run_frames(scene, width, height, frames, device, overlap=False)
+    over, serial = summarise(over_recs), summarise(serial_recs)
+    rss = [r["rss_mb"] for r in over_recs]
+    result = {
+        "scene": scene.name, "size": [width, height], "frames": frames, "device": device,
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version()},
+        "overlapped": over, "serial": serial,
+        "overlap_ratio": over["frame_ms"] / serial["frame_ms"] if serial["frame_ms"] else None,
+        "rss_mb": {"frame_20": rss[min(19, len(rss) - 1)], "last": rss[-1], "max": max(rss)},
+        "nan_frames": int(sum(r["nan"] for r in over_recs + serial_recs)),
+        "rays_median": float(np.median([r["rays"] for r in over_recs])),
+        "paper_table1_ms": {k: v[1] for k, v in PAPER_TABLE1.items()},
+        "bench_seconds": time.perf_counter() - t0,
+    }
+    print(format_table(over, serial))
+    print(f"overlap gain: frame {over['frame_ms']:.1f} ms overlapped vs {serial['frame_ms']:.1f} ms serial "
+          f"(ratio {result['overlap_ratio']:.2f}; paper 42.6 / 68 = 0.63)")
+    print(f"memory: RSS {result['rss_mb']['frame_20']:.0f} MiB at frame {min(20, len(rss))}, "
+          f"{result['rss_mb']['last']:.0f} MiB at frame {len(rss)}; NaN frames: {result['nan_frames']}")
+    if json_path:
+        os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
+        with open(json_path, "w") as f:
+            json.dump(result, f, indent=2)
+        print(f"wrote {json_path}")
+    if chart_path:
+        os.makedirs(os.path.dirname(os.path.abspath(chart_path)), exist_ok=True)
+        timeline_chart(sample, chart_path, f"{scene.name} {width}x{height}, {device}: one overlapped frame "
+                                           f"({sample.wall_ms:.0f} ms wall, {sample.total_ms:.0f} ms of stages)")
+        print(f"wrote {chart_path}")
+    return result

@@ -1,0 +1,91 @@
+"""Ray-traced G-buffers on the GL side (paper §9, Fig. 14–16): the CPU ray tracer's hits, scattered
+back to their pixels and uploaded as textures with the rasterised G-buffer's layout, so the same
+deferred lighting program lights them.
+
+Reflection and refraction share one stacked target of (W, 2H) texels: the top half of the image
+(GL v ∈ [0.5, 1)) holds the reflection G-buffer, the bottom half (v ∈ [0, 0.5)) the refraction
+G-buffer. One lighting pass per technique then lights both views, and the composite samples the
+two halves (``glsl/composite.glsl``).
+
+Per-pixel layout (as ``glsl/gbuffer.glsl``): albedo.rgb; normal.xyz + specular k_s in w;
+position.xyz + coverage in w (1 = hit, 0 = miss: the deferred pass shows the sky along the ray);
+material = (shininess, reflectivity, transparency, ior); plus, for ray-traced views only, eye.xyz
+(the ray origin: the viewer of that pixel) and ray_dir.xyz (0 = pixel not traced).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_NAMES = ("albedo", "normal", "position", "material", "eye", "ray_dir")
+
+
+@dataclass
+class RTView:
+    """Stacked reflection (top) + refraction (bottom) G-buffer textures, (W, 2H) each."""
+
+    albedo: object
+    normal: object
+    position: object
+    material: object
+    eye: object
+    ray_dir: object
+    width: int
+    height: int  # of ONE half (the view's height); the textures are 2 * height tall
+
+
+class RTGBufferUpload:
+    """Owns the stacked textures and the CPU staging images (reused every frame: no allocation)."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.size = None
+        self.view: RTView | None = None
+
+    def resize(self, width: int, height: int) -> None:
+        import moderngl
+
+        if self.size == (width, height):
+            return
+        if self.view is not None:
+            for n in _NAMES:
+                getattr(self.view, n).release()
+        tex = {}
+        for n in _NAMES:
+            t = self.ctx.texture((width, 2 * height), 4, dtype="f4")
+            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            t.repeat_x = t.repeat_y = False
+            tex[n] = t
+        self.view = RTView(**tex, width=width, height=height)
+        self._staging = {n: np.zeros((2 * height, width, 4), np.float32) for n in _NAMES}
+        self.size = (width, height)
+
+    def upload(self, rcb, reflection: dict | None, refraction: dict | None) -> RTView:
+        """Scatter the tracer's per-ray results back to pixels and upload.
+
+        ``rcb``: the frame's :class:`~serenity.raster.raycast.RayCastingBuffer`. ``reflection`` /
+        ``refraction``: the ray tracer's outputs for the rays with the reflect / refract flag, in
+        the order of ``rcb.pixels`` restricted to that flag, each with (N, 4) arrays under the
+        names of ``_NAMES`` (``eye``/``ray_dir`` are filled here from the rays themselves)."""
+        w, h = self.size
+        for a in self._staging.values():
+            a.fill(0.0)
+        for half, res, dirs, flag in ((0, reflection, rcb.reflect_dirs, 1), (1, refraction, rcb.refract_dirs, 2)):
+            if res is None:
+                continue
+            sel = (rcb.flags & flag) != 0
+            if half == 1:
+                sel &= np.any(rcb.refract_dirs != 0, axis=1)
+            pix = rcb.pixels[sel]
+            rows, cols = np.divmod(pix, w)
+            rows = rows + half * h
+            for n in ("albedo", "normal", "position", "material"):
+                self._staging[n][rows, cols] = res[n]
+            self._staging["eye"][rows, cols, :3] = rcb.origins[sel]
+            self._staging["ray_dir"][rows, cols, :3] = dirs[sel]
+        for n in _NAMES:
+            # GL rows run bottom-up: flip so image row 0 (top) is the texture's last row
+            getattr(self.view, n).write(np.ascontiguousarray(self._staging[n][::-1]).tobytes())
+        return self.view
