@@ -1,0 +1,353 @@
+"""Ray-traced G-buffers for reflections and refractions (paper §9, Fig. 14).
+
+The ray-casting buffer (``raster/raycast.py``) gives, for the pixels whose visible surface
+reflects or refracts, a ray origin, a reflected and a refracted direction and a ray cone. Only
+those rays are traced here, through the scene's kd-tree (:mod:`serenity.kernels.kdtree`), and the
+surface each one hits is written into a G-buffer with **the same layout as the rasterised one**
+(``raster/glsl/gbuffer.glsl``), so the deferred pass lights both the same way:
+
+    albedo   (N,4) float32: rgb = linear albedo = material albedo × texture (trilinear, mip from the
+             ray cone), a = material index.
+    normal   (N,4): xyz = interpolated vertex normal (unit), flipped to face the ray's origin;
+             w = Phong specular strength k_s.
+    position (N,4): xyz = world position of the hit (m, interpolated from the triangle's vertices);
+             w = 1 where the ray hit something (coverage), 0 on a miss.
+    material (N,4): (Phong exponent, reflectivity, transparency, index of refraction).
+    ray_dir  (N,4): xyz = the unit ray direction — on a miss the direction in which the deferred
+             pass looks up the sky; w = hit distance in m (0 on a miss). A ray with a zero, NaN or
+             infinite direction (e.g. no refraction under total internal reflection) gets all
+             zeros everywhere: "not traced", as the deferred pass reads ``ray_dir``.
+Misses write zeros to albedo, normal, position and material.
+
+Texture filtering: ray cones (Akenine-Möller et al., "Texture Level of Detail Strategies for
+Real-Time Ray Tracing", Ray Tracing Gems ch. 20). The cone's width at the hit is
+``cone_width + cone_spread · t`` (m; ``cone_width`` at the ray origin, ``cone_spread`` in rad, t in
+m), and the level of detail is λ = log2(width / |n_g·d| · sqrt(t_a / p_a)), with t_a the
+triangle's area in texels of level 0 (uv area × W × H) and p_a its world area. λ is clamped to the
+mip chain and filtered trilinearly (bilinear in two levels, GL's LINEAR_MIPMAP_LINEAR; repeat
+wrap; uv with v up, texture rows stored top first, as ``scene/texture.py`` defines).
+
+Inputs to :meth:`RayTracer.trace`: origins (N,3) m, directions (N,3) (any length, normalised
+here), cone_width (N,) or scalar m, cone_spread (N,) or scalar rad. Host class
+:class:`RayTracer` packs the merged scene (geometry, materials and every texture's mip chain) into
+Warp arrays once — the geometry is static — and owns the kd-tree. On the CPU launches are split
+over all cores (:func:`serenity.kernels.launch.launch`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from serenity.device import init_warp, resolve_device
+from serenity.errors import SerenityError
+from serenity.kernels.kdtree import KdBuildConfig, KdTree, KdTreeData, trace_kd
+from serenity.kernels.launch import launch
+
+wp.set_module_options({"enable_backward": False})
+
+# ----------------------------------------------------------------------------------------------
+# constants
+# ----------------------------------------------------------------------------------------------
+
+GBUFFER_KEYS = ("albedo", "normal", "position", "material", "ray_dir")
+RAY_EPSILON_REL = 1e-4  # default tmin: this fraction of the scene's bounding-box diagonal (m)
+MIN_COSINE = 1e-4  # |n·d| floor in the LOD formula (grazing hits get the coarsest mips, not inf)
+
+# ----------------------------------------------------------------------------------------------
+# structs
+# ----------------------------------------------------------------------------------------------
+
+
+@wp.struct
+class SceneData:
+    """The merged scene on one device (vertex attributes, faces, materials, texture mips)."""
+
+    tree: KdTreeData
+    normals: wp.array(dtype=wp.vec3)  # (V,) unit vertex normals
+    uvs: wp.array(dtype=wp.vec2)  # (V,) texture coordinates
+    faces: wp.array(dtype=wp.vec3i)  # (F,) vertex indices
+    face_material: wp.array(dtype=wp.int32)  # (F,)
+    mat_albedo: wp.array(dtype=wp.vec3)  # (M,) linear
+    mat_specular: wp.array(dtype=float)  # (M,) k_s
+    mat_params: wp.array(dtype=wp.vec4)  # (M,) shininess, reflectivity, transparency, ior
+    mat_texture: wp.array(dtype=wp.int32)  # (M,) texture index or -1
+    tex_first_level: wp.array(dtype=wp.int32)  # (T,) index into the level tables
+    tex_levels: wp.array(dtype=wp.int32)  # (T,) number of mip levels
+    level_offset: wp.array(dtype=wp.int32)  # (L,) first texel of each level in ``texels``
+    level_size: wp.array(dtype=wp.vec2i)  # (L,) (width, height)
+    texels: wp.array(dtype=wp.vec4)  # all levels of all textures, row-major, top row first, RGBA linear
+
+
+# ----------------------------------------------------------------------------------------------
+# functions
+# ----------------------------------------------------------------------------------------------
+
+
+@wp.func
+def wrap_index(i: int, n: int) -> int:
+    r = i % n
+    if r < 0:
+        r += n
+    return r
+
+
+@wp.func
+def sample_bilinear(scene: SceneData, level: int, uv: wp.vec2) -> wp.vec3:
+    """Bilinear lookup of one mip level with repeat wrap (GL_LINEAR, GL_REPEAT)."""
+    size = scene.level_size[level]
+    w = size[0]
+    h = size[1]
+    off = scene.level_offset[level]
+    fu = uv[0] - wp.floor(uv[0])
+    fv = uv[1] - wp.floor(uv[1])
+    x = fu * float(w) - 0.5
+    y = (1.0 - fv) * float(h) - 0.5  # rows are stored top first; v points up
+    x0 = wp.floor(x)
+    y0 = wp.floor(y)
+    tx = x - x0
+    ty = y - y0
+    c0 = wrap_index(int(x0), w)
+    c1 = wrap_index(int(x0) + 1, w)
+    r0 = wrap_index(int(y0), h)
+    r1 = wrap_index(int(y0) + 1, h)
+    t00 = scene.texels[off + r0 * w + c0]
+    t01 = scene.texels[off + r0 * w + c1]
+    t10 = scene.texels[off + r1 * w + c0]
+    t11 = scene.texels[off + r1 * w + c1]
+    top = t00 * (1.0 - tx) + t01 * tx
+    bottom = t10 * (1.0 - tx) + t11 * tx
+    c = top * (1.0 - ty) + bottom * ty
+    return wp.vec3(c[0], c[1], c[2])
+
+
+@wp.func
+def sample_trilinear(scene: SceneData, tex: int, uv: wp.vec2, lod: float) -> wp.vec3:
+    """Trilinear lookup (GL_LINEAR_MIPMAP_LINEAR) at level of detail ``lod`` (clamped)."""
+    first = scene.tex_first_level[tex]
+    n = scene.tex_levels[tex]
+    lam = wp.clamp(lod, 0.0, float(n - 1))
+    l0 = int(wp.floor(lam))
+    f = lam - float(l0)
+    c = sample_bilinear(scene, first + l0, uv)
+    if f > 0.0 and l0 + 1 < n:
+        c = c * (1.0 - f) + sample_bilinear(scene, first + l0 + 1, uv) * f
+    return c
+
+
+@wp.func
+def eval_texture_lod(scene: SceneData, tex: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, uv0: wp.vec2,
+                     uv1: wp.vec2, uv2: wp.vec2, cone: float, cos_theta: float) -> float:
+    """Ray-cone level of detail (RTG ch. 20): log2(cone / |cos| · sqrt(texel area / world area))."""
+    size = scene.level_size[scene.tex_first_level[tex]]
+    e1 = uv1 - uv0
+    e2 = uv2 - uv0
+    t_a = wp.abs(e1[0] * e2[1] - e1[1] * e2[0]) * float(size[0]) * float(size[1])
+    p_a = wp.length(wp.cross(p1 - p0, p2 - p0))
+    lod = float(-1.0e30)
+    if t_a > 0.0 and p_a > 0.0 and cone > 0.0:
+        lod = wp.log2(cone / wp.max(cos_theta, MIN_COSINE) * wp.sqrt(t_a / p_a))
+    return lod
+
+
+# ----------------------------------------------------------------------------------------------
+# kernels
+# ----------------------------------------------------------------------------------------------
+
+
+@wp.kernel(enable_backward=False)
+def trace_gbuffer(
+    # inputs
+    scene: SceneData,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    cone_width: wp.array(dtype=float),
+    cone_spread: wp.array(dtype=float),
+    tmin: float,
+    tmax: float,
+    # outputs
+    out_albedo: wp.array(dtype=wp.vec4),
+    out_normal: wp.array(dtype=wp.vec4),
+    out_position: wp.array(dtype=wp.vec4),
+    out_material: wp.array(dtype=wp.vec4),
+    out_ray: wp.array(dtype=wp.vec4),
+    offset: int,
+):
+    i = wp.tid() + offset
+    zero = wp.vec4(0.0, 0.0, 0.0, 0.0)
+    out_albedo[i] = zero
+    out_normal[i] = zero
+    out_position[i] = zero
+    out_material[i] = zero
+    out_ray[i] = zero
+    d = directions[i]
+    len_d = wp.length(d)
+    if not (wp.isfinite(len_d) and len_d > 0.0):
+        return
+    dn = d / len_d
+    o = origins[i]
+    prim, t, u, v = trace_kd(scene.tree, o, dn, tmin, tmax, False)
+    if prim < 0:
+        out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], 0.0)
+        return
+    out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], t)
+    f = scene.faces[prim]
+    b0 = 1.0 - u - v
+    p0 = scene.tree.tri_verts[3 * prim]
+    p1 = scene.tree.tri_verts[3 * prim + 1]
+    p2 = scene.tree.tri_verts[3 * prim + 2]
+    p = b0 * p0 + u * p1 + v * p2
+    ng = wp.normalize(wp.cross(p1 - p0, p2 - p0))
+    n = b0 * scene.normals[f[0]] + u * scene.normals[f[1]] + v * scene.normals[f[2]]
+    ln = wp.length(n)
+    if ln > 0.0:
+        n = n / ln
+    else:
+        n = ng
+    if wp.dot(n, dn) > 0.0:  # two-sided: face the viewer of this ray, as the G-buffer pass does
+        n = -n
+    m = scene.face_material[prim]
+    albedo = scene.mat_albedo[m]
+    tex = scene.mat_texture[m]
+    if tex >= 0:
+        uv0 = scene.uvs[f[0]]
+        uv1 = scene.uvs[f[1]]
+        uv2 = scene.uvs[f[2]]
+        uv = b0 * uv0 + u * uv1 + v * uv2
+        cone = cone_width[i] + cone_spread[i] * t
+        lod = eval_texture_lod(scene, tex, p0, p1, p2, uv0, uv1, uv2, cone, wp.abs(wp.dot(ng, dn)))
+        albedo = wp.cw_mul(albedo, sample_trilinear(scene, tex, uv, lod))
+    out_albedo[i] = wp.vec4(albedo[0], albedo[1], albedo[2], float(m))
+    out_normal[i] = wp.vec4(n[0], n[1], n[2], scene.mat_specular[m])
+    out_position[i] = wp.vec4(p[0], p[1], p[2], 1.0)
+    out_material[i] = scene.mat_params[m]
+
+
+# ----------------------------------------------------------------------------------------------
+# host
+# ----------------------------------------------------------------------------------------------
+
+
+def scene_needs_ray_tracing(scene) -> bool:
+    """True when some triangle of ``scene`` has a reflective or transparent material."""
+    used = set()
+    for mesh in scene.meshes:
+        if mesh.triangle_count:
+            used.update(np.unique(mesh.face_material).tolist())
+    return any(scene.materials[i].needs_ray_tracing for i in used)
+
+
+def pack_textures(textures: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """All mip levels of ``textures`` in one RGBA float32 array.
+
+    Returns (first_level (T,), levels (T,), level_offset (L,), level_size (L,2) as (w, h),
+    texels (texels, 4)); a texture with 3 channels gets alpha 1."""
+    first, nlev, offs, sizes, chunks = [], [], [], [], []
+    n_levels = 0
+    n_texels = 0
+    for tex in textures:
+        first.append(n_levels)
+        nlev.append(len(tex.mips))
+        for mip in tex.mips:
+            a = np.asarray(mip, np.float32)
+            h, w, c = a.shape
+            rgba = np.ones((h, w, 4), np.float32)
+            rgba[..., :min(c, 4)] = a[..., :4]
+            if c == 1:
+                rgba[..., 1:3] = a[..., :1]
+            offs.append(n_texels)
+            sizes.append((w, h))
+            chunks.append(rgba.reshape(-1, 4))
+            n_texels += h * w
+            n_levels += 1
+    if not chunks:  # Warp arrays may not be empty in a struct: one dummy texel
+        chunks, offs, sizes = [np.ones((1, 4), np.float32)], [0], [(1, 1)]
+    return (np.array(first or [0], np.int32), np.array(nlev or [1], np.int32), np.array(offs, np.int32),
+            np.array(sizes, np.int32).reshape(-1, 2), np.concatenate(chunks))
+
+
+class RayTracer:
+    """Traces rays into G-buffers (module docstring) for one static scene on one device.
+
+    ``RayTracer(scene, device=None)`` builds (or loads from the disk cache) the kd-tree of
+    ``scene.merged()`` and uploads geometry, materials and all texture mips once.
+    """
+
+    def __init__(self, scene, device: str | None = None, *, tree_config: KdBuildConfig | None = None,
+                 cache: bool | None = None, progress: bool | None = None, ray_epsilon: float | None = None):
+        self.device = resolve_device(device)
+        wp_ = init_warp()
+        pos, nrm, uv, faces, fmat = scene.merged()
+        if len(faces) == 0:
+            raise SerenityError(f"scene {getattr(scene, 'name', '?')!r} has no triangles to ray trace")
+        self.tree = KdTree.build(pos, faces, config=tree_config, cache=cache, progress=progress)
+        lo, hi = pos[np.unique(faces)].min(axis=0), pos[np.unique(faces)].max(axis=0)
+        diag = float(np.linalg.norm(hi.astype(np.float64) - lo))
+        self.ray_epsilon = float(ray_epsilon) if ray_epsilon is not None else RAY_EPSILON_REL * max(diag, 1e-6)
+
+        textures, tex_index, mat_tex = [], {}, []
+        for m in scene.materials:
+            t = m.albedo_texture
+            if t is None:
+                mat_tex.append(-1)
+                continue
+            if id(t) not in tex_index:
+                tex_index[id(t)] = len(textures)
+                textures.append(t)
+            mat_tex.append(tex_index[id(t)])
+        first, nlev, offs, sizes, texels = pack_textures(textures)
+        mats = scene.materials
+        dev = self.device
+        s = SceneData()
+        s.tree = self.tree.device_data(dev)
+        s.normals = wp_.array(nrm, dtype=wp.vec3, device=dev)
+        s.uvs = wp_.array(uv, dtype=wp.vec2, device=dev)
+        s.faces = wp_.array(faces, dtype=wp.vec3i, device=dev)
+        s.face_material = wp_.array(fmat, dtype=wp.int32, device=dev)
+        s.mat_albedo = wp_.array(np.array([m.albedo for m in mats], np.float32), dtype=wp.vec3, device=dev)
+        s.mat_specular = wp_.array(np.array([m.specular for m in mats], np.float32), dtype=float, device=dev)
+        s.mat_params = wp_.array(np.array([[m.shininess, m.reflectivity, m.transparency, m.ior] for m in mats],
+                                          np.float32), dtype=wp.vec4, device=dev)
+        s.mat_texture = wp_.array(np.array(mat_tex, np.int32), dtype=wp.int32, device=dev)
+        s.tex_first_level = wp_.array(first, dtype=wp.int32, device=dev)
+        s.tex_levels = wp_.array(nlev, dtype=wp.int32, device=dev)
+        s.level_offset = wp_.array(offs, dtype=wp.int32, device=dev)
+        s.level_size = wp_.array(sizes, dtype=wp.vec2i, device=dev)
+        s.texels = wp_.array(texels, dtype=wp.vec4, device=dev)
+        self.data = s
+        self.textures = textures
+
+    def trace(self, origins, directions, cone_width=0.0, cone_spread=0.0, *, tmin: float | None = None,
+              tmax: float = np.inf, threads: int | None = None) -> dict[str, np.ndarray]:
+        """Trace N rays; returns the G-buffer as a dict of (N,4) float32 arrays (``GBUFFER_KEYS``).
+
+        ``tmin`` (m) defaults to ``ray_epsilon`` (hits closer than that are ignored: rays start on
+        the reflecting surface)."""
+        dev = self.device
+        o = np.ascontiguousarray(np.asarray(origins, np.float32).reshape(-1, 3))
+        d = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
+        n = len(o)
+        if len(d) != n:
+            raise SerenityError(f"{n} ray origins but {len(d)} directions")
+        cw = np.ascontiguousarray(np.broadcast_to(np.asarray(cone_width, np.float32), (n,)))
+        cs = np.ascontiguousarray(np.broadcast_to(np.asarray(cone_spread, np.float32), (n,)))
+        outs = [wp.empty(n, dtype=wp.vec4, device=dev) for _ in GBUFFER_KEYS]
+        if n:
+            args = [self.data, wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
+                    wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev),
+                    float(self.ray_epsilon if tmin is None else tmin), float(tmax), *outs]
+            launch(trace_gbuffer, n, args, device=dev, threads=threads)
+        return {k: a.numpy().reshape(n, 4) for k, a in zip(GBUFFER_KEYS, outs, strict=True)}
+
+    def trace_casting_buffer(self, buffer, threads: int | None = None) -> dict[str, dict[str, np.ndarray]]:
+        """Both G-buffers of a ray-casting buffer (``raster.raycast.RayCastingBuffer`` or anything
+        with its fields): ``{"reflection": {...}, "refraction": {...}}``, each (N,4) per key in the
+        buffer's ray order. Rays whose flag is not set (refraction without TRACE_REFRACTION) come
+        back as "not traced" (all zeros)."""
+        flags = np.asarray(buffer.flags)
+        refl = np.where((flags & 1)[:, None] > 0, buffer.reflect_dirs, 0.0)
+        refr = np.where((flags & 2)[:, None] > 0, buffer.refract_dirs, 0.0)
+        return {
+            "reflection": self.trace(buffer.origins, refl, buffer.cone_width, buffer.cone_spread, threads=threads),
+            "refraction": self.trace(buffer.origins, refr, buffer.cone_width, buffer.cone_spread, threads=threads),
+        }

@@ -1,0 +1,449 @@
+"""The kd-tree against exact references: a brute-force loop over all triangles (same triangle test,
+so t and the primitive must match exactly), Embree on a big mesh, watertightness on closed meshes,
+degenerate input, the disk cache, and CPU vs CUDA."""
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from serenity.device import init_warp
+from serenity.errors import SerenityError
+from serenity.kernels.kdtree import KdBuildConfig, KdTree, intersect_triangle, setup_ray
+
+wp = init_warp()
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path, monkeypatch):
+    """Builds in these tests never touch the user's cache."""
+    monkeypatch.setenv("SERENITY_CACHE", str(tmp_path / "cache"))
+
+
+@wp.kernel
+def _brute_force(
+    tri_verts: wp.array(dtype=wp.vec3),
+    n_tris: int,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    tmax: float,
+    out_t: wp.array(dtype=float),
+    out_prim: wp.array(dtype=wp.int32),
+    out_u: wp.array(dtype=float),
+    out_v: wp.array(dtype=float),
+):
+    i = wp.tid()
+    o = origins[i]
+    kx, ky, kz, sx, sy, sz = setup_ray(directions[i])
+    best = tmax
+    prim = int(-1)
+    bu = float(0.0)
+    bv = float(0.0)
+    for f in range(n_tris):
+        hit, t, u, v = intersect_triangle(o, kx, ky, kz, sx, sy, sz, tri_verts[3 * f], tri_verts[3 * f + 1],
+                                          tri_verts[3 * f + 2], 0.0, best)
+        if hit and (t < best or f < prim):
+            best = t
+            prim = f
+            bu = u
+            bv = v
+    if prim < 0:
+        best = float(math.inf)
+    out_t[i] = best
+    out_prim[i] = prim
+    out_u[i] = bu
+    out_v[i] = bv
+
+
+def brute_force(vertices, faces, origins, directions, tmax=math.inf):
+    """Closest hits by testing every triangle (the kd-tree's own triangle test)."""
+    tv = wp.array(np.ascontiguousarray(vertices[faces].reshape(-1, 3), np.float32), dtype=wp.vec3, device="cpu")
+    n = len(origins)
+    outs = [wp.zeros(n, dtype=float), wp.zeros(n, dtype=wp.int32), wp.zeros(n, dtype=float), wp.zeros(n, dtype=float)]
+    wp.launch(_brute_force, n, [tv, len(faces), wp.array(origins, dtype=wp.vec3), wp.array(directions, dtype=wp.vec3),
+                                float(tmax), *outs], device="cpu")
+    return [a.numpy() for a in outs]
+
+
+def random_soup(rng, n, spread=1.0, size=0.15):
+    centres = rng.uniform(-spread, spread, (n, 1, 3))
+    v = (centres + rng.normal(size=(n, 3, 3)) * size).reshape(-1, 3).astype(np.float32)
+    return v, np.arange(3 * n, dtype=np.int32).reshape(-1, 3)
+
+
+def random_rays(rng, n, extent=1.5):
+    o = rng.uniform(-extent, extent, (n, 3)).astype(np.float32)
+    d = rng.normal(size=(n, 3)).astype(np.float32)
+    return o, d
+
+
+def lumpy_scene(subdivisions: int):
+    """A displaced icosphere standing on a wavy terrain grid of similar triangle count."""
+    s = trimesh.creation.icosphere(subdivisions=subdivisions)
+    v = s.vertices * (1 + 0.1 * np.sin(5 * s.vertices[:, :1]) * np.cos(7 * s.vertices[:, 1:2]))
+    n = int(np.sqrt(len(s.faces) / 2)) + 1
+    xs = np.linspace(-3, 3, n)
+    gx, gz = np.meshgrid(xs, xs)
+    gy = -1.2 + 0.1 * np.sin(3 * gx) * np.cos(2 * gz)
+    tv = np.stack([gx, gy, gz], -1).reshape(-1, 3)
+    idx = np.arange(n * n).reshape(n, n)
+    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    tf = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+    return (np.concatenate([v, tv]).astype(np.float32),
+            np.concatenate([s.faces, tf + len(v)]).astype(np.int32))
+
+
+def camera_rays(width, height, position=(0.0, 0.5, 4.0), fov_deg=60.0):
+    t = math.tan(math.radians(fov_deg) / 2)
+    xs = ((np.arange(width) + 0.5) / width * 2 - 1) * t * width / height
+    ys = (1 - (np.arange(height) + 0.5) / height * 2) * t
+    d = np.stack(np.broadcast_arrays(xs[None, :], ys[:, None], -1.0), -1).reshape(-1, 3)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.broadcast_to(np.asarray(position, np.float32), d.shape)
+    return np.ascontiguousarray(o, np.float32), d.astype(np.float32)
+
+
+def assert_same_hits(hits, ref, vertices=None, faces=None, origins=None, directions=None):
+    """Same t, same triangle and barycentrics. Where a ray hits a shared edge or vertex exactly, two
+    triangles tie at the same t: then the tree's triangle must be hit at that very t (checked
+    against the triangle alone when the geometry is given)."""
+    t, prim, u, v = ref
+    assert np.array_equal(hits.t, t)
+    same = hits.prim == prim
+    tie = ~same
+    if tie.any():
+        assert vertices is not None, f"{np.count_nonzero(tie)} rays hit another triangle"
+        assert np.all(hits.hit[tie]) and tie.mean() < 0.01
+        for i in np.flatnonzero(tie):
+            one = brute_force(vertices, faces[hits.prim[i:i + 1]], origins[i:i + 1], directions[i:i + 1])
+            assert one[0][0] == t[i], f"ray {i}: triangle {hits.prim[i]} is not hit at t = {t[i]}"
+    assert np.array_equal(hits.u[same], u[same]) and np.array_equal(hits.v[same], v[same])
+
+
+# ---------------------------------------------------------------------------------------------
+# exactness
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_matches_brute_force_on_random_soups(device, seed):
+    rng = np.random.default_rng(seed)
+    v, f = random_soup(rng, 600)
+    o, d = random_rays(rng, 20_000)
+    tree = KdTree.build(v, f)
+    hits = tree.intersect(o, d, device=device)
+    assert 0.2 < hits.hit.mean() < 0.9
+    assert_same_hits(hits, brute_force(v, f, o, d))
+
+
+def test_matches_brute_force_on_a_closed_mesh_with_tmax(device):
+    rng = np.random.default_rng(3)
+    m = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=40, minor_sections=20)
+    v, f = m.vertices.astype(np.float32), m.faces.astype(np.int32)
+    o, d = random_rays(rng, 20_000)
+    tree = KdTree.build(v, f)
+    for tmax in (math.inf, 1.0):
+        assert_same_hits(tree.intersect(o, d, tmax, device=device), brute_force(v, f, o, d, tmax))
+
+
+def test_occluded_is_any_hit_before_tmax(device):
+    rng = np.random.default_rng(4)
+    v, f = random_soup(rng, 400)
+    o, d = random_rays(rng, 10_000)
+    tree = KdTree.build(v, f)
+    closest = tree.intersect(o, d, device=device)
+    for tmax in (math.inf, 0.5, np.linspace(0.01, 3.0, len(o)).astype(np.float32)):
+        occ = tree.occluded(o, d, tmax, device=device)
+        assert occ.dtype == bool
+        assert np.array_equal(occ, closest.t < tmax)
+
+
+def test_non_unit_directions_measure_t_in_direction_lengths(device):
+    rng = np.random.default_rng(5)
+    v, f = random_soup(rng, 300)
+    o, d = random_rays(rng, 5_000)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    tree = KdTree.build(v, f)
+    unit = tree.intersect(o, d, device=device)
+    long = tree.intersect(o, d * 4.0, device=device)
+    assert np.array_equal(unit.prim, long.prim)
+    hit = unit.hit
+    assert np.allclose(long.t[hit] * 4.0, unit.t[hit], rtol=1e-5)
+
+
+def test_split_launch_matches_single_thread():
+    rng = np.random.default_rng(6)
+    v, f = random_soup(rng, 500)
+    o, d = random_rays(rng, 20_000)
+    tree = KdTree.build(v, f)
+    a = tree.intersect(o, d, device="cpu", threads=1)
+    b = tree.intersect(o, d, device="cpu", threads=3)
+    assert np.array_equal(a.prim, b.prim) and np.array_equal(a.t, b.t)
+
+
+def _embree_agreement(v, f, o, d, hits):
+    embreex = pytest.importorskip("embreex")  # noqa: F841
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    scene = rtcore_scene.EmbreeScene()
+    TriangleMesh(scene, v, f)
+    res = scene.run(o, d, output=1)
+    e_prim = res["primID"].astype(np.int32)
+    e_t = np.where(e_prim >= 0, res["tfar"], np.inf).astype(np.float32)
+    both = (e_prim >= 0) & hits.hit
+    close = np.zeros(len(o), bool)
+    close[both] = np.abs(hits.t[both] - e_t[both]) <= 1e-5 * e_t[both]
+    # the same triangle, or (at a shared edge or vertex) another triangle at the same distance
+    agree = ((e_prim == hits.prim) & ((e_prim < 0) | close)) | close
+    return agree.mean(), both
+
+
+def test_agrees_with_embree_on_120k_triangles(device):
+    v, f = lumpy_scene(6)
+    assert len(f) > 100_000
+    tree = KdTree.build(v, f)
+    rng = np.random.default_rng(7)
+    o1, d1 = camera_rays(320, 180)
+    o2 = rng.uniform(-0.5, 0.5, (60_000, 3)).astype(np.float32)
+    d2 = rng.normal(size=(60_000, 3)).astype(np.float32)
+    o, d = np.concatenate([o1, o2]), np.concatenate([d1, d2])
+    hits = tree.intersect(o, d, device=device)
+    agreement, both = _embree_agreement(v, f, o, d, hits)
+    assert both.mean() > 0.5
+    assert agreement >= 0.9999, agreement
+
+
+@pytest.mark.slow
+def test_agrees_with_embree_on_330k_triangles_1m_rays(device):
+    v, f = lumpy_scene(7)
+    tree = KdTree.build(v, f)
+    rng = np.random.default_rng(8)
+    o1, d1 = camera_rays(1280, 400)
+    o2 = rng.uniform(-2, 2, (500_000, 3)).astype(np.float32)
+    d2 = rng.normal(size=(500_000, 3)).astype(np.float32)
+    o, d = np.concatenate([o1, o2]), np.concatenate([d1, d2])
+    hits = tree.intersect(o, d, device=device)
+    agreement, _ = _embree_agreement(v, f, o, d, hits)
+    assert agreement >= 0.9999, agreement
+
+
+# ---------------------------------------------------------------------------------------------
+# watertightness
+
+
+def _closed_meshes():
+    ico = trimesh.creation.icosphere(subdivisions=4)
+    caps = trimesh.creation.capsule(height=1.0, radius=0.4, count=[24, 24])
+    box = trimesh.creation.box((1.0, 2.0, 0.5)).subdivide().subdivide()  # axis-aligned faces on split planes
+    for m in (ico, caps, box):
+        assert m.is_watertight
+    return [(name, m.vertices.astype(np.float32), m.faces.astype(np.int32))
+            for name, m in (("icosphere", ico), ("capsule", caps), ("box", box))]
+
+
+def _edge_and_vertex_targets(v, f, rng, per_edge):
+    """Every vertex, and points on every edge (midpoints and random fractions), as float32."""
+    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+    a, b = v[edges[:, 0]].astype(np.float64), v[edges[:, 1]].astype(np.float64)
+    s = np.concatenate([np.full((len(edges), 1), 0.5), rng.uniform(0, 1, (len(edges), per_edge - 1))], axis=1)
+    on_edges = (a[:, None] + s[..., None] * (b - a)[:, None]).reshape(-1, 3)
+    return np.concatenate([v.astype(np.float64), on_edges]).astype(np.float32)
+
+
+def _escapes(tree, v, f, targets, origins, device):
+    n = 0
+    for c in origins:
+        o = np.broadcast_to(np.asarray(c, np.float32), targets.shape).copy()
+        d = (targets - o).astype(np.float32)
+        hits = tree.intersect(o, d, device=device)
+        occ = tree.occluded(o, d, device=device)
+        n += int(np.count_nonzero(~hits.hit)) + int(np.count_nonzero(~occ))
+    return n
+
+
+def test_no_ray_escapes_closed_meshes_through_edges_and_vertices(device):
+    rng = np.random.default_rng(9)
+    total = 0
+    for name, v, f in _closed_meshes():
+        tree = KdTree.build(v, f)
+        targets = _edge_and_vertex_targets(v, f, rng, per_edge=3)
+        origins = [(0.0, 0.0, 0.0), (0.05, -0.1, 0.03), (0.1, 0.13, -0.07)]
+        assert _escapes(tree, v, f, targets, origins, device) == 0, name
+        total += len(targets) * len(origins)
+    assert total > 50_000
+
+
+@pytest.mark.slow
+def test_no_ray_escapes_1m_rays(device):
+    rng = np.random.default_rng(10)
+    total = 0
+    for name, v, f in _closed_meshes():
+        tree = KdTree.build(v, f)
+        targets = _edge_and_vertex_targets(v, f, rng, per_edge=14)
+        origins = rng.uniform(-0.15, 0.15, (8, 3))
+        assert _escapes(tree, v, f, targets, origins, device) == 0, name
+        total += len(targets) * len(origins)
+    assert total >= 1_000_000
+
+
+# ---------------------------------------------------------------------------------------------
+# degenerate input
+
+
+def test_zero_area_triangles_are_never_hit(device):
+    rng = np.random.default_rng(11)
+    v, f = random_soup(rng, 200)
+    # collinear, repeated-vertex and point triangles, placed where rays pass
+    deg = np.array([[[0, 0, 0], [1, 1, 1], [2, 2, 2]], [[0.5, 0, 0], [0.5, 0, 0], [0.5, 1, 0]],
+                    [[0.2, 0.2, 0.2]] * 3, [[-1, 0, 0], [1, 0, 0], [0, 0, 0]]], np.float32)
+    v2 = np.concatenate([v, deg.reshape(-1, 3)])
+    f2 = np.concatenate([f, len(v) + np.arange(12).reshape(-1, 3)]).astype(np.int32)
+    tree = KdTree.build(v2, f2)
+    assert tree.stats.valid_triangles == len(f)
+    o, d = random_rays(rng, 10_000)
+    d[:100] = (deg[0, 1] - o[:100])  # aimed at the collinear triangle's middle vertex
+    hits = tree.intersect(o, d, device=device)
+    assert not np.any(hits.prim >= len(f))
+    assert_same_hits(hits, brute_force(v, f, o, d))
+    only_degenerate = KdTree.build(deg.reshape(-1, 3), np.arange(12).reshape(-1, 3))
+    assert not only_degenerate.intersect(o, d, device=device).hit.any()
+    assert not only_degenerate.occluded(o, d, device=device).any()
+
+
+def test_flat_axis_aligned_grid_and_rays_in_its_plane(device):
+    g = trimesh.creation.box((4.0, 4.0, 4.0)).subdivide().subdivide().subdivide()
+    v = g.vertices.astype(np.float32).copy()
+    v[:, 1] = 0.0  # squash the box flat: coplanar overlapping triangles in y = 0
+    f = g.faces.astype(np.int32)
+    tree = KdTree.build(v, f)
+    rng = np.random.default_rng(12)
+    o, d = random_rays(rng, 20_000, extent=3.0)
+    o[:5000, 1] = 0.0
+    d[:5000, 1] = 0.0  # in the plane of every triangle
+    o[5000:10000, 1] = 0.0  # starting on the plane
+    o[10000:12000] = np.round(o[10000:12000])  # on many split planes at once
+    d[10000:11000] = np.round(d[10000:11000])  # axis-parallel
+    hits = tree.intersect(o, d, device=device)
+    assert_same_hits(hits, brute_force(v, f, o, d), v, f, o, d)
+    assert not hits.hit[:5000].any()  # a ray in the triangle's plane is a miss (zero determinant)
+
+
+def test_rays_on_and_parallel_to_split_planes(device):
+    rng = np.random.default_rng(13)
+    v, f = random_soup(rng, 800)
+    tree = KdTree.build(v, f)
+    inner = (tree.node_head & 3) != 3
+    axes, planes = tree.node_head[inner] & 3, tree.node_split[inner]
+    pick = rng.integers(0, len(planes), 30_000)
+    o, d = random_rays(rng, 30_000)
+    rows = np.arange(len(o))
+    o[rows, axes[pick]] = planes[pick]  # origin exactly on a split plane
+    d[:10_000][rows[:10_000], axes[pick[:10_000]]] = 0.0  # ... and running inside it
+    d[10_000:20_000, :2] = 0.0  # along z only
+    hits = tree.intersect(o, d, device=device)
+    assert_same_hits(hits, brute_force(v, f, o, d), v, f, o, d)
+
+
+def test_invalid_rays_miss(device):
+    rng = np.random.default_rng(14)
+    v, f = random_soup(rng, 200, spread=0.3)
+    tree = KdTree.build(v, f)
+    nan, inf = np.nan, np.inf
+    o = np.zeros((9, 3), np.float32)
+    d = np.array([[0, 0, 0], [nan, 1, 0], [inf, 0, 0], [1e-38, 0, 0], [0, -inf, 1], [1, 0, 0], [1, 0, 0],
+                  [0, 1, 0], [0, 0, 1]], np.float32)
+    o[5] = nan
+    o[6, 2] = -inf
+    tmax = np.array([inf] * 7 + [nan, -1.0], np.float32)
+    hits = tree.intersect(o, d, tmax, device=device)
+    assert not hits.hit.any() and np.all(np.isinf(hits.t)) and np.all(hits.prim == -1)
+    assert not tree.occluded(o, d, tmax, device=device).any()
+    # a valid ray in the same batch still hits
+    h = tree.intersect(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), device=device)
+    b = brute_force(v, f, np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
+    assert h.prim[0] == b[1][0]
+
+
+def test_empty_and_malformed_meshes_raise():
+    with pytest.raises(SerenityError, match="empty"):
+        KdTree.build(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))
+    with pytest.raises(SerenityError, match="empty"):
+        KdTree.build(np.zeros((3, 3), np.float32), np.zeros((0, 3), np.int32))
+    with pytest.raises(SerenityError, match="out of range"):
+        KdTree.build(np.zeros((3, 3), np.float32), np.array([[0, 1, 3]]))
+    with pytest.raises(SerenityError, match="shape"):
+        KdTree.build(np.zeros((3, 2), np.float32), np.array([[0, 1, 2]]))
+
+
+def test_nan_vertices_leave_their_triangles_out(device):
+    rng = np.random.default_rng(15)
+    v, f = random_soup(rng, 100)
+    v[0] = np.nan
+    tree = KdTree.build(v, f)
+    assert tree.stats.valid_triangles == 99
+    o, d = random_rays(rng, 2000)
+    hits = tree.intersect(o, d, device=device)
+    assert not np.any(hits.prim == 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# cache, build settings, devices
+
+
+def test_cache_round_trip(tmp_path, monkeypatch):
+    monkeypatch.setenv("SERENITY_CACHE", str(tmp_path / "c"))
+    rng = np.random.default_rng(16)
+    v, f = random_soup(rng, 300)
+    a = KdTree.build(v, f, cache=True)
+    files = list((tmp_path / "c").glob("kdtree-*.npz"))
+    assert len(files) == 1 and not a.stats.from_cache
+    b = KdTree.build(v, f, cache=True)
+    assert b.stats.from_cache
+    for k in ("node_head", "node_split", "prims", "box"):
+        assert np.array_equal(getattr(a, k), getattr(b, k))
+    assert b.stats.nodes == a.stats.nodes and b.stats.references == a.stats.references
+    with np.load(files[0], allow_pickle=False) as z:  # plain arrays, no pickled objects
+        assert all(z[k].dtype != object for k in z.files)
+    o, d = random_rays(rng, 3000)
+    assert np.array_equal(a.intersect(o, d, device="cpu").t, b.intersect(o, d, device="cpu").t)
+    # other geometry or settings -> another key
+    v2 = v.copy()
+    v2[0, 0] += 1e-3
+    KdTree.build(v2, f, cache=True)
+    KdTree.build(v, f, cache=True, config=KdBuildConfig(bins=16))
+    assert len(list((tmp_path / "c").glob("kdtree-*.npz"))) == 3
+    # a corrupt cache file is rebuilt, not trusted
+    files[0].write_bytes(b"not an npz")
+    c = KdTree.build(v, f, cache=True)
+    assert not c.stats.from_cache and np.array_equal(c.node_head, a.node_head)
+
+
+def test_tree_is_a_real_sah_tree():
+    v, f = lumpy_scene(4)
+    tree = KdTree.build(v, f)
+    st = tree.stats
+    assert st.depth <= KdBuildConfig().depth_limit(len(f))
+    assert st.empty_leaves > 0  # empty space was cut off
+    assert st.references < 8 * len(f)
+    # every valid triangle is referenced by some leaf
+    leaf = (tree.node_head & 3) == 3
+    offs = tree.node_head[leaf] >> 2
+    referenced = np.zeros(len(f), bool)
+    for off in offs[offs > 0]:
+        referenced[tree.prims[off + 1: off + 1 + tree.prims[off]]] = True
+    assert referenced.all()
+
+
+def test_cpu_and_cuda_give_identical_hits(cuda_devices):
+    if not cuda_devices:
+        pytest.skip("no CUDA device")
+    v, f = lumpy_scene(4)
+    tree = KdTree.build(v, f)
+    rng = np.random.default_rng(17)
+    o, d = random_rays(rng, 50_000, extent=2.0)
+    ref = tree.intersect(o, d, device="cpu")
+    for dev in cuda_devices:
+        got = tree.intersect(o, d, device=dev)
+        assert np.array_equal(got.prim, ref.prim) and np.array_equal(got.t, ref.t)
+        assert np.array_equal(tree.occluded(o, d, 1.0, device=dev), tree.occluded(o, d, 1.0, device="cpu"))

@@ -1,0 +1,285 @@
+"""Ray-traced G-buffers: texel-exact texture lookups and the ray-cone mip level against a numpy
+reference, misses and untraced rays, and the whole G-buffer against the rasterised one for rays
+equal to the camera's primary rays."""
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from serenity.errors import SerenityError
+from serenity.kernels.raytrace import GBUFFER_KEYS, RayTracer, scene_needs_ray_tracing
+from serenity.scene.model import Camera, Material, Mesh, Scene, Sky, Sun
+from serenity.scene.texture import texture_from_array
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("SERENITY_CACHE", str(tmp_path / "cache"))
+
+
+SIZE = 4.0  # the textured plane spans x in [0, SIZE], z in [-SIZE, 0], y = 0; uv = (x, -z) / SIZE
+
+
+def textured_plane_scene(img, repeat=1.0):
+    tex = texture_from_array(img)
+    p = np.array([[0, 0, 0], [SIZE, 0, 0], [SIZE, 0, -SIZE], [0, 0, -SIZE]], np.float32)
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32) * repeat
+    mesh = Mesh("plane", p, None, uv, np.array([[0, 1, 2], [0, 2, 3]]), np.zeros(2))
+    mat = Material("tex", albedo=(1.0, 0.5, 1.0), albedo_texture=tex, specular=0.25, shininess=16.0)
+    return Scene("plane", [mesh], [mat], Camera((2, 5, 2), (2, 0, -2)), Sun((0.3, 1, 0.2))), tex
+
+
+def bilinear_ref(img, u, v):
+    """GL_LINEAR + GL_REPEAT on an image stored top row first, v up."""
+    h, w = img.shape[:2]
+    x = (u - math.floor(u)) * w - 0.5
+    y = (1 - (v - math.floor(v))) * h - 0.5
+    x0, y0 = math.floor(x), math.floor(y)
+    tx, ty = x - x0, y - y0
+    c = [[img[(y0 + j) % h, (x0 + i) % w].astype(np.float64) for i in (0, 1)] for j in (0, 1)]
+    return (c[0][0] * (1 - tx) + c[0][1] * tx) * (1 - ty) + (c[1][0] * (1 - tx) + c[1][1] * tx) * ty
+
+
+def trilinear_ref(tex, u, v, lod):
+    lam = min(max(lod, 0.0), len(tex.mips) - 1)
+    l0 = int(math.floor(lam))
+    f = lam - l0
+    c = bilinear_ref(tex.mips[l0], u, v)
+    if f > 0 and l0 + 1 < len(tex.mips):
+        c = c * (1 - f) + bilinear_ref(tex.mips[l0 + 1], u, v) * f
+    return c
+
+
+def down_ray_at(u, v, height=1.0):
+    """A ray straight down onto the plane at texture coordinate (u, v)."""
+    return np.array([[SIZE * u, height, -SIZE * v]], np.float32), np.array([[0.0, -1.0, 0.0]], np.float32)
+
+
+def test_texel_centres_give_the_texel(device):
+    img = np.random.default_rng(0).uniform(0, 1, (16, 16, 3)).astype(np.float32)
+    scene, tex = textured_plane_scene(img)
+    rt = RayTracer(scene, device=device)
+    for r, c in [(0, 0), (3, 5), (15, 15), (8, 1)]:
+        o, d = down_ray_at((c + 0.5) / 16, 1 - (r + 0.5) / 16)
+        g = rt.trace(o, d, 0.0, 0.0)
+        assert np.allclose(g["albedo"][0, :3], img[r, c] * [1.0, 0.5, 1.0], atol=1e-6), (r, c)
+
+
+@pytest.mark.parametrize("level", [1, 2, 3])
+def test_cone_width_selects_the_mip_level(device, level):
+    # level-0 texels are SIZE/16 m wide: a cone of 2^level texels lands exactly on that level
+    img = np.random.default_rng(1).uniform(0, 1, (16, 16, 3)).astype(np.float32)
+    scene, tex = textured_plane_scene(img)
+    rt = RayTracer(scene, device=device)
+    n = 16 >> level
+    texel = SIZE / 16
+    for r, c in [(0, 0), (n - 1, n // 2)]:
+        o, d = down_ray_at((c + 0.5) / n, 1 - (r + 0.5) / n, height=2.0)
+        expected = tex.mips[level][r, c] * [1.0, 0.5, 1.0]
+        by_width = rt.trace(o, d, cone_width=texel * 2**level, cone_spread=0.0)
+        by_spread = rt.trace(o, d, cone_width=0.0, cone_spread=texel * 2**level / 2.0)  # hit at t = 2 m
+        assert np.allclose(by_width["albedo"][0, :3], expected, atol=1e-5)
+        assert np.allclose(by_spread["albedo"][0, :3], expected, atol=1e-5)
+
+
+def test_trilinear_filtering_matches_reference(device):
+    rng = np.random.default_rng(2)
+    img = rng.uniform(0, 1, (32, 16, 3)).astype(np.float32)  # non-square, so level sizes differ per axis
+    scene, tex = textured_plane_scene(img, repeat=3.0)  # uv in [0, 3]: repeat wrap
+    rt = RayTracer(scene, device=device)
+    n = 300
+    uv = rng.uniform(0, 1, (n, 2))
+    o = np.stack([SIZE * uv[:, 0], np.full(n, 1.5), -SIZE * uv[:, 1]], 1).astype(np.float32)
+    d = np.tile(np.float32([0, -1, 0]), (n, 1))
+    width = rng.uniform(0, 2.0, n).astype(np.float32)
+    g = rt.trace(o, d, width, 0.0)
+    # texel area / world area of level 0: (32*16 texels * 9 repeats) over SIZE^2 m^2
+    density = math.sqrt(32 * 16 * 9 / SIZE**2)
+    for i in range(n):
+        lod = math.log2(width[i] * density) if width[i] > 0 else -1.0
+        ref = trilinear_ref(tex, 3 * uv[i, 0], 3 * uv[i, 1], lod) * [1.0, 0.5, 1.0]
+        assert np.allclose(g["albedo"][i, :3], ref, atol=2e-5), i
+
+
+def test_grazing_hits_use_coarser_mips(device):
+    img = np.random.default_rng(3).uniform(0, 1, (64, 64, 3)).astype(np.float32)
+    scene, tex = textured_plane_scene(img)
+    rt = RayTracer(scene, device=device)
+    target = np.array([SIZE * 0.3, 0.0, -SIZE * 0.6])
+    texel = SIZE / 64
+    for cos_theta in (1.0, 0.5, 0.25):
+        d = np.array([math.sqrt(1 - cos_theta**2), -cos_theta, 0.0])
+        o = (target - 2.0 * d).astype(np.float32)[None]
+        g = rt.trace(o, d.astype(np.float32)[None], cone_width=texel, cone_spread=0.0)
+        lod = math.log2(1.0 / cos_theta)  # the footprint stretches by 1/cos along the plane
+        ref = trilinear_ref(tex, 0.3, 0.6, lod) * [1.0, 0.5, 1.0]
+        assert np.allclose(g["albedo"][0, :3], ref, atol=1e-4), cos_theta
+        assert g["ray_dir"][0, 3] == pytest.approx(2.0, rel=1e-5)
+
+
+def test_hit_attributes_misses_and_untraced_rays(device):
+    img = np.full((4, 4, 3), 0.5, np.float32)
+    scene, _ = textured_plane_scene(img)
+    rt = RayTracer(scene, device=device)
+    o = np.array([[1.0, 1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, -1.0], [9.0, 1.0, 0.0]],
+                 np.float32)
+    d = np.array([[0, -2, 0], [0, 1, 0], [0, 0, 0], [np.nan, 0, 0], [1, -1, 0]], np.float32)
+    g = rt.trace(o, d, 0.0, 0.0)
+    assert set(g) == set(GBUFFER_KEYS) and all(a.shape == (5, 4) and a.dtype == np.float32 for a in g.values())
+    # 0: a hit from above
+    assert np.allclose(g["position"][0], [1, 0, -1, 1], atol=1e-6)
+    assert np.allclose(g["normal"][0], [0, 1, 0, 0.25], atol=1e-6)
+    assert np.allclose(g["albedo"][0], [0.5, 0.25, 0.5, 0.0], atol=1e-6)
+    assert np.allclose(g["material"][0], [16.0, 0.0, 0.0, 1.5])
+    assert np.allclose(g["ray_dir"][0], [0, -1, 0, 1.0], atol=1e-6)  # unit direction, distance in m
+    # 4: a miss: the sky direction, nothing else
+    assert np.allclose(g["ray_dir"][4, :3], [math.sqrt(0.5), -math.sqrt(0.5), 0], atol=1e-6)
+    for k in ("albedo", "normal", "position", "material"):
+        assert np.all(g[k][4] == 0)
+    # 1: from below, the normal faces the ray (two-sided, like the raster G-buffer)
+    assert np.allclose(g["normal"][1, :3], [0, -1, 0], atol=1e-6) and g["position"][1, 3] == 1
+    # 2, 3: zero and NaN directions are "not traced": all zeros
+    for k in GBUFFER_KEYS:
+        assert np.all(g[k][2:4] == 0)
+
+
+def test_tmin_skips_the_starting_surface(device):
+    scene, _ = textured_plane_scene(np.full((2, 2, 3), 0.5, np.float32))
+    rt = RayTracer(scene, device=device)
+    o = np.array([[1.0, 0.0, -1.0]], np.float32)  # on the plane
+    assert rt.trace(o, [[0, -1, 0]])["position"][0, 3] == 0
+    assert rt.trace(o, [[0, -1, 0]], tmin=0.0)["position"][0, 3] == 0  # t = 0 is never a hit
+    assert rt.trace(o + [[0, 1e-5, 0]], [[0, -1, 0]], tmin=0.0)["position"][0, 3] == 1
+
+
+def _mixed_scene():
+    """A textured ground, a reflective box and a smooth glass sphere."""
+    rng = np.random.default_rng(4)
+    yy, xx = np.mgrid[0:64, 0:64] / 64.0
+    img = np.stack([0.5 + 0.4 * np.sin(2 * np.pi * xx), 0.5 + 0.4 * np.cos(2 * np.pi * yy),
+                    np.full_like(xx, 0.3)], -1).astype(np.float32)  # smooth: filtering barely matters
+    ground_p = np.array([[-6, 0, 6], [6, 0, 6], [6, 0, -6], [-6, 0, -6]], np.float32)
+    ground = Mesh("ground", ground_p, None, np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32),
+                  np.array([[0, 1, 2], [0, 2, 3]]), np.zeros(2))
+    b = trimesh.creation.box((1.5, 1.5, 1.5))
+    b.apply_translation((-1.2, 0.75, -0.5))
+    bv = b.vertices[b.faces].reshape(-1, 3)
+    box = Mesh("box", bv, np.repeat(b.face_normals, 3, axis=0), None, np.arange(len(bv)).reshape(-1, 3),
+               np.ones(len(b.faces)))
+    s = trimesh.creation.icosphere(subdivisions=3, radius=0.8)
+    s.apply_translation((1.3, 0.8 + 0.01 * rng.uniform(), 0.4))
+    sphere = Mesh("sphere", s.vertices, s.vertex_normals, None, s.faces, np.full(len(s.faces), 2))
+    mats = [Material("ground", albedo=(0.9, 0.9, 0.9), albedo_texture=texture_from_array(img)),
+            Material("mirror", albedo=(0.25, 0.5, 0.75), reflectivity=0.5, specular=0.5, shininess=64.0),
+            Material("glass", albedo=(0.75, 0.75, 0.75), transparency=0.75, ior=1.5, specular=0.25)]
+    cam = Camera((0.5, 3.0, 6.0), (0.0, 0.5, 0.0), fov_y_deg=50.0)
+    return Scene("mixed", [ground, box, sphere], mats, cam, Sun((0.3, 1.0, 0.4)), Sky(model="constant"))
+
+
+def test_scene_needs_ray_tracing():
+    scene = _mixed_scene()
+    assert scene_needs_ray_tracing(scene)
+    for m in scene.materials:
+        m.reflectivity = m.transparency = 0.0
+    assert not scene_needs_ray_tracing(scene)
+    scene.materials.append(Material("unused mirror", reflectivity=1.0))  # used by no triangle
+    assert not scene_needs_ray_tracing(scene)
+
+
+def test_empty_scene_raises():
+    scene = _mixed_scene()
+
+    class Empty:
+        name = "empty"
+
+        def merged(self):
+            return (np.zeros((0, 3), np.float32),) * 2 + (np.zeros((0, 2), np.float32),
+                                                           np.zeros((0, 3), np.int32), np.zeros(0, np.int32))
+
+    with pytest.raises(SerenityError):
+        RayTracer(Empty(), device="cpu")
+    assert RayTracer(scene, device="cpu").tree.stats.valid_triangles == scene.triangle_count
+
+
+def test_casting_buffer_rays_follow_their_flags():
+    scene = _mixed_scene()
+    rt = RayTracer(scene, device="cpu")
+
+    class Buffer:
+        origins = np.array([[0.0, 0.5, 3.0]] * 3, np.float32)
+        reflect_dirs = np.array([[0.0, 0.0, -1.0]] * 3, np.float32)
+        refract_dirs = np.array([[0.0, -1.0, 0.0]] * 3, np.float32)
+        cone_width = np.zeros(3, np.float32)
+        cone_spread = np.full(3, 1e-3, np.float32)
+        flags = np.array([1, 3, 1 | 4], np.int32)
+
+    out = rt.trace_casting_buffer(Buffer())
+    assert np.all(out["reflection"]["ray_dir"][:, 2] == -1)
+    assert out["refraction"]["position"][1, 3] == 1 and abs(out["refraction"]["position"][1, 1]) < 1e-6
+    assert np.all(out["refraction"]["ray_dir"][[0, 2]] == 0)  # not traced
+
+
+@pytest.mark.gl
+def test_gbuffer_matches_raster_gbuffer_for_primary_rays(device):
+    try:
+        from serenity.raster.context import check_gl_error, get_context
+        from serenity.raster.gbuffer import GBufferPass
+        from serenity.raster.interop import read_texture
+        from serenity.raster.scene_gl import SceneGL
+
+        ctx = get_context()
+    except (SerenityError, ImportError) as e:
+        pytest.skip(f"no headless GL: {e}")
+    scene = _mixed_scene()
+    w, h = 160, 96
+    cam = scene.camera
+    scene_gl = SceneGL(ctx, scene)
+    gpass = GBufferPass(ctx, scene_gl)
+    gpass.resize(w, h)
+    gb = gpass.render(cam.projection_matrix(w / h) @ cam.view_matrix(), cam.position)
+    ref = {k: read_texture(getattr(gb, k), 4).reshape(-1, 4) for k in ("albedo", "normal", "position", "material")}
+    check_gl_error(ctx, "gbuffer")
+
+    o, d = cam.primary_rays(w, h)
+    spread = math.atan(2 * math.tan(math.radians(cam.fov_y_deg) / 2) / h)
+    got = RayTracer(scene, device=device).trace(o, d, 0.0, spread)
+
+    cov_gl = ref["position"][:, 3] > 0
+    cov_rt = got["position"][:, 3] > 0
+    assert cov_gl.mean() > 0.5
+    assert np.mean(cov_gl == cov_rt) > 0.995
+    # compare away from silhouettes and material boundaries (a pixel and its 8 neighbours agree)
+    mat = np.where(cov_gl, ref["albedo"][:, 3], -1).reshape(h, w)
+    pad = np.pad(mat, 1, mode="edge")
+    interior = np.ones((h, w), bool)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            interior &= pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] == mat
+    sel = (interior.reshape(-1) & cov_gl & cov_rt)
+    assert sel.mean() > 0.4
+    dist = np.linalg.norm(got["position"][sel, :3] - o[sel], axis=1)
+    assert np.all(np.abs(got["position"][sel, :3] - ref["position"][sel, :3]).max(axis=1) < 1e-3 * dist + 1e-4)
+    assert np.allclose(got["normal"][sel], ref["normal"][sel], atol=2e-3)
+    assert np.array_equal(got["material"][sel], ref["material"][sel])
+    assert np.array_equal(got["albedo"][sel, 3], ref["albedo"][sel, 3])
+    untextured = sel & (ref["albedo"][:, 3] > 0)
+    textured = sel & (ref["albedo"][:, 3] == 0)
+    assert untextured.any() and textured.any()
+    assert np.allclose(got["albedo"][untextured, :3], ref["albedo"][untextured, :3], atol=1e-3)
+    # GL picks the mip from screen derivatives (with anisotropic filtering); the tracer from the cone
+    err = np.abs(got["albedo"][textured, :3] - ref["albedo"][textured, :3])
+    assert err.mean() < 0.01 and err.max() < 0.05
+
+
+def test_cpu_and_cuda_gbuffers_are_identical(cuda_devices):
+    if not cuda_devices:
+        pytest.skip("no CUDA device")
+    scene = _mixed_scene()
+    o, d = scene.camera.primary_rays(64, 40)
+    ref = RayTracer(scene, device="cpu").trace(o, d, 0.0, 1e-3)
+    for dev in cuda_devices:
+        got = RayTracer(scene, device=dev).trace(o, d, 0.0, 1e-3)
+        for k in GBUFFER_KEYS:
+            assert np.allclose(got[k], ref[k], atol=1e-6), k
