@@ -1,0 +1,621 @@
+"""Single-scattering atmosphere: the sky map, the sun's colour, and a numerical reference (paper §5, §6).
+
+Physics (clear sky, single scattering, no ground reflection, no ozone), as O'Neil's real-time model
+(GPU Gems 2 ch. 16, the paper's refs [8][9]) after Nishita et al. 1993, with the standard Earth
+parameters of Nishita 1993 / Bruneton & Neyret 2008 (all lengths in **km** inside the model):
+
+    ground radius R = 6360, top of the atmosphere R_top = 6420 (60 km thick), observer at h = 0;
+    Rayleigh: β_R = (5.8, 13.5, 33.1)·10⁻³ km⁻¹ (RGB ≈ 680/550/440 nm, ∝ λ⁻⁴), scale height 8 km,
+              phase 3/(16π)·(1 + cos²θ);
+    Mie:      β_M = 21·10⁻³ km⁻¹ scattering, β_M/0.9 extinction, scale height 1.2 km,
+              Cornette–Shanks phase 3/(8π)·(1−g²)(1+cos²θ)/((2+g²)(1+g²−2g cosθ)^{3/2}), g = 0.76.
+
+    L(v) = E₀ ∫₀^T Σ_k β_k ρ_k(h(s)) P_k(v·l) · exp(−τ(O→s) − τ(s→sun)) ds,
+    τ = β_R^ext·∫ρ_R + β_M^ext·∫ρ_M,  ρ_k(h) = exp(−h/H_k),
+
+v the view direction, l the unit direction towards the sun, T the distance to the top of the
+atmosphere. A sample whose sun ray hits the ground is in the Earth's shadow (T_sun = 0). Radiance in
+W·m⁻²·sr⁻¹ per RGB channel (the scene model's units, :mod:`serenity.scene.model`).
+
+**Fast model** (the sky-map kernel): O'Neil's structure — a short march along the view ray, the
+view optical depth accumulated along it, and the optical depth towards the sun from a closed-form
+fit instead of a nested march. O'Neil fitted a polynomial "scale" function to his own scaled
+atmosphere; we use the asymptotic Chapman function (Chapman 1931; the large-x expansion, e.g.
+Schüler 2012, GPU Pro 3 "An approximation to the Chapman grazing-incidence function"), which
+holds for any scale height:
+
+    ∫₀^∞ ρ(h(s)) ds ≈ H·e^{−h/H}·Ch(x, μ),  x = r/H,
+    Ch(x, μ ≥ 0) = √(πx/2)·erfcx(√(x/2)·μ),
+    Ch(x, μ < 0) = 2·e^{x−x_t}·√(πx_t/2) − Ch(x, −μ),  x_t = x√(1−μ²) (through the tangent point),
+
+erfcx(y) = e^{y²}erfc(y) by Abramowitz & Stegun 7.1.26 (y < 2) and an 8-term continued fraction
+(y ≥ 2); the fit is within 0.1% of the exact integral for both scale heights at every altitude
+and angle. The view march takes ``steps`` midpoint samples in x ∈ [0,1] with s = T·x² (denser
+near the observer, where the density is, which matters towards the horizon).
+
+**Reference model** (:func:`sky_radiance_reference`, numpy float64): the same integral with
+uniform midpoint steps (512 along the view ray, 256 along each sun ray by default) and the exact
+geometry for both optical depths. The tests and ``benchmarks/bench_sky.py`` measure the fast model
+against it.
+
+**Sun** (paper §6): :func:`sun_irradiance` = E₀·exp(−τ(ground → sun)) on a surface facing the sun
+(0 once the sun is below the geometric horizon; no refraction), :func:`sun_radiance` = that over the
+disc's solid angle, :func:`make_sun` a :class:`serenity.scene.model.Sun` with it.
+E₀ = ``SOLAR_IRRADIANCE`` = 1100 W·m⁻² per channel (white): the solar constant is 1361 W·m⁻² over
+the whole spectrum; in the renderer's radiometric RGB the sun at zenith then delivers
+≈ (1021, 960, 821) W·m⁻² at the ground — the order of the scene model's default Sun irradiance
+(1000, 960, 900), whose green channel it matches.
+
+**Night**: a sun below the horizon still lights the upper atmosphere (twilight falls off
+smoothly through the Earth's shadow); once it is deep below, the sky tends to
+``NIGHT_SKY_RADIANCE`` ≈ 3·10⁻⁷ W·m⁻²·sr⁻¹, the moonless night sky (airglow + starlight,
+≈ 2·10⁻⁴ cd/m², over 683 lm/W), added above the horizon in both models: dark, finite, positive.
+Directions below the horizon (v.y < 0) get 0 (the observer stands on the ground).
+
+**Sky map** (paper §5, Fig. 3): a ``size``×``size`` (256) paraboloid map of the upper hemisphere,
+(size, size, 3) float32, array row i, column j. Texel centre (u, v) = ((j+½)/size, (i+½)/size),
+(s, t) = (2u − 1, 2v − 1), and with r² = s² + t²:
+
+    direction(s, t) = (2s, 1 − r², 2t) / (1 + r²)      (upper hemisphere; r = 1 is the horizon)
+    (s, t) = (d.x, d.z) / (1 + d.y)                     (inverse)
+
+so column j runs west → east (+x), row i north → south (+z), the zenith is the centre. Texels
+outside the unit circle hold the horizon radiance of their radial direction (clamped (s, t)), so
+bilinear filtering at the horizon never reads undefined texels. The solid angle of a texel is
+4/(1 + r²)²·(2/size)². Lookups (:func:`sample_sky_map`, ``sky.glsl``'s ``sky_map_radiance``)
+clamp d.y to ≥ 0 first (a direction below the horizon gets the horizon) and filter bilinearly
+with clamp-to-edge, as GL_LINEAR + GL_CLAMP_TO_EDGE does.
+
+**Equirect export** (:func:`equirect_sky`, for Mitsuba's ``envmap``): (H, W, 3) float32, row 0 the
+zenith, pixel (i, j) centre u = (j+½)/W, v = (i+½)/H ↔ azimuth φ = 2πu from north (−z) towards
+east (+x), zenith angle θ = πv: d = (sinθ sinφ, cosθ, −sinθ cosφ) — Mitsuba 3's default envmap
+orientation (u = atan2(x, −z)/2π, v = acos(y)/π). Sky only, no sun disc (the reference renders the
+sun as its own emitter); below the horizon 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+# ---------------------------------------------------------------------------------------------
+# constants
+
+EARTH_RADIUS_KM = 6360.0
+ATMOSPHERE_TOP_KM = 6420.0
+OBSERVER_ALTITUDE_KM = 0.0
+RAYLEIGH_SCATTERING = (5.8e-3, 13.5e-3, 33.1e-3)  # km⁻¹ per RGB channel
+RAYLEIGH_SCALE_HEIGHT_KM = 8.0
+MIE_SCATTERING = 21.0e-3  # km⁻¹
+MIE_EXTINCTION = MIE_SCATTERING / 0.9
+MIE_SCALE_HEIGHT_KM = 1.2
+MIE_G = 0.76
+#: top-of-atmosphere solar irradiance per channel, W·m⁻² (see the module docstring)
+SOLAR_IRRADIANCE = (1100.0, 1100.0, 1100.0)
+#: moonless night sky, W·m⁻²·sr⁻¹ per channel (added above the horizon)
+NIGHT_SKY_RADIANCE = (2.5e-7, 3.0e-7, 4.0e-7)
+#: default view-march steps of the fast model (see benchmarks/bench_sky.py for error vs steps)
+DEFAULT_STEPS = 24
+SKY_MAP_SIZE = 256
+SUN_ANGULAR_DIAMETER_DEG = 0.53
+
+_R = wp.constant(EARTH_RADIUS_KM)
+_R_TOP = wp.constant(ATMOSPHERE_TOP_KM)
+_R_OBS = wp.constant(EARTH_RADIUS_KM + OBSERVER_ALTITUDE_KM)
+_H_OBS = wp.constant(OBSERVER_ALTITUDE_KM)
+_BETA_R = wp.constant(wp.vec3(*RAYLEIGH_SCATTERING))
+_H_R = wp.constant(RAYLEIGH_SCALE_HEIGHT_KM)
+_BETA_M = wp.constant(MIE_SCATTERING)
+_BETA_M_EXT = wp.constant(MIE_EXTINCTION)
+_H_M = wp.constant(MIE_SCALE_HEIGHT_KM)
+_G = wp.constant(MIE_G)
+_E0 = wp.constant(wp.vec3(*SOLAR_IRRADIANCE))
+_NIGHT = wp.constant(wp.vec3(*NIGHT_SKY_RADIANCE))
+_PI = wp.constant(math.pi)
+_INV_SQRT_PI = wp.constant(1.0 / math.sqrt(math.pi))
+_BLOCKED = wp.constant(1.0e9)  # optical depth (km) of a ray that hits the ground
+
+
+# ---------------------------------------------------------------------------------------------
+# funcs
+
+
+@wp.func
+def erfcx_approx(y: float) -> float:
+    """exp(y²)·erfc(y) for y ≥ 0: A&S 7.1.26 below 2, a continued fraction above (rel. err < 2e-5)."""
+    if y < 2.0:
+        t = 1.0 / (1.0 + 0.3275911 * y)
+        return t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))))
+    f = y
+    for k in range(8):
+        f = y + (float(8 - k) * 0.5) / f
+    return _INV_SQRT_PI / f
+
+
+@wp.func
+def chapman_up(x: float, mu: float) -> float:
+    """Chapman function Ch(x, μ) for μ ≥ 0 (asymptotic form, x = r/H ≫ 1)."""
+    return wp.sqrt(0.5 * _PI * x) * erfcx_approx(wp.sqrt(0.5 * x) * mu)
+
+
+@wp.func
+def eval_optical_depth(r: float, h: float, mu: float, scale_height: float) -> float:
+    """∫ρ ds (km) from radius r (altitude h) along cos-zenith μ to infinity; _BLOCKED if it hits the ground."""
+    if mu >= 0.0:
+        return scale_height * wp.exp(-h / scale_height) * chapman_up(r / scale_height, mu)
+    # through the tangent point: r_t = r·sqrt(1 − μ²), h_t = r_t − R computed without cancellation
+    s2 = wp.max(1.0 - mu * mu, 0.0)
+    rt = r * wp.sqrt(s2)
+    ht = (h * (2.0 * _R + h) - r * r * mu * mu) / (rt + _R)
+    if ht < 0.0:
+        return _BLOCKED
+    down = 2.0 * scale_height * wp.exp(-ht / scale_height) * wp.sqrt(0.5 * _PI * rt / scale_height)
+    return down - scale_height * wp.exp(-h / scale_height) * chapman_up(r / scale_height, -mu)
+
+
+@wp.func
+def eval_extinction(tau_r: float, tau_m: float) -> wp.vec3:
+    """exp(−β_R·τ_R − β_M^ext·τ_M) per channel."""
+    m = _BETA_M_EXT * tau_m
+    return wp.vec3(wp.exp(-_BETA_R[0] * tau_r - m), wp.exp(-_BETA_R[1] * tau_r - m), wp.exp(-_BETA_R[2] * tau_r - m))
+
+
+@wp.func
+def phase_rayleigh(c: float) -> float:
+    return 3.0 / (16.0 * _PI) * (1.0 + c * c)
+
+
+@wp.func
+def phase_mie(c: float) -> float:
+    g2 = _G * _G
+    d = wp.max(1.0 + g2 - 2.0 * _G * c, 1.0e-6)
+    return 3.0 / (8.0 * _PI) * (1.0 - g2) * (1.0 + c * c) / ((2.0 + g2) * d * wp.sqrt(d))
+
+
+@wp.func
+def eval_sky(v: wp.vec3, sun: wp.vec3, steps: int) -> wp.vec3:
+    """Fast single-scattering sky radiance (no sun disc) seen from the ground along unit ``v``."""
+    mu = v[1]
+    if mu < 0.0:
+        return wp.vec3(0.0, 0.0, 0.0)
+    r0 = _R_OBS
+    t_end = -r0 * mu + wp.sqrt((_R_TOP - r0) * (_R_TOP + r0) + r0 * r0 * mu * mu)
+    inv_n = 1.0 / float(steps)
+    tau_vr = float(0.0)
+    tau_vm = float(0.0)
+    sum_r = wp.vec3(0.0, 0.0, 0.0)
+    sum_m = wp.vec3(0.0, 0.0, 0.0)
+    for k in range(steps):
+        x = (float(k) + 0.5) * inv_n
+        s = t_end * x * x
+        ds = 2.0 * t_end * x * inv_n
+        # altitude without cancellation: r² − R² = h0(2R + h0) + s² + 2 r0 s μ
+        p = wp.vec3(s * v[0], r0 + s * v[1], s * v[2])
+        r = wp.length(p)
+        h = (_H_OBS * (2.0 * _R + _H_OBS) + s * s + 2.0 * r0 * s * mu) / (r + _R)
+        rho_r = wp.exp(-h / _H_R)
+        rho_m = wp.exp(-h / _H_M)
+        mu_s = wp.dot(p, sun) / r
+        tsr = eval_optical_depth(r, h, mu_s, _H_R)
+        tsm = eval_optical_depth(r, h, mu_s, _H_M)
+        t = eval_extinction(tau_vr + 0.5 * rho_r * ds + tsr, tau_vm + 0.5 * rho_m * ds + tsm)
+        sum_r += t * (rho_r * ds)
+        sum_m += t * (rho_m * ds)
+        tau_vr += rho_r * ds
+        tau_vm += rho_m * ds
+    c = wp.dot(v, sun)
+    rad = wp.cw_mul(_BETA_R, sum_r) * phase_rayleigh(c) + sum_m * (_BETA_M * phase_mie(c))
+    return wp.cw_mul(_E0, rad) + _NIGHT
+
+
+@wp.func
+def eval_paraboloid_direction(u: float, v: float) -> wp.vec3:
+    """Unit direction of sky-map coordinates (u, v) ∈ [0,1]² (outside the disc: its horizon)."""
+    s = 2.0 * u - 1.0
+    t = 2.0 * v - 1.0
+    r2 = s * s + t * t
+    if r2 > 1.0:
+        inv = 1.0 / wp.sqrt(r2)
+        s = s * inv
+        t = t * inv
+        r2 = 1.0
+    k = 1.0 / (1.0 + r2)
+    return wp.vec3(2.0 * s * k, (1.0 - r2) * k, 2.0 * t * k)
+
+
+@wp.func
+def eval_paraboloid_uv(d: wp.vec3) -> wp.vec2:
+    """Sky-map (u, v) of a unit direction; d.y is clamped to ≥ 0 (below the horizon → the horizon)."""
+    y = wp.max(d[1], 0.0)
+    hx = d[0]
+    hz = d[2]
+    n = wp.sqrt(hx * hx + y * y + hz * hz)
+    if n < 1.0e-12:
+        hx = 1.0
+        n = 1.0
+    k = 1.0 / (n + y)
+    return wp.vec2(0.5 * hx * k + 0.5, 0.5 * hz * k + 0.5)
+
+
+@wp.func
+def sample_sky_map(sky_map: wp.array2d(dtype=wp.vec3), d: wp.vec3) -> wp.vec3:
+    """Bilinear, clamp-to-edge lookup of the paraboloid sky map (= GL_LINEAR + GL_CLAMP_TO_EDGE)."""
+    size = sky_map.shape[0]
+    uv = eval_paraboloid_uv(d)
+    fx = uv[0] * float(size) - 0.5
+    fy = uv[1] * float(size) - 0.5
+    x0f = wp.floor(fx)
+    y0f = wp.floor(fy)
+    ax = fx - x0f
+    ay = fy - y0f
+    x0 = wp.clamp(int(x0f), 0, size - 1)
+    x1 = wp.clamp(int(x0f) + 1, 0, size - 1)
+    y0 = wp.clamp(int(y0f), 0, size - 1)
+    y1 = wp.clamp(int(y0f) + 1, 0, size - 1)
+    top = sky_map[y0, x0] * (1.0 - ax) + sky_map[y0, x1] * ax
+    bot = sky_map[y1, x0] * (1.0 - ax) + sky_map[y1, x1] * ax
+    return top * (1.0 - ay) + bot * ay
+
+
+# ---------------------------------------------------------------------------------------------
+# kernels
+
+
+@wp.kernel
+def bake_sky_map_texels(
+    # inputs
+    size: int,
+    sun: wp.vec3,
+    steps: int,
+    # outputs
+    sky_map: wp.array2d(dtype=wp.vec3),
+    offset: int,
+):
+    i = wp.tid() + offset
+    row = i // size
+    col = i - row * size
+    d = eval_paraboloid_direction((float(col) + 0.5) / float(size), (float(row) + 0.5) / float(size))
+    sky_map[row, col] = eval_sky(d, sun, steps)
+
+
+@wp.kernel
+def eval_sky_directions(
+    # inputs
+    directions: wp.array(dtype=wp.vec3),
+    sun: wp.vec3,
+    steps: int,
+    # outputs
+    radiance: wp.array(dtype=wp.vec3),
+    offset: int,
+):
+    i = wp.tid() + offset
+    radiance[i] = eval_sky(wp.normalize(directions[i]), sun, steps)
+
+
+@wp.kernel
+def lookup_sky_map(
+    # inputs
+    sky_map: wp.array2d(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    # outputs
+    radiance: wp.array(dtype=wp.vec3),
+    offset: int,
+):
+    i = wp.tid() + offset
+    radiance[i] = sample_sky_map(sky_map, wp.normalize(directions[i]))
+
+
+# ---------------------------------------------------------------------------------------------
+# host
+
+
+def _unit(v) -> np.ndarray:
+    a = np.asarray(v, np.float64).reshape(3)
+    n = float(np.linalg.norm(a))
+    if not np.isfinite(n) or n < 1e-12:
+        raise ValueError(f"sun direction must be a finite non-zero 3-vector, got {v!r}")
+    return a / n
+
+
+def _launch(kernel, dim, inputs, device):
+    from serenity.kernels.launch import launch
+
+    launch(kernel, dim, inputs, device=device)
+
+
+def sky_radiance(directions, sun_direction, device: str | None = None, steps: int = DEFAULT_STEPS) -> np.ndarray:
+    """(N,3) float32 sky radiance (W·m⁻²·sr⁻¹, no sun disc) along (N,3) directions, fast model."""
+    from serenity.device import resolve_device
+
+    device = resolve_device(device)
+    d = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
+    sun = _unit(sun_direction)
+    dirs = wp.array(d, dtype=wp.vec3, device=device)
+    out = wp.zeros(len(d), dtype=wp.vec3, device=device)
+    _launch(eval_sky_directions, len(d), [dirs, wp.vec3(*sun), int(steps), out], device)
+    return out.numpy()
+
+
+def bake_sky_map_wp(sun_direction, size: int = SKY_MAP_SIZE, device: str | None = None,
+                    steps: int = DEFAULT_STEPS):
+    """The sky map as a Warp ``array2d(vec3)`` (size, size) on ``device`` (no host copy)."""
+    from serenity.device import resolve_device
+
+    device = resolve_device(device)
+    sun = _unit(sun_direction)
+    out = wp.zeros((size, size), dtype=wp.vec3, device=device)
+    _launch(bake_sky_map_texels, size * size, [int(size), wp.vec3(*sun), int(steps), out], device)
+    return out
+
+
+def bake_sky_map(sun_direction, size: int = SKY_MAP_SIZE, device: str | None = None,
+                 steps: int = DEFAULT_STEPS) -> np.ndarray:
+    """(size, size, 3) float32 paraboloid sky map (see the module docstring for the mapping)."""
+    return bake_sky_map_wp(sun_direction, size, device, steps).numpy().reshape(size, size, 3)
+
+
+def sample_sky_map_wp(sky_map: np.ndarray, directions, device: str | None = None) -> np.ndarray:
+    """(N,3) bilinear lookups of a sky map by the Warp function the sky volume uses."""
+    from serenity.device import resolve_device
+
+    device = resolve_device(device)
+    m = np.ascontiguousarray(sky_map, np.float32)
+    d = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
+    out = wp.zeros(len(d), dtype=wp.vec3, device=device)
+    _launch(lookup_sky_map, len(d), [wp.array(m, dtype=wp.vec3, device=device),
+                                     wp.array(d, dtype=wp.vec3, device=device), out], device)
+    return out.numpy()
+
+
+# -- numpy twins of the mapping
+
+
+def paraboloid_direction(u, v) -> np.ndarray:
+    """(..., 3) unit directions of sky-map coordinates u, v (arrays, [0,1]); twin of the Warp func."""
+    s = 2.0 * np.asarray(u, np.float64) - 1.0
+    t = 2.0 * np.asarray(v, np.float64) - 1.0
+    r2 = s * s + t * t
+    inv = np.where(r2 > 1.0, 1.0 / np.sqrt(np.maximum(r2, 1e-300)), 1.0)
+    s, t = s * inv, t * inv
+    r2 = np.minimum(r2, 1.0)
+    k = 1.0 / (1.0 + r2)
+    return np.stack([2.0 * s * k, (1.0 - r2) * k, 2.0 * t * k], axis=-1)
+
+
+def direction_to_paraboloid(d) -> np.ndarray:
+    """(..., 2) sky-map (u, v) of directions (d.y clamped to ≥ 0); twin of the Warp func."""
+    d = np.asarray(d, np.float64)
+    x, y, z = d[..., 0], np.maximum(d[..., 1], 0.0), d[..., 2]
+    n = np.sqrt(x * x + y * y + z * z)
+    bad = n < 1e-12
+    x = np.where(bad, 1.0, x)
+    n = np.where(bad, 1.0, n)
+    k = 1.0 / (n + y)
+    return np.stack([0.5 * x * k + 0.5, 0.5 * z * k + 0.5], axis=-1)
+
+
+def sky_map_directions(size: int = SKY_MAP_SIZE) -> np.ndarray:
+    """(size, size, 3) float64 direction of every sky-map texel centre (outside the disc: horizon)."""
+    c = (np.arange(size) + 0.5) / size
+    return paraboloid_direction(c[None, :], c[:, None])
+
+
+def sky_map_solid_angles(size: int = SKY_MAP_SIZE) -> np.ndarray:
+    """(size, size) float64 solid angle (sr) of each texel inside the unit disc, 0 outside; sums to ≈ 2π."""
+    c = 2.0 * (np.arange(size) + 0.5) / size - 1.0
+    r2 = c[None, :] ** 2 + c[:, None] ** 2
+    return np.where(r2 <= 1.0, 4.0 / (1.0 + r2) ** 2 * (2.0 / size) ** 2, 0.0)
+
+
+def sample_sky_map_np(sky_map: np.ndarray, directions) -> np.ndarray:
+    """(N,3) float64 bilinear clamp-to-edge lookup (twin of :func:`sample_sky_map`)."""
+    m = np.asarray(sky_map, np.float64)
+    size = m.shape[0]
+    uv = direction_to_paraboloid(np.asarray(directions, np.float64).reshape(-1, 3))
+    fx, fy = uv[:, 0] * size - 0.5, uv[:, 1] * size - 0.5
+    x0, y0 = np.floor(fx), np.floor(fy)
+    ax, ay = (fx - x0)[:, None], (fy - y0)[:, None]
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xa, xb = np.clip(x0, 0, size - 1), np.clip(x0 + 1, 0, size - 1)
+    ya, yb = np.clip(y0, 0, size - 1), np.clip(y0 + 1, 0, size - 1)
+    top = m[ya, xa] * (1 - ax) + m[ya, xb] * ax
+    bot = m[yb, xa] * (1 - ax) + m[yb, xb] * ax
+    return top * (1 - ay) + bot * ay
+
+
+def horizontal_irradiance(sky_map: np.ndarray) -> np.ndarray:
+    """(3,) W·m⁻² the sky map delivers to an upward-facing horizontal surface (∫ L cosθ dω)."""
+    size = sky_map.shape[0]
+    w = sky_map_solid_angles(size) * np.maximum(sky_map_directions(size)[..., 1], 0.0)
+    return np.einsum("ij,ijc->c", w, np.asarray(sky_map, np.float64))
+
+
+# -- reference model and the sun (numpy, float64)
+
+_BETA_R_NP = np.array(RAYLEIGH_SCATTERING)
+_E0_NP = np.array(SOLAR_IRRADIANCE)
+_NIGHT_NP = np.array(NIGHT_SKY_RADIANCE)
+
+
+def _altitude(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(r, h) of points p (…,3) in km relative to the Earth's centre at (0, −R, 0) + observer (0, h0, 0)."""
+    r0 = EARTH_RADIUS_KM + OBSERVER_ALTITUDE_KM
+    x, y, z = p[..., 0], p[..., 1], p[..., 2]
+    r2_minus_R2 = (OBSERVER_ALTITUDE_KM * (2 * EARTH_RADIUS_KM + OBSERVER_ALTITUDE_KM)
+                   + x * x + z * z + y * y + 2.0 * r0 * y)
+    r = np.sqrt(EARTH_RADIUS_KM**2 + r2_minus_R2)
+    return r, r2_minus_R2 / (r + EARTH_RADIUS_KM)
+
+
+def _distance_to_top(r: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    return -r * mu + np.sqrt((ATMOSPHERE_TOP_KM - r) * (ATMOSPHERE_TOP_KM + r) + r * r * mu * mu)
+
+
+def _phase_rayleigh_np(c):
+    return 3.0 / (16.0 * math.pi) * (1.0 + c * c)
+
+
+def _phase_mie_np(c):
+    g = MIE_G
+    d = np.maximum(1.0 + g * g - 2.0 * g * c, 1e-6)
+    return 3.0 / (8.0 * math.pi) * (1.0 - g * g) * (1.0 + c * c) / ((2.0 + g * g) * d ** 1.5)
+
+
+def _sun_optical_depths_exact(p: np.ndarray, sun: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(τ_R, τ_M, blocked) along the sun ray from points p (…,3), uniform midpoint steps."""
+    r, h = _altitude(p)
+    centre_up = p + np.array([0.0, EARTH_RADIUS_KM + OBSERVER_ALTITUDE_KM, 0.0])
+    mu = (centre_up @ sun) / r
+    blocked = (mu < 0.0) & (r * r * (1.0 - mu * mu) < EARTH_RADIUS_KM**2)
+    length = _distance_to_top(r, mu)
+    x = (np.arange(steps) + 0.5) / steps
+    q = p[..., None, :] + (length[..., None, None] * x[:, None]) * sun
+    _, hq = _altitude(q)
+    ds = length / steps
+    tau_r = np.exp(-hq / RAYLEIGH_SCALE_HEIGHT_KM).sum(-1) * ds
+    tau_m = np.exp(-hq / MIE_SCALE_HEIGHT_KM).sum(-1) * ds
+    return tau_r, tau_m, blocked
+
+
+def sky_radiance_reference(directions, sun_direction, device: str | None = None, view_steps: int = 512,
+                           sun_steps: int = 256, chunk: int = 16) -> np.ndarray:
+    """(N,3) float32 reference sky radiance: the same physics as :func:`sky_radiance`, integrated
+    numerically (uniform midpoint steps, exact optical depths). numpy float64; ``device`` is
+    accepted for signature parity and ignored. Cost ∝ N·view_steps·sun_steps."""
+    del device
+    d = np.asarray(directions, np.float64).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    sun = _unit(sun_direction)
+    out = np.zeros((len(d), 3))
+    x = (np.arange(view_steps) + 0.5) / view_steps
+    r0 = EARTH_RADIUS_KM + OBSERVER_ALTITUDE_KM
+    for a in range(0, len(d), chunk):
+        v = d[a:a + chunk]
+        up = v[:, 1] >= 0.0
+        t_end = _distance_to_top(np.full(len(v), r0), v[:, 1])
+        ds = t_end / view_steps
+        p = (t_end[:, None, None] * x[None, :, None]) * v[:, None, :]
+        _, h = _altitude(p)
+        rho_r, rho_m = np.exp(-h / RAYLEIGH_SCALE_HEIGHT_KM), np.exp(-h / MIE_SCALE_HEIGHT_KM)
+        tv_r = (np.cumsum(rho_r, axis=1) - 0.5 * rho_r) * ds[:, None]
+        tv_m = (np.cumsum(rho_m, axis=1) - 0.5 * rho_m) * ds[:, None]
+        ts_r, ts_m, blocked = _sun_optical_depths_exact(p, sun, sun_steps)
+        tau = (_BETA_R_NP * (tv_r + ts_r)[..., None]) + (MIE_EXTINCTION * (tv_m + ts_m))[..., None]
+        t = np.where(blocked[..., None], 0.0, np.exp(-tau))
+        s_r = (t * rho_r[..., None]).sum(1) * ds[:, None]
+        s_m = (t * rho_m[..., None]).sum(1) * ds[:, None]
+        c = v @ sun
+        rad = _BETA_R_NP * s_r * _phase_rayleigh_np(c)[:, None] + MIE_SCATTERING * s_m * _phase_mie_np(c)[:, None]
+        out[a:a + chunk] = np.where(up[:, None], _E0_NP * rad + _NIGHT_NP, 0.0)
+    return out.astype(np.float32)
+
+
+def sun_transmittance(sun_direction, steps: int = 4096) -> np.ndarray:
+    """(3,) transmittance from the ground to the top of the atmosphere towards the sun (exact,
+    numerically integrated in float64; 0 below the geometric horizon)."""
+    sun = _unit(sun_direction)
+    if sun[1] < 0.0:
+        return np.zeros(3)
+    tr, tm, _ = _sun_optical_depths_exact(np.zeros((1, 3)), sun, steps)
+    return np.exp(-(_BETA_R_NP * tr[0] + MIE_EXTINCTION * tm[0]))
+
+
+def sun_irradiance(sun_direction) -> np.ndarray:
+    """(3,) float64 W·m⁻² of the sun on a surface facing it at the ground (E₀ × transmittance)."""
+    return _E0_NP * sun_transmittance(sun_direction)
+
+
+def sun_radiance(sun_direction, angular_diameter_deg: float = SUN_ANGULAR_DIAMETER_DEG) -> np.ndarray:
+    """(3,) float64 W·m⁻²·sr⁻¹ of the (uniform) sun disc: :func:`sun_irradiance` / disc solid angle."""
+    omega = 2.0 * math.pi * (1.0 - math.cos(math.radians(angular_diameter_deg) / 2.0))
+    return sun_irradiance(sun_direction) / omega
+
+
+def make_sun(sun_direction, angular_diameter_deg: float = SUN_ANGULAR_DIAMETER_DEG):
+    """A :class:`serenity.scene.model.Sun` towards ``sun_direction`` with the atmosphere's irradiance."""
+    from serenity.scene.model import Sun
+
+    return Sun(direction=_unit(sun_direction), irradiance=sun_irradiance(sun_direction),
+               angular_diameter_deg=angular_diameter_deg)
+
+
+def equirect_directions(width: int, height: int) -> np.ndarray:
+    """(H, W, 3) float64 pixel-centre directions of the Mitsuba envmap layout (module docstring)."""
+    phi = 2.0 * math.pi * (np.arange(width) + 0.5) / width
+    theta = math.pi * (np.arange(height) + 0.5) / height
+    st = np.sin(theta)[:, None]
+    return np.stack([st * np.sin(phi)[None, :], np.broadcast_to(np.cos(theta)[:, None], (height, width)),
+                     -st * np.cos(phi)[None, :]], axis=-1)
+
+
+def equirect_sky(sun_direction, width: int, height: int, device: str | None = None,
+                 steps: int = DEFAULT_STEPS) -> np.ndarray:
+    """(H, W, 3) float32 equirect sky (Mitsuba envmap orientation, no sun disc, 0 below the horizon)."""
+    d = equirect_directions(width, height).reshape(-1, 3)
+    return sky_radiance(d, sun_direction, device=device, steps=steps).reshape(height, width, 3)
+
+
+# ---------------------------------------------------------------------------------------------
+# cache
+
+
+def angle_between_deg(a, b) -> float:
+    a, b = _unit(a), _unit(b)
+    return math.degrees(math.atan2(float(np.linalg.norm(np.cross(a, b))), float(np.dot(a, b))))
+
+
+class SkyMapCache:
+    """Owns the baked sky map; rebakes only when the sun moved more than ``rebuild_angle_deg``.
+
+    ``get(sun_direction)`` returns the current Warp map and whether it was rebaked; ``version``
+    counts bakes (consumers such as the sky volume compare it to know their data is stale).
+    ``sky_map`` is the (size, size, 3) numpy copy (for GL upload), ``sun_direction`` the direction
+    it was baked for.
+    """
+
+    def __init__(self, size: int = SKY_MAP_SIZE, rebuild_angle_deg: float = 0.5, device: str | None = None,
+                 steps: int = DEFAULT_STEPS):
+        from serenity.device import resolve_device
+
+        if size < 2:
+            raise ValueError(f"sky map size must be >= 2, got {size}")
+        if not rebuild_angle_deg >= 0.0:
+            raise ValueError(f"rebuild_angle_deg must be >= 0, got {rebuild_angle_deg}")
+        self.size = int(size)
+        self.rebuild_angle_deg = float(rebuild_angle_deg)
+        self.device = resolve_device(device)
+        self.steps = int(steps)
+        self.version = 0
+        self.sun_direction: np.ndarray | None = None
+        self.sky_map_wp = None
+        self._host: np.ndarray | None = None
+
+    def needs_rebuild(self, sun_direction) -> bool:
+        if self.sun_direction is None:
+            return True
+        return angle_between_deg(self.sun_direction, sun_direction) > self.rebuild_angle_deg
+
+    def get(self, sun_direction, force: bool = False):
+        """(Warp sky map, rebaked?) for ``sun_direction``."""
+        if force or self.needs_rebuild(sun_direction):
+            self.sun_direction = _unit(sun_direction)
+            self.sky_map_wp = bake_sky_map_wp(self.sun_direction, self.size, self.device, self.steps)
+            self._host = None
+            self.version += 1
+            return self.sky_map_wp, True
+        return self.sky_map_wp, False
+
+    @property
+    def sky_map(self) -> np.ndarray:
+        if self.sky_map_wp is None:
+            raise RuntimeError("SkyMapCache.get(sun_direction) has not been called yet")
+        if self._host is None:
+            self._host = self.sky_map_wp.numpy().reshape(self.size, self.size, 3)
+        return self._host
+
+
+SkyModel = SkyMapCache
