@@ -1,0 +1,457 @@
+"""The sky lighting irradiance volume (paper §7, Fig. 6–9): L2 SH irradiance probes lit by the sky map
+and shadowed by occlusion quads, computed one layer per frame.
+
+Grid: probes at ``grid_origin + (x, y, z)·cell_size`` for x < X, y < Y, z < Z (``resolution`` =
+(X, Y, Z)), fitted to the scene's bounds (centred on them). The cell is cubic,
+``SkyVolumeConfig.cell_size`` metres, or by default chosen from the scene's scale so that the
+bounds hold about ``target_probes`` = 32·16·23 probes (the paper's reference volume);
+``resolution=(X, Y, Z)`` instead fits exactly that many probes to the bounds (per-axis cells).
+A **layer** is one y slice (X·Z probes; the paper's 32×16×23 volume has 16 layers).
+
+Per probe (``integrate_sky_layer``): ``rays_per_probe`` directions ωᵢ over the sphere, a QMC set
+(:mod:`serenity.kernels.sampling`) — Hammersley with a per-probe Cranley–Patterson rotation
+(default) or Owen-scrambled Sobol' with a per-probe seed — mapped equal-area to the sphere (pdf
+1/4π), decorrelated between probes by hashing the probe's index. Each ray from the probe is
+tested against every occlusion quad (two-sided rectangle, ``model.OcclusionQuad``, paper Fig. 6);
+an unoccluded ray gets
+
+    ω.y ≥ 0: the sky map, bilinear in the paraboloid map (``atmosphere.sample_sky_map``);
+    ω.y < 0: the ground, a Lambertian plane of albedo ``ground_albedo`` lit by the sky only:
+             L_g = ρ_g/π·E_sky↓ (E_sky↓ = the map's irradiance on a horizontal surface). The
+             sun's bounce off the ground is left to the light propagation volumes (their RSM
+             carries it); ρ_g = 0 gives a black lower hemisphere, ρ_g = 1 with a constant sky is
+             the white furnace (E = π·L for every normal).
+
+and is projected onto real L2 SH (:mod:`serenity.kernels.sh`): L_k = 4π/N·Σ L(ωᵢ)Y_k(ωᵢ), then
+convolved with the clamped cosine and windowed: E_k = Â_l·w_l·L_k (the **irradiance
+coefficients**, W·m⁻²). A constant sky is supported (``Sky.model == "constant"``: the map holds
+``Sky.radiance``).
+
+Storage (paper §7: "six RGBA textures and one RGB texture"): 27 float32 per probe, coefficient-
+major, flat index f = 3k + c (k the SH index 0..8, c the RGB channel); texture t < 6 holds
+f = 4t..4t+3 in RGBA, texture 6 holds f = 24..26 in RGB. ``textures()`` returns them as 7 numpy
+arrays (Z, Y, X, 4) ×6 + (Z, Y, X, 3), ready for ``texture3d_from_array`` (width X, height Y,
+depth Z).
+
+Lookup (``irradiance``; ``serenity/raster/glsl/sky.glsl``'s ``sky_volume_irradiance`` is the
+same arithmetic):
+    p' = p + normal_offset_m·n;  g = clamp((p' − grid_origin)/cell_size, 0, resolution − 1);
+    texture coordinate (g + ½)/resolution, trilinear (GL_LINEAR, clamp to edge) of the 27
+    coefficients; E(n) = max(0, Σ_k E_k·Y_k(n)) per channel, W·m⁻².
+``normal_offset_m`` = ``normal_offset`` (in cells) × the smallest cell edge: it moves the lookup
+off the surface, away from probes behind it.
+
+Updating: ``update(layers=1)`` — the per-frame path — rebakes the sky map when the sun moved more
+than ``rebuild_angle_deg`` (``atmosphere.SkyMapCache``), which restarts the sweep at layer 0, then
+integrates the next ``layers`` stale layers; it returns whether anything changed. After a sun step
+the volume is fully current after Y calls (Y = layers in the volume). ``rebuild()`` does it all at
+once. Probe results are deterministic (fixed per-probe seeds), so a layer-by-layer sweep equals a
+rebuild bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from serenity.kernels.atmosphere import (
+    SKY_MAP_SIZE,
+    SkyMapCache,
+    horizontal_irradiance,
+    sample_sky_map,
+)
+from serenity.kernels.sampling import (
+    cp_rotation,
+    hammersley_np,
+    hash_u32,
+    sample_sobol_owen,
+    sample_uniform_sphere,
+)
+from serenity.kernels.sh import WINDOWS, eval_sh9, irradiance_scale, sh_basis, vec9
+
+wp.set_module_options({"enable_backward": False})
+
+# ---------------------------------------------------------------------------------------------
+# constants
+
+PAPER_RESOLUTION = (32, 16, 23)
+SEQUENCES = ("hammersley", "sobol-owen")
+COEFFS = 27
+_FOUR_PI = wp.constant(4.0 * math.pi)
+_ONE_MINUS_EPS = wp.constant(0.99999994)
+_PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
+
+
+@dataclass(frozen=True)
+class SkyVolumeConfig:
+    """Settings of the sky lighting irradiance volume (see the module docstring)."""
+
+    rays_per_probe: int = 256
+    """QMC directions per probe over the whole sphere."""
+    cell_size: float | None = None
+    """Probe spacing in metres; None: from the scene's bounds and ``target_probes``."""
+    resolution: tuple[int, int, int] | None = None
+    """(X, Y, Z) probes fitted exactly to the bounds (overrides ``cell_size``), e.g. (32, 16, 23)."""
+    target_probes: int = 32 * 16 * 23
+    """Probe budget the automatic cell size aims at (the paper's volume)."""
+    normal_offset: float = 0.5
+    """Lookup offset along the surface normal, in cells (of the smallest cell edge)."""
+    window: str = "none"
+    """SH window against ringing: "none", "hanning" or "lanczos" (``sh.window_weights``)."""
+    window_size: float = 4.0
+    """Window size W of the Hanning/Lanczos window."""
+    rebuild_angle_deg: float = 0.5
+    """Rebake the sky map (and restart the layer sweep) when the sun moved more than this."""
+    sky_map_size: int = SKY_MAP_SIZE
+    """Texels per side of the paraboloid sky map."""
+    ground_albedo: float = 0.2
+    """Albedo of the ground seen below the horizon (lit by the sky only); 0 = black."""
+    sequence: str = "hammersley"
+    """"hammersley" (Cranley–Patterson rotated per probe) or "sobol-owen" (Owen-scrambled per probe)."""
+    seed: int = 0
+    """Salt of the per-probe decorrelation."""
+    auto_quads: bool = True
+    """Fit occlusion quads from the meshes (``quadfit``) when the scene has none."""
+
+    def __post_init__(self):
+        if not (1 <= self.rays_per_probe <= 1 << 20):
+            raise ValueError(f"rays_per_probe must be in 1..2^20, got {self.rays_per_probe}")
+        if self.cell_size is not None and not self.cell_size > 0:
+            raise ValueError(f"cell_size must be positive, got {self.cell_size}")
+        if self.resolution is not None and (len(self.resolution) != 3 or min(self.resolution) < 1):
+            raise ValueError(f"resolution must be 3 positive ints, got {self.resolution}")
+        if self.window not in WINDOWS:
+            raise ValueError(f"window must be one of {WINDOWS}, got {self.window!r}")
+        if self.sequence not in SEQUENCES:
+            raise ValueError(f"sequence must be one of {SEQUENCES}, got {self.sequence!r}")
+        if not 0.0 <= self.ground_albedo <= 1.0:
+            raise ValueError(f"ground_albedo must be in [0, 1], got {self.ground_albedo}")
+        if not self.normal_offset >= 0.0:
+            raise ValueError(f"normal_offset must be >= 0, got {self.normal_offset}")
+        if self.target_probes < 8:
+            raise ValueError(f"target_probes must be >= 8, got {self.target_probes}")
+
+
+# ---------------------------------------------------------------------------------------------
+# funcs
+
+
+@wp.func
+def intersect_quads(o: wp.vec3, d: wp.vec3, centers: wp.array(dtype=wp.vec3), ups: wp.array(dtype=wp.vec3),
+                    rights: wp.array(dtype=wp.vec3), halves: wp.array(dtype=wp.vec2), count: int) -> bool:
+    """Whether the ray o + t·d (t > 0) hits any two-sided occlusion quad."""
+    for q in range(count):
+        up = ups[q]
+        right = rights[q]
+        n = wp.cross(right, up)
+        denom = wp.dot(d, n)
+        if wp.abs(denom) > 1.0e-12:
+            oc = centers[q] - o
+            t = wp.dot(oc, n) / denom
+            if t > 1.0e-5:
+                h = d * t - oc
+                hw = halves[q]
+                if wp.abs(wp.dot(h, up)) <= hw[0] and wp.abs(wp.dot(h, right)) <= hw[1]:
+                    return True
+    return False
+
+
+# ---------------------------------------------------------------------------------------------
+# kernels
+
+
+@wp.kernel
+def integrate_sky_layer(
+    # inputs
+    origin: wp.vec3,
+    cell: wp.vec3,
+    res_x: int,
+    res_y: int,
+    res_z: int,
+    first_layer: int,
+    centers: wp.array(dtype=wp.vec3),
+    ups: wp.array(dtype=wp.vec3),
+    rights: wp.array(dtype=wp.vec3),
+    halves: wp.array(dtype=wp.vec2),
+    quad_count: int,
+    sky_map: wp.array2d(dtype=wp.vec3),
+    ground: wp.vec3,
+    base_points: wp.array(dtype=wp.vec2),
+    rays: int,
+    sequence: int,
+    salt: wp.uint32,
+    scale: vec9,
+    # outputs
+    coeffs: wp.array2d(dtype=float),
+    offset: int,
+):
+    t = wp.tid() + offset
+    slab = res_x * res_z
+    y = first_layer + t // slab
+    rem = t - (t // slab) * slab
+    z = rem // res_x
+    x = rem - z * res_x
+    probe = (z * res_y + y) * res_x + x
+    p = origin + wp.vec3(float(x) * cell[0], float(y) * cell[1], float(z) * cell[2])
+    seed = hash_u32(wp.uint32(probe) ^ salt)
+    rot = cp_rotation(seed)
+    acc_r = vec9()
+    acc_g = vec9()
+    acc_b = vec9()
+    for k in range(rays):
+        u = wp.vec2()
+        if sequence == 0:
+            u = base_points[k] + rot
+            u = wp.vec2(wp.min(u[0] - wp.floor(u[0]), _ONE_MINUS_EPS), wp.min(u[1] - wp.floor(u[1]), _ONE_MINUS_EPS))
+        else:
+            u = sample_sobol_owen(k, seed)
+        d = sample_uniform_sphere(u)
+        if not intersect_quads(p, d, centers, ups, rights, halves, quad_count):
+            radiance = ground
+            if d[1] >= 0.0:
+                radiance = sample_sky_map(sky_map, d)
+            b = eval_sh9(d)
+            acc_r += b * radiance[0]
+            acc_g += b * radiance[1]
+            acc_b += b * radiance[2]
+    w = _FOUR_PI / float(rays)
+    for k in range(9):
+        s = scale[k] * w
+        coeffs[probe, 3 * k + 0] = acc_r[k] * s
+        coeffs[probe, 3 * k + 1] = acc_g[k] * s
+        coeffs[probe, 3 * k + 2] = acc_b[k] * s
+
+
+# ---------------------------------------------------------------------------------------------
+# host
+
+
+def fit_grid(bounds: np.ndarray, config: SkyVolumeConfig) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
+    """(origin (3,), cell_size (3,), resolution (X, Y, Z)) of the probe grid for scene bounds (2,3)."""
+    lo, hi = np.asarray(bounds, np.float64)
+    extent = np.maximum(hi - lo, 0.0)
+    centre = (lo + hi) / 2
+    if config.resolution is not None:
+        res = np.asarray(config.resolution, np.int64)
+        cell = np.where(res > 1, extent / np.maximum(res - 1, 1), max(float(extent.max()), 1e-3))
+        cell = np.maximum(cell, 1e-6)
+    else:
+        c = config.cell_size
+        if c is None:
+            vol = float(np.prod(np.maximum(extent, 1e-3 * max(float(extent.max()), 1e-3))))
+            c = (vol / config.target_probes) ** (1.0 / 3.0)
+            c = max(c, float(extent.max()) / 255.0, 1e-6)
+        res = np.maximum(np.ceil(extent / c - 1e-9).astype(np.int64) + 1, 1)
+        cell = np.full(3, float(c))
+    origin = centre - (res - 1) * cell / 2
+    return origin, cell, (int(res[0]), int(res[1]), int(res[2]))
+
+
+def quads_arrays(quads) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(centers, ups, rights, halves (Q,2) = (half_up, half_right)) float32 of OcclusionQuads."""
+    if not quads:
+        z = np.zeros((0, 3), np.float32)
+        return z, z, z, np.zeros((0, 2), np.float32)
+    c = np.array([q.center for q in quads], np.float32)
+    u = np.array([q.up for q in quads], np.float32)
+    r = np.array([q.right for q in quads], np.float32)
+    h = np.array([[q.half_up, q.half_right] for q in quads], np.float32)
+    return c, u, r, h
+
+
+def occluded_np(origins, directions, quads) -> np.ndarray:
+    """(N,) bool: rays (N,3)/(N,3) (or one origin (3,)) blocked by any quad (twin of ``intersect_quads``)."""
+    d = np.asarray(directions, np.float64).reshape(-1, 3)
+    o = np.broadcast_to(np.asarray(origins, np.float64), d.shape)
+    hit = np.zeros(len(d), bool)
+    for q in quads:
+        n = np.cross(q.right, q.up)
+        denom = d @ n
+        oc = q.center[None] - o
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (oc @ n) / denom
+        ok = (np.abs(denom) > 1e-12) & (t > 1e-5)
+        h = d * np.where(ok, t, 0.0)[:, None] - oc
+        hit |= ok & (np.abs(h @ q.up) <= q.half_up) & (np.abs(h @ q.right) <= q.half_right)
+    return hit
+
+
+def pack_textures(coeffs: np.ndarray, resolution: tuple[int, int, int]) -> list[np.ndarray]:
+    """(P, 27) coefficients → 6 × (Z, Y, X, 4) + 1 × (Z, Y, X, 3) float32 (coefficient-major packing)."""
+    x, y, z = resolution
+    c = np.asarray(coeffs, np.float32).reshape(z, y, x, COEFFS)
+    return [np.ascontiguousarray(c[..., 4 * t:4 * t + 4]) for t in range(6)] + [np.ascontiguousarray(c[..., 24:27])]
+
+
+def unpack_textures(textures: list[np.ndarray]) -> np.ndarray:
+    """Inverse of :func:`pack_textures`: (Z, Y, X, 27)."""
+    return np.concatenate([np.asarray(t, np.float32) for t in textures], axis=-1)
+
+
+def eval_volume_irradiance(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_offset_m: float,
+                           points, normals) -> np.ndarray:
+    """(N,3) float64 irradiance from (Z, Y, X, 27) coefficients — the shader's arithmetic, on the host."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    res = np.asarray(resolution, np.float64)
+    g = (p + normal_offset_m * n - np.asarray(origin, np.float64)) / np.asarray(cell, np.float64)
+    g = np.clip(g, 0.0, res - 1.0)
+    i0 = np.floor(g).astype(np.int64)
+    a = g - i0
+    ri = np.asarray(resolution, np.int64)
+    i1 = np.minimum(i0 + 1, ri - 1)
+    c = np.asarray(coeffs_zyx, np.float64)
+    out = np.zeros((len(p), COEFFS))
+    for dz in (0, 1):
+        zi = i1[:, 2] if dz else i0[:, 2]
+        wz = a[:, 2] if dz else 1 - a[:, 2]
+        for dy in (0, 1):
+            yi = i1[:, 1] if dy else i0[:, 1]
+            wy = a[:, 1] if dy else 1 - a[:, 1]
+            for dx in (0, 1):
+                xi = i1[:, 0] if dx else i0[:, 0]
+                wx = a[:, 0] if dx else 1 - a[:, 0]
+                out += (wx * wy * wz)[:, None] * c[zi, yi, xi]
+    y = sh_basis(n)
+    e = np.einsum("nk,nkc->nc", y, out.reshape(-1, 9, 3))
+    return np.maximum(e, 0.0)
+
+
+class SkyVolume:
+    """The sky lighting irradiance volume of one scene (see the module docstring).
+
+    Attributes for the shader: ``grid_origin`` (3,) m, ``cell_size`` (3,) m, ``resolution``
+    (X, Y, Z), ``normal_offset_m``; ``textures()`` the 7 arrays. ``sky`` is the
+    :class:`~serenity.kernels.atmosphere.SkyMapCache` (its ``sky_map`` is what the dome samples).
+    """
+
+    def __init__(self, scene, config: SkyVolumeConfig | None = None, device: str | None = None):
+        from serenity.device import resolve_device
+
+        self.scene = scene
+        self.config = cfg = config or SkyVolumeConfig()
+        self.device = resolve_device(device)
+        self.grid_origin, self.cell_size, self.resolution = fit_grid(scene.bounds, cfg)
+        self.normal_offset_m = float(cfg.normal_offset * float(np.min(self.cell_size)))
+        quads = list(scene.occlusion_quads)
+        self.quad_fit = None
+        if not quads and cfg.auto_quads:
+            from serenity.kernels.quadfit import fit_occlusion_quads
+
+            self.quad_fit = fit_occlusion_quads(scene)
+            quads = self.quad_fit.quads
+        self.quads = quads
+        dev = self.device
+        c, u, r, h = quads_arrays(quads)
+        self._quads_wp = (wp.array(c, dtype=wp.vec3, device=dev), wp.array(u, dtype=wp.vec3, device=dev),
+                          wp.array(r, dtype=wp.vec3, device=dev), wp.array(h, dtype=wp.vec2, device=dev))
+        n = cfg.rays_per_probe
+        self._base = wp.array(hammersley_np(n) if cfg.sequence == "hammersley" else np.zeros((n, 2), np.float32),
+                              dtype=wp.vec2, device=dev)
+        self._scale = vec9(*irradiance_scale(cfg.window, cfg.window_size).astype(np.float32).tolist())
+        x, y, z = self.resolution
+        self.probe_count = x * y * z
+        self._coeffs = wp.zeros((self.probe_count, COEFFS), dtype=float, device=dev)
+        self._constant_sky = getattr(scene.sky, "model", "atmosphere") == "constant"
+        self.sky = SkyMapCache(cfg.sky_map_size, cfg.rebuild_angle_deg, device=dev)
+        self._constant_map = None
+        self.ground_radiance = np.zeros(3)
+        self._pending: list[int] = list(range(y))
+        self._sky_version = -1
+        self._host: np.ndarray | None = None
+
+    # -- sky
+
+    def _current_sky_map(self, sun_direction):
+        """(Warp sky map, changed?) — the atmosphere's cached bake, or the constant sky."""
+        cfg = self.config
+        if self._constant_sky:
+            if self._constant_map is None:
+                m = np.broadcast_to(np.asarray(self.scene.sky.radiance, np.float32), (2, 2, 3))
+                self._constant_map = wp.array(np.ascontiguousarray(m), dtype=wp.vec3, device=self.device)
+                self.ground_radiance = cfg.ground_albedo * np.asarray(self.scene.sky.radiance, np.float64)
+                return self._constant_map, True
+            return self._constant_map, False
+        m, rebaked = self.sky.get(sun_direction)
+        if rebaked:
+            self.ground_radiance = cfg.ground_albedo / math.pi * horizontal_irradiance(self.sky.sky_map)
+        return m, rebaked
+
+    def sky_map(self) -> np.ndarray:
+        """(S, S, 3) float32 the sky map the probes sample (constant sky: a 2×2 map)."""
+        if self._constant_sky:
+            return np.broadcast_to(np.asarray(self.scene.sky.radiance, np.float32), (2, 2, 3)).copy()
+        return self.sky.sky_map
+
+    # -- integration
+
+    def _integrate(self, sky_map, first: int, count: int) -> None:
+        from serenity.kernels.launch import launch
+
+        x, y, z = self.resolution
+        cfg = self.config
+        c, u, r, h = self._quads_wp
+        launch(integrate_sky_layer, count * x * z,
+               [wp.vec3(*self.grid_origin.astype(np.float32)), wp.vec3(*self.cell_size.astype(np.float32)),
+                x, y, z, int(first), c, u, r, h, len(self.quads), sky_map,
+                wp.vec3(*self.ground_radiance.astype(np.float32)), self._base, int(cfg.rays_per_probe),
+                SEQUENCES.index(cfg.sequence), wp.uint32(cfg.seed & 0xFFFFFFFF), self._scale, self._coeffs],
+               device=self.device)
+        self._host = None
+
+    def _sun(self, sun_direction):
+        return np.asarray(self.scene.sun.direction if sun_direction is None else sun_direction, np.float64)
+
+    def update(self, layers: int = 1, sun_direction=None) -> bool:
+        """Integrate the next ``layers`` stale layers (restarting the sweep if the sky was rebaked).
+
+        ``sun_direction`` defaults to ``scene.sun.direction``. Returns whether anything changed."""
+        sky_map, changed = self._current_sky_map(self._sun(sun_direction))
+        if changed:
+            self._pending = list(range(self.resolution[1]))
+        if not self._pending or layers <= 0:
+            return False
+        todo = self._pending[:layers]
+        del self._pending[:layers]
+        self._integrate(sky_map, todo[0], len(todo))
+        return True
+
+    def rebuild(self, sun_direction=None) -> None:
+        """Bring every layer up to date now (rebakes the sky map only if the sun moved)."""
+        sky_map, _ = self._current_sky_map(self._sun(sun_direction))
+        self._integrate(sky_map, 0, self.resolution[1])
+        self._pending = []
+
+    @property
+    def pending_layers(self) -> int:
+        """Layers still to integrate before the volume reflects the current sky."""
+        return len(self._pending)
+
+    # -- outputs
+
+    def probe_positions(self) -> np.ndarray:
+        """(P, 3) float64 probe positions, in storage order (z, y, x)."""
+        x, y, z = self.resolution
+        zz, yy, xx = np.meshgrid(np.arange(z), np.arange(y), np.arange(x), indexing="ij")
+        g = np.stack([xx, yy, zz], axis=-1).reshape(-1, 3).astype(np.float64)
+        return self.grid_origin + g * self.cell_size
+
+    def coefficients(self) -> np.ndarray:
+        """(Z, Y, X, 9, 3) float32 irradiance coefficients E_k per channel."""
+        if self._host is None:
+            x, y, z = self.resolution
+            self._host = self._coeffs.numpy().reshape(z, y, x, COEFFS)
+        return self._host.reshape(*self._host.shape[:3], 9, 3)
+
+    def textures(self) -> list[np.ndarray]:
+        """The 7 arrays of the paper's layout: 6 × (Z, Y, X, 4) + (Z, Y, X, 3) float32."""
+        return pack_textures(self.coefficients().reshape(-1, COEFFS), self.resolution)
+
+    def irradiance(self, points, normals) -> np.ndarray:
+        """(N, 3) float64 W·m⁻² at surface points with unit normals, as the shader evaluates it."""
+        c = self.coefficients().reshape(*self.resolution[::-1], COEFFS)
+        return eval_volume_irradiance(c, self.grid_origin, self.cell_size, self.resolution, self.normal_offset_m,
+                                      points, normals)

@@ -1,0 +1,182 @@
+"""Sky irradiance volume: white furnace, quad occlusion, brute-force Monte Carlo, layer sweep == rebuild,
+packing, night/stability, automatic quad fitting."""
+
+import math
+
+import numpy as np
+import pytest
+
+from serenity.kernels import atmosphere as A
+from serenity.kernels import sh as S
+from serenity.kernels.quadfit import fit_occlusion_quads
+from serenity.kernels.skyvolume import (
+    SkyVolume,
+    SkyVolumeConfig,
+    occluded_np,
+    pack_textures,
+    unpack_textures,
+)
+from serenity.scene.model import OcclusionQuad, Sky, direction_from_angles
+from serenity.scene.procedural import build_scene, plane_scene
+
+
+def _fibonacci(n):
+    i = np.arange(n) + 0.5
+    y = 1 - 2 * i / n
+    r = np.sqrt(1 - y * y)
+    phi = math.pi * (1 + 5**0.5) * i
+    return np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1)
+
+
+def _constant_scene(radiance=(1.0, 2.0, 3.0), quads=()):
+    s = plane_scene()
+    s.sky = Sky(radiance=radiance, model="constant")
+    s.occlusion_quads = list(quads)
+    return s
+
+
+def test_white_furnace(device):
+    cfg = SkyVolumeConfig(rays_per_probe=512, resolution=(2, 2, 2), ground_albedo=1.0, auto_quads=False,
+                          normal_offset=0.0)
+    vol = SkyVolume(_constant_scene(), cfg, device=device)
+    vol.rebuild()
+    n = _fibonacci(64)
+    p = np.repeat(vol.probe_positions()[:1], len(n), axis=0)
+    e = vol.irradiance(p, n)
+    assert np.allclose(e, math.pi * np.array([1.0, 2.0, 3.0]), rtol=0.01)
+
+
+def test_quad_over_probe_blocks_its_solid_angle(device):
+    # a 4 m × 6 m quad 2 m above the probe: Ω = 4·asin(ab / sqrt((a² + 4c²)(b² + 4c²)))
+    a, b, c = 4.0, 6.0, 2.0
+    quad = OcclusionQuad((0.0, c, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), a / 2, b / 2)
+    cfg = SkyVolumeConfig(rays_per_probe=4096, resolution=(1, 1, 1), ground_albedo=1.0, normal_offset=0.0)
+    scene = _constant_scene((1.0, 1.0, 1.0), [quad])
+    vol = SkyVolume(scene, cfg, device=device)
+    vol.grid_origin = np.zeros(3)  # the single probe right under the quad's centre
+    vol.rebuild()
+    e0 = vol.coefficients()[0, 0, 0, 0, 0]  # E_00 = π·L_00 = π·Y_00·L·(4π − Ω)
+    omega = 4 * math.asin(a * b / math.sqrt((a * a + 4 * c * c) * (b * b + 4 * c * c)))
+    measured = 4 * math.pi - e0 / (math.pi * S.SH_C0)
+    assert abs(measured - omega) / omega < 0.02
+    # and the irradiance facing up matches the brute-force cosine integral of the same visibility
+    d = _fibonacci(65536)
+    vis = ~occluded_np(np.zeros(3), d, [quad])
+    brute_up = (np.maximum(d[:, 1], 0) * vis).mean() * 4 * math.pi  # the sky around the quad
+    e_up = vol.irradiance(np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]))[0, 0]
+    assert abs(e_up - brute_up) / brute_up < 0.05
+
+
+@pytest.fixture(scope="module")
+def courtyard():
+    return build_scene("courtyard")
+
+
+def test_probes_among_quads_vs_brute_force(device, courtyard):
+    cfg = SkyVolumeConfig(resolution=(32, 16, 23), normal_offset=0.0)  # default rays per probe
+    vol = SkyVolume(courtyard, cfg, device=device)
+    vol.rebuild()
+    pos = vol.probe_positions()
+    inside = (np.abs(pos[:, 0]) < 13) & (np.abs(pos[:, 2]) < 13) & (pos[:, 1] > 0.3) & (pos[:, 1] < 9)
+    rng = np.random.default_rng(5)
+    probes = pos[rng.choice(np.nonzero(inside)[0], 24, replace=False)]
+    sky = vol.sky_map()
+    d = _fibonacci(16384)
+    normals = _fibonacci(26)
+    errs = []
+    for p in probes:
+        vis = ~occluded_np(p, d, vol.quads)
+        rad = np.where((d[:, 1] >= 0)[:, None], A.sample_sky_map_np(sky, d), vol.ground_radiance[None])
+        brute = (np.maximum(normals @ d.T, 0) * vis) @ rad * (4 * math.pi / len(d))
+        ours = vol.irradiance(np.repeat(p[None], len(normals), 0), normals)
+        errs.append(np.abs(ours - brute) / brute)
+    rel = np.concatenate(errs)
+    print(f"quad probes: mean {rel.mean():.2%} worst {rel.max():.2%}")
+    assert rel.mean() <= 0.05
+
+
+def test_layer_sweep_equals_rebuild(device, courtyard):
+    cfg = SkyVolumeConfig(rays_per_probe=32, cell_size=8.0)
+    a = SkyVolume(courtyard, cfg, device=device)
+    b = SkyVolume(courtyard, cfg, device=device)
+    b.rebuild()
+    steps = 0
+    while a.update(layers=1):
+        steps += 1
+    assert steps == a.resolution[1] and a.pending_layers == 0
+    assert not a.update()
+    for ta, tb in zip(a.textures(), b.textures(), strict=True):
+        assert np.array_equal(ta, tb)
+    # a small sun move keeps the volume, a big one restarts the sweep
+    sun = courtyard.sun.direction
+    el, az = math.degrees(math.asin(sun[1])), courtyard.sun.azimuth_deg
+    assert not a.update(sun_direction=direction_from_angles(el + 0.2, az))
+    assert a.update(sun_direction=direction_from_angles(el + 5.0, az))
+    assert a.pending_layers == a.resolution[1] - 1
+
+
+def test_textures_layout(device, courtyard):
+    vol = SkyVolume(courtyard, SkyVolumeConfig(rays_per_probe=16, cell_size=10.0), device=device)
+    vol.rebuild()
+    tex = vol.textures()
+    x, y, z = vol.resolution
+    assert [t.shape for t in tex] == [(z, y, x, 4)] * 6 + [(z, y, x, 3)]
+    assert all(t.dtype == np.float32 for t in tex)
+    c = vol.coefficients()
+    assert np.array_equal(unpack_textures(tex).reshape(z, y, x, 9, 3), c)
+    assert np.array_equal(tex[0][..., 3], c[..., 1, 0])  # f = 3k + c: texture 0 alpha = (k=1, red)
+    assert np.array_equal(pack_textures(c.reshape(-1, 27), vol.resolution)[6], tex[6])
+    assert vol.probe_positions().shape == (x * y * z, 3)
+
+
+@pytest.mark.parametrize("elevation", [0.0, -5.0, -30.0])
+def test_night_and_horizon_are_finite(device, courtyard, elevation):
+    vol = SkyVolume(courtyard, SkyVolumeConfig(rays_per_probe=32, cell_size=10.0), device=device)
+    vol.rebuild(sun_direction=direction_from_angles(elevation, 270.0))
+    c = vol.coefficients()
+    assert np.all(np.isfinite(c))
+    e = vol.irradiance(vol.probe_positions(), np.tile([0.0, 1.0, 0.0], (vol.probe_count, 1)))
+    assert np.all(np.isfinite(e)) and e.min() >= 0
+
+
+def test_probe_inside_a_building_is_dark_above(device, courtyard):
+    cfg = SkyVolumeConfig(rays_per_probe=256, resolution=(1, 1, 1), normal_offset=0.0)
+    vol = SkyVolume(courtyard, cfg, device=device)
+    vol.grid_origin = np.array([0.0, 6.0, -19.0])  # inside the north building (x ±23, y 0..12.3, z -23..-15)
+    vol.rebuild()
+    up = vol.irradiance(vol.grid_origin[None], np.array([[0.0, 1.0, 0.0]]))[0]
+    outside = SkyVolume(courtyard, cfg, device=device)
+    outside.grid_origin = np.array([0.0, 6.0, 0.0])
+    outside.rebuild()
+    up_out = outside.irradiance(outside.grid_origin[None], np.array([[0.0, 1.0, 0.0]]))[0]
+    assert np.all(up < 0.05 * up_out)
+
+
+def test_owen_sequence_agrees(device, courtyard):
+    base = dict(rays_per_probe=256, cell_size=12.0)
+    a = SkyVolume(courtyard, SkyVolumeConfig(**base), device=device)
+    b = SkyVolume(courtyard, SkyVolumeConfig(sequence="sobol-owen", **base), device=device)
+    a.rebuild()
+    b.rebuild()
+    ca, cb = a.coefficients()[..., 0, :], b.coefficients()[..., 0, :]
+    assert np.abs(ca - cb).mean() / np.abs(ca).mean() < 0.05
+
+
+def test_quad_fit_recovers_courtyard_walls(courtyard):
+    fit = fit_occlusion_quads(courtyard)
+    print(fit.summary())
+    assert fit.coverage > 0.8 and 0.5 < fit.fill
+    # visibility from points in the square agrees with the hand-placed quads for most rays
+    d = _fibonacci(4096)
+    pts = [np.array([x, 2.0, z]) for x in (-10.0, 0.0, 10.0) for z in (-10.0, 0.0, 10.0)]
+    agree = np.mean([np.mean(occluded_np(p, d, fit.quads) == occluded_np(p, d, courtyard.occlusion_quads))
+                     for p in pts])
+    print(f"ray agreement with hand-placed quads: {agree:.1%}")
+    assert agree > 0.9
+
+
+def test_volume_fits_quads_when_scene_has_none(device):
+    s = build_scene("thin-wall")
+    s.occlusion_quads = []
+    vol = SkyVolume(s, SkyVolumeConfig(rays_per_probe=16, cell_size=5.0), device=device)
+    assert vol.quad_fit is not None and len(vol.quads) >= 1
