@@ -1,0 +1,76 @@
+// Sky lighting for the deferred passes (paper §5, §7): the paraboloid sky map and the sky irradiance
+// volume. Mirrors serenity/kernels/atmosphere.py (sample_sky_map) and serenity/kernels/skyvolume.py
+// (SkyVolume.irradiance) exactly; tests/raster/test_sky_gl.py checks both.
+//
+// Sky map: 2-D RGB float texture uploaded without a row flip (array row i = texture row i), linear
+// filtering, clamp to edge. (u, v) = ((d.x, d.z) / (1 + d.y) + 1) / 2, d.y clamped to >= 0 first.
+//
+// Sky volume: 7 3-D textures (6 RGBA + 1 RGB), width X, height Y, depth Z, linear filtering, clamp to
+// edge, holding 27 irradiance SH coefficients per probe, flat index f = 3k + c (k = SH index 0..8,
+// c = RGB channel): texture t < 6 holds f = 4t..4t+3, texture 6 holds f = 24..26.
+//   g  = clamp((p + normal_offset * n - origin) / cell, 0, res - 1)     (grid units, probes at integers)
+//   tc = (g + 0.5) / res                                                (trilinear between probes)
+//   E  = max(0, sum_k c_k Y_k(n))                                       (W m^-2 per channel)
+// Y_k: real L2 SH of Ramamoorthi & Hanrahan 2001 in world x, y, z (serenity/kernels/sh.py).
+//
+// Uniforms set by serenity/raster/sky.py SkyTexturesGL.bind(program, first_unit):
+//   sampler2D u_sky_map; sampler3D u_sky_volume[7]; vec3 u_sky_origin; vec3 u_sky_cell;
+//   vec3 u_sky_res; float u_sky_normal_offset;   (sky_irradiance(p, n) uses them)
+#ifndef SERENITY_SKY_GLSL
+#define SERENITY_SKY_GLSL
+
+vec2 sky_paraboloid_uv(vec3 d) {
+    d.y = max(d.y, 0.0);
+    float len = length(d);
+    if (len < 1e-12) { d = vec3(1.0, 0.0, 0.0); len = 1.0; }
+    float k = 1.0 / (len + d.y);
+    return vec2(0.5 * d.x * k + 0.5, 0.5 * d.z * k + 0.5);
+}
+
+vec3 sky_map_radiance(sampler2D sky_map, vec3 dir) {
+    return texture(sky_map, sky_paraboloid_uv(dir)).rgb;
+}
+
+void sky_sh9(vec3 d, out float y[9]) {
+    y[0] = 0.282094791773878;
+    y[1] = 0.488602511902920 * d.y;
+    y[2] = 0.488602511902920 * d.z;
+    y[3] = 0.488602511902920 * d.x;
+    y[4] = 1.092548430592079 * d.x * d.y;
+    y[5] = 1.092548430592079 * d.y * d.z;
+    y[6] = 0.315391565252520 * (3.0 * d.z * d.z - 1.0);
+    y[7] = 1.092548430592079 * d.x * d.z;
+    y[8] = 0.546274215296040 * (d.x * d.x - d.y * d.y);
+}
+
+vec3 sky_volume_irradiance(sampler3D tex[7], vec3 p, vec3 n, vec3 origin, vec3 cell, vec3 res,
+                           float normal_offset) {
+    vec3 g = clamp((p + normal_offset * n - origin) / cell, vec3(0.0), res - 1.0);
+    vec3 tc = (g + 0.5) / res;
+    float f[28];
+    for (int t = 0; t < 6; ++t) {
+        vec4 v = texture(tex[t], tc);
+        f[4 * t + 0] = v.x; f[4 * t + 1] = v.y; f[4 * t + 2] = v.z; f[4 * t + 3] = v.w;
+    }
+    vec3 last = texture(tex[6], tc).rgb;
+    f[24] = last.x; f[25] = last.y; f[26] = last.z; f[27] = 0.0;
+    float y[9];
+    sky_sh9(n, y);
+    vec3 e = vec3(0.0);
+    for (int k = 0; k < 9; ++k) e += y[k] * vec3(f[3 * k], f[3 * k + 1], f[3 * k + 2]);
+    return max(e, vec3(0.0));
+}
+
+uniform sampler2D u_sky_map;
+uniform sampler3D u_sky_volume[7];
+uniform vec3 u_sky_origin;
+uniform vec3 u_sky_cell;
+uniform vec3 u_sky_res;
+uniform float u_sky_normal_offset;
+
+// The volume's irradiance at surface point p with unit normal n, using the uniforms above.
+vec3 sky_irradiance(vec3 p, vec3 n) {
+    return sky_volume_irradiance(u_sky_volume, p, n, u_sky_origin, u_sky_cell, u_sky_res, u_sky_normal_offset);
+}
+
+#endif
