@@ -90,6 +90,14 @@ class RenderConfig:
     traces inline first (the serial schedule, for comparison)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
+    sky_lighting: bool = True
+    """The sky lighting irradiance volume (paper §7): occluded sky light on every surface; the
+    sky dome and the sun's colour from the atmosphere (paper §5, §6) for "atmosphere" skies."""
+    sky_settings: object = None
+    """A ``serenity.kernels.skyvolume.SkyVolumeConfig`` (None: its defaults)."""
+    sky_layers_per_frame: int = 1
+    """Probe layers re-integrated per frame while the sun moves (paper: one); the first frame
+    builds the whole volume."""
     lpv: bool = True
     """Light propagation volumes: one-bounce diffuse + glossy light from the sun's RSM and the
     sky-lit G-buffer (paper §8)."""

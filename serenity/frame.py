@@ -145,8 +145,20 @@ class Renderer:
         self._record(MAIN_LANE, name, t0, time.perf_counter())
 
     def _init_gi(self) -> None:
-        """The volumes: light propagation volumes (paper §8) when enabled."""
+        """The volumes: the sky irradiance volume (paper §7) and the light propagation volumes
+        (paper §8), each when enabled."""
         cfg, ctx = self.config, self.ctx
+        self.sky_volume = None
+        if cfg.sky_lighting:
+            from serenity.kernels.skyvolume import SkyVolume, SkyVolumeConfig
+            from serenity.raster.indirect import IndirectPass
+            from serenity.raster.sky import SkyTexturesGL
+
+            self.sky_volume = SkyVolume(self.scene, cfg.sky_settings or SkyVolumeConfig(), self.device)
+            self.sky_gl = SkyTexturesGL(ctx)
+            self.sky_pass = IndirectPass(ctx, "sky")
+            self._sky_built = False
+            self._sky_map_version = -1
         self.lpv = None
         self._lpv_key = None
         if cfg.lpv:
@@ -162,7 +174,28 @@ class Renderer:
 
     def _sky_irradiance_at(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray | None:
         """Sky irradiance (W/m²) at G-buffer points for the sky-light VPLs; None without a sky volume."""
-        return None
+        if self.sky_volume is None:
+            return None
+        shape = points.shape[:-1]
+        e = self.sky_volume.irradiance(points.reshape(-1, 3), normals.reshape(-1, 3))
+        return np.asarray(e, np.float32).reshape(*shape, 3)
+
+    def _update_sky(self) -> None:
+        """Sky map rebaked when the sun moved (SkyMapCache's angle), then the volume: all layers on
+        the first frame, then ``sky_layers_per_frame`` per frame while stale (paper §7)."""
+        sv = self.sky_volume
+        first = not self._sky_built
+        with self._stage("sky volume build" if first else "sky volume update", gl=False):
+            changed = sv.update(layers=sv.resolution[1] if first else self.config.sky_layers_per_frame)
+            self._sky_built = True
+        if changed:
+            with self._stage("sky upload"):
+                version = getattr(sv.sky, "version", 0)
+                if version != self._sky_map_version:
+                    self.sky_gl.upload_sky_map(sv.sky_map())
+                    self._sky_map_version = version
+                self.sky_gl.upload_volume(sv.textures(), sv.grid_origin, sv.cell_size, sv.resolution,
+                                          sv.normal_offset_m)
 
     def _update_lpv(self, gbuf, sun_irradiance: np.ndarray) -> None:
         """Re-inject and propagate only when the sun, the sky or the camera changed (the RSM and the
@@ -194,7 +227,7 @@ class Renderer:
         self._lpv_key = key
 
     def _sky_version(self) -> np.ndarray:
-        return np.zeros(1)
+        return np.array([self._sky_map_version if self.sky_volume is not None else 0.0])
 
     # ------------------------------------------------------------------------------ ray tracing
 
@@ -225,14 +258,18 @@ class Renderer:
     # ---------------------------------------------------------------------------------- lighting
 
     def _lighting_inputs(self, view_proj: np.ndarray) -> LightingInputs:
+        from serenity.kernels.atmosphere import scene_sun_irradiance
+
         sun, sky, cam = self.scene.sun, self.scene.sky, self.scene.camera
         ambient = np.zeros(3)
         if self.config.ambient == "constant":
             ambient = math.pi * sky.radiance
+        e_sun = scene_sun_irradiance(self.scene)
+        omega = 2 * math.pi * (1 - math.cos(math.radians(sun.angular_diameter_deg) / 2))
         return LightingInputs(
             sun_direction=sun.direction,
-            sun_irradiance=sun.irradiance if sun.is_up else np.zeros(3),
-            sun_radiance=sun.radiance,
+            sun_irradiance=e_sun,
+            sun_radiance=e_sun / omega,
             sun_cos_radius=math.cos(math.radians(sun.angular_diameter_deg) / 2),
             sky_radiance=sky.radiance,
             ambient_irradiance=ambient,
@@ -281,11 +318,17 @@ class Renderer:
         if cfg.ssao.enabled:
             with self._stage("ssao"):
                 ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward)
+        if self.sky_volume is not None:
+            self._update_sky()
         if self.lpv is not None:
             with self._stage("lpv update"):
                 self._update_lpv(gbuf, light.sun_irradiance)
+        sky_gl = self.sky_gl if self.sky_volume is not None else None
         with self._stage("direct lighting"):
-            lit = self.deferred_pass.render(gbuf, shadow, light, ao)
+            lit = self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl)
+        if sky_gl is not None:
+            with self._stage("sky lighting"):
+                self.sky_pass.render(lit.hdr, gbuf, sky_gl.bind, cam.position, ao)
         if self.lpv is not None and self.lpv_gl.count:
             with self._stage("lpv lighting"):
                 self.lpv_pass.render(lit.hdr, gbuf, self.lpv_gl.bind, cam.position, ao)
@@ -302,7 +345,10 @@ class Renderer:
                 osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, scene.bounds, 3,
                                                           cfg.osm_size))
             with self._stage("rt direct lighting"):
-                rt_lit = self.rt_deferred.render(view_rt, osm, light, None, rt_view=view_rt)
+                rt_lit = self.rt_deferred.render(view_rt, osm, light, None, rt_view=view_rt, sky=sky_gl)
+            if sky_gl is not None:
+                with self._stage("rt sky lighting"):
+                    self.sky_pass.render(rt_lit.hdr, view_rt, sky_gl.bind, cam.position, rt_view=view_rt)
             if self.lpv is not None and self.lpv_gl.count:
                 with self._stage("rt lpv lighting"):
                     self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt)

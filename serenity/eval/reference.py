@@ -356,6 +356,20 @@ def _store(path: str, img: np.ndarray) -> None:
 # ------------------------------------------------------------------------------------------- render
 
 
+def with_effective_sun(scene):
+    """A shallow copy of ``scene`` whose sun carries the irradiance our renderer uses
+    (:func:`serenity.kernels.atmosphere.scene_sun_irradiance`: the atmosphere's sun colour for
+    "atmosphere" skies), so both renderers are lit by the same sun."""
+    import copy
+
+    from serenity.kernels.atmosphere import scene_sun_irradiance
+
+    out = copy.copy(scene)
+    out.sun = copy.copy(scene.sun)
+    out.sun.irradiance = scene_sun_irradiance(scene)
+    return out
+
+
 def render_reference(scene, width: int, height: int, spp: int = 64, component: str = "full", seed: int = 0, *,
                      max_depth: int | None = None, sky_envmap=_AUTO, cache: bool = True, progress: bool = True,
                      chunk_spp: int = DEFAULT_CHUNK_SPP, info: dict | None = None) -> np.ndarray:
@@ -370,6 +384,7 @@ def render_reference(scene, width: int, height: int, spp: int = 64, component: s
     cache: read/write ``cache_dir()/<hash>.npy``.
     info: if given, filled with ``cache_paths`` (list) and ``cached`` (True when nothing was rendered).
     """
+    scene = with_effective_sun(scene)
     if info is not None:
         info.setdefault("cache_paths", [])
         info.setdefault("cached", True)

@@ -619,3 +619,16 @@ class SkyMapCache:
 
 
 SkyModel = SkyMapCache
+
+
+def scene_sun_irradiance(scene) -> np.ndarray:
+    """(3,) W·m⁻² the sun delivers in ``scene``: the atmosphere's transmitted irradiance
+    (:func:`sun_irradiance`, the sun's colour by time of day, paper §6) when ``scene.sky.model`` is
+    "atmosphere", else the scene's own ``Sun.irradiance``; zero below the horizon. The renderer and
+    the Mitsuba reference both take the sun from here, so they agree."""
+    sun = scene.sun
+    if not sun.is_up:
+        return np.zeros(3)
+    if getattr(scene.sky, "model", "constant") == "atmosphere":
+        return sun_irradiance(sun.direction)
+    return np.asarray(sun.irradiance, np.float64)

@@ -53,7 +53,7 @@ class DeferredPass:
         self.fbo = self.ctx.framebuffer(color_attachments=[self.hdr, self.direct])
         self.size = (width, height)
 
-    def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None) -> LitImage:
+    def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None) -> LitImage:
         """Light ``gbuffer``. ``rt_view`` (an object with ``eye`` and ``ray_dir`` textures) marks a
         ray-traced G-buffer: each pixel's viewer is its ray origin, misses show the sky along the
         ray, untraced pixels are black, and SSAO is not applied."""
@@ -77,6 +77,9 @@ class DeferredPass:
             if ao is not None and rt_view is None:
                 ao.use(location=5)
                 p["u_ao"].value = 5
+            p["u_use_sky_map"].value = sky is not None
+            if sky is not None:
+                sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
             p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
             self._set(p, "u_sun_dir", light.sun_direction)
             self._set(p, "u_sun_irradiance", light.sun_irradiance)

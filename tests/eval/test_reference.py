@@ -171,7 +171,8 @@ def our_direct(scene):
     from serenity.config import RenderConfig
     from serenity.frame import Renderer
 
-    frame = Renderer(scene, W, H, config=RenderConfig(ambient="none", ray_tracing=False, lpv=False)).render()
+    cfg = RenderConfig(ambient="none", ray_tracing=False, lpv=False, sky_lighting=False)
+    frame = Renderer(scene, W, H, config=cfg).render()
     return frame.hdr, frame.aovs["depth"][..., 0]
 
 

@@ -15,7 +15,9 @@ void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_positi
 
 #if defined FRAGMENT_SHADER
 #include "shadow_sampling.glsl"
+#include "sky.glsl"
 in vec2 v_uv;
+uniform bool u_use_sky_map;         // sky dome from the paraboloid sky map (else the constant sky)
 uniform sampler2D g_albedo;
 uniform sampler2D g_normal;
 uniform sampler2D g_position;
@@ -39,7 +41,8 @@ layout(location = 1) out vec4 o_direct;
 
 vec3 sky(vec3 dir) {
     if (dot(dir, u_sun_dir) >= u_sun_cos_radius && u_sun_dir.y > 0.0) return u_sun_radiance;
-    return dir.y >= 0.0 ? u_sky_radiance : vec3(0.0);
+    if (dir.y < 0.0) return vec3(0.0);
+    return u_use_sky_map ? sky_map_radiance(u_sky_map, dir) : u_sky_radiance;
 }
 
 void main() {
