@@ -28,7 +28,7 @@ import math
 import threading
 import time
 from collections.abc import Iterator
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -190,10 +190,9 @@ class Renderer:
             self._sky_built = True
         if changed:
             with self._stage("sky upload"):
-                version = getattr(sv.sky, "version", 0)
-                if version != self._sky_map_version:
+                if sv.sky.version != self._sky_map_version:
                     self.sky_gl.upload_sky_map(sv.sky_map())
-                    self._sky_map_version = version
+                    self._sky_map_version = sv.sky.version
                 self.sky_gl.upload_volume(sv.textures(), sv.grid_origin, sv.cell_size, sv.resolution,
                                           sv.normal_offset_m)
 
@@ -244,11 +243,11 @@ class Renderer:
         """CPU ray tracing of the reflected and refracted rays (the worker's job)."""
         t0 = time.perf_counter()
         refl = refr = None
-        sel = (rcb.flags & 1) != 0
+        sel = rcb.reflection_rays()
         if sel.any():
             refl = self.tracer.trace(rcb.origins[sel], rcb.reflect_dirs[sel], rcb.cone_width[sel],
                                      rcb.cone_spread[sel])
-        sel = ((rcb.flags & 2) != 0) & np.any(rcb.refract_dirs != 0, axis=1)
+        sel = rcb.refraction_rays()
         if sel.any():
             refr = self.tracer.trace(rcb.origins[sel], rcb.refract_dirs[sel], rcb.cone_width[sel],
                                      rcb.cone_spread[sel])
@@ -265,11 +264,10 @@ class Renderer:
         if self.config.ambient == "constant":
             ambient = math.pi * sky.radiance
         e_sun = scene_sun_irradiance(self.scene)
-        omega = 2 * math.pi * (1 - math.cos(math.radians(sun.angular_diameter_deg) / 2))
         return LightingInputs(
             sun_direction=sun.direction,
             sun_irradiance=e_sun,
-            sun_radiance=e_sun / omega,
+            sun_radiance=e_sun / sun.solid_angle,
             sun_cos_radius=math.cos(math.radians(sun.angular_diameter_deg) / 2),
             sky_radiance=sky.radiance,
             ambient_irradiance=ambient,
@@ -338,7 +336,7 @@ class Renderer:
         if rcb is not None and rcb.count:
             if job is not None:
                 with self._stage("wait for ray tracing", gl=False):
-                    traced = _result(job)
+                    traced = job.result()
             with self._stage("rt g-buffer upload"):
                 view_rt = self.rt_upload.upload(rcb, *traced)
             with self._stage("shadow maps (OSM)"):
@@ -389,10 +387,6 @@ class Renderer:
         pool = getattr(self, "_pool", None)
         if pool is not None:
             pool.shutdown(wait=True)
-
-
-def _result(job: Future):
-    return job.result()
 
 
 def format_timings(timings: dict[str, float], wall_ms: float | None = None) -> str:

@@ -47,6 +47,14 @@ class RayCastingBuffer:
     def count(self) -> int:
         return int(len(self.pixels))
 
+    def reflection_rays(self) -> np.ndarray:
+        """(N,) bool: the rays with a reflected direction to trace."""
+        return (self.flags & TRACE_REFLECTION) != 0
+
+    def refraction_rays(self) -> np.ndarray:
+        """(N,) bool: the rays with a refracted direction to trace (not under total internal reflection)."""
+        return ((self.flags & TRACE_REFRACTION) != 0) & np.any(self.refract_dirs != 0, axis=1)
+
     def mask(self) -> np.ndarray:
         m = np.zeros(self.width * self.height, bool)
         m[self.pixels] = True

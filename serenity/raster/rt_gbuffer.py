@@ -66,18 +66,16 @@ class RTGBufferUpload:
         """Scatter the tracer's per-ray results back to pixels and upload.
 
         ``rcb``: the frame's :class:`~serenity.raster.raycast.RayCastingBuffer`. ``reflection`` /
-        ``refraction``: the ray tracer's outputs for the rays with the reflect / refract flag, in
-        the order of ``rcb.pixels`` restricted to that flag, each with (N, 4) arrays under the
+        ``refraction``: the ray tracer's outputs for ``rcb.reflection_rays()`` /
+        ``rcb.refraction_rays()``, in the order of ``rcb.pixels``, each with (N, 4) arrays under the
         names of ``_NAMES`` (``eye``/``ray_dir`` are filled here from the rays themselves)."""
         w, h = self.size
         for a in self._staging.values():
             a.fill(0.0)
-        for half, res, dirs, flag in ((0, reflection, rcb.reflect_dirs, 1), (1, refraction, rcb.refract_dirs, 2)):
+        for half, res, dirs, sel in ((0, reflection, rcb.reflect_dirs, rcb.reflection_rays()),
+                                     (1, refraction, rcb.refract_dirs, rcb.refraction_rays())):
             if res is None:
                 continue
-            sel = (rcb.flags & flag) != 0
-            if half == 1:
-                sel &= np.any(rcb.refract_dirs != 0, axis=1)
             pix = rcb.pixels[sel]
             rows, cols = np.divmod(pix, w)
             rows = rows + half * h
