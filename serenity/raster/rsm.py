@@ -4,6 +4,10 @@ The sun's orthographic view of the scene's bounding sphere (``ShadowPass``'s sin
 ``size``² texels; each covered texel becomes a VPL at its surface point with normal n and flux
 ρ·E·A (W), A = the texel's area perpendicular to the sun. The sum of all VPL fluxes is therefore
 the sun power the scene's directly lit surfaces reflect diffusely.
+
+ρ of a textured material is the material albedo times the texture's mean: an RSM texel (and the
+LPV cell it lands in) is far coarser than texture detail, and binding a texture per draw made this
+256² pass cost ~115 ms instead of ~1.5 ms on llvmpipe (measured on the courtyard).
 """
 
 from __future__ import annotations
@@ -72,12 +76,8 @@ class RSMPass:
             p["u_texel_area"].value = float(self.texel_area)
             for r in self.scene_gl.ranges:
                 m = self.scene_gl.materials[r.material]
-                p["u_albedo"].value = tuple(float(x) for x in m.albedo)
-                tex = self.scene_gl.textures.get(r.material)
-                p["u_has_texture"].value = tex is not None
-                if tex is not None:
-                    tex.use(location=0)
-                    p["u_albedo_tex"].value = 0
+                albedo = np.asarray(m.albedo, np.float64) * self.scene_gl.mean_texture_albedo.get(r.material, 1.0)
+                p["u_albedo"].value = tuple(float(x) for x in albedo)
                 self.vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
             ctx.disable(moderngl.DEPTH_TEST)
 

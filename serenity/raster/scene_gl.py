@@ -40,9 +40,12 @@ class SceneGL:
         self.ibo = ctx.buffer(faces.astype(np.int32).tobytes())
         self.materials = scene.materials
         self.textures = {}
+        self.mean_texture_albedo = {}
+        """material index → mean linear RGB of its albedo texture (passes coarser than the texture use it)."""
         for i, m in enumerate(scene.materials):
             if m.albedo_texture is not None:
                 t = m.albedo_texture
+                self.mean_texture_albedo[i] = t.mips[0][..., :3].reshape(-1, 3).astype(np.float64).mean(axis=0)
                 self.textures[i] = texture_from_array(ctx, t.mips[0][..., :3], dtype="f2",
                                                       mips=[mm[..., :3] for mm in t.mips])
         self.triangle_count = len(faces)

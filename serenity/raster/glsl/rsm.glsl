@@ -9,15 +9,12 @@
 #if defined VERTEX_SHADER
 in vec3 in_position;
 in vec3 in_normal;
-in vec2 in_uv;
 uniform mat4 u_light_view_proj;
 out vec3 v_world;
 out vec3 v_normal;
-out vec2 v_uv;
 void main() {
     v_world = in_position;
     v_normal = in_normal;
-    v_uv = in_uv;
     gl_Position = u_light_view_proj * vec4(in_position, 1.0);
 }
 #endif
@@ -25,10 +22,7 @@ void main() {
 #if defined FRAGMENT_SHADER
 in vec3 v_world;
 in vec3 v_normal;
-in vec2 v_uv;
-uniform vec3 u_albedo;
-uniform bool u_has_texture;
-uniform sampler2D u_albedo_tex;
+uniform vec3 u_albedo;   // material albedo x its texture's mean (rsm.py)
 uniform vec3 u_sun_dir;
 uniform vec3 u_sun_irradiance;
 uniform float u_texel_area;
@@ -37,7 +31,6 @@ layout(location = 1) out vec4 o_normal;
 layout(location = 2) out vec4 o_position;
 void main() {
     vec3 albedo = u_albedo;
-    if (u_has_texture) albedo *= textureLod(u_albedo_tex, v_uv, 2.0).rgb;
     vec3 n = normalize(v_normal);
     if (dot(n, u_sun_dir) < 0.0) n = -n;
     o_flux = vec4(albedo * u_sun_irradiance * u_texel_area, 1.0);
