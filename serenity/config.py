@@ -102,7 +102,8 @@ class RenderConfig:
     """Light propagation volumes: one-bounce diffuse + glossy light from the sun's RSM and the
     sky-lit G-buffer (paper §8)."""
     lpv_settings: object = None
-    """A ``serenity.kernels.lpv.LPVConfig`` (None: its defaults — 3 cascades of 32³, 8 iterations)."""
+    """A ``serenity.kernels.lpv.LPVConfig`` (None: its defaults — 3 cascades of 16³, 8 iterations, the coarsest
+    extended to cross the scene, far light handed over to the finer cascades)."""
     rsm_size: int = 256
     """Texels per side of the sun's reflective shadow map (one VPL per texel)."""
     sky_vpl_stride: int = 4

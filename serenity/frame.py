@@ -172,6 +172,13 @@ class Renderer:
             self.lpv_gl = LPVTexturesGL(ctx)
             self.lpv_pass = IndirectPass(ctx, "lpv")
 
+    def invalidate_lpv(self) -> None:
+        """Make the next frame re-inject and re-propagate the LPV even if nothing changed (for
+        timing the update, or after editing the scene's geometry in place)."""
+        self._lpv_key = None
+        if self.lpv is not None:
+            self.lpv.invalidate()
+
     def _sky_irradiance_at(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray | None:
         """Sky irradiance (W/m²) at G-buffer points for the sky-light VPLs; None without a sky volume."""
         if self.sky_volume is None:

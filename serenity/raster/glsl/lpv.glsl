@@ -73,8 +73,8 @@ void lpv_texel(int c, ivec3 i, out vec4 sr, out vec4 sg, out vec4 sb) {
     }
 }
 
-// Trilinear with each of the 8 cells also weighted by g = clamp(4 n.(centre - us) + 1, 0, 1):
-// cells whose centre lies over 1/4 cell behind the surface point us (cells) do not light it.
+// Trilinear with each of the 8 cells also weighted by g = clamp(4 n.(centre - us), 0, 1):
+// cells whose centre lies behind the surface point us (cells) do not light it.
 void lpv_fetch_guarded(int c, vec3 u, vec3 us, vec3 n, out vec4 sr, out vec4 sg, out vec4 sb) {
     int res = u_lpv_res[c];
     vec3 p = u - vec3(0.5);
@@ -87,7 +87,7 @@ void lpv_fetch_guarded(int c, vec3 u, vec3 us, vec3 n, out vec4 sr, out vec4 sg,
     for (int k = 0; k < 8; ++k) {
         bool bx = (k & 1) != 0, by = (k & 2) != 0, bz = (k & 4) != 0;
         ivec3 ii = ivec3(bx ? i1.x : i0.x, by ? i1.y : i0.y, bz ? i1.z : i0.z);
-        float g = clamp(4.0 * dot(n, vec3(ii) + vec3(0.5) - us) + 1.0, 0.0, 1.0);
+        float g = clamp(4.0 * dot(n, vec3(ii) + vec3(0.5) - us), 0.0, 1.0);
         float w = (bx ? t.x : 1.0 - t.x) * (by ? t.y : 1.0 - t.y) * (bz ? t.z : 1.0 - t.z) * g;
         vec4 a, b, d;
         lpv_texel(c, ii, a, b, d);
