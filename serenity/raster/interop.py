@@ -31,9 +31,10 @@ def read_depth(tex) -> np.ndarray:
 
 
 def texture_from_array(ctx, arr: np.ndarray, dtype: str = "f4", mips: list[np.ndarray] | None = None,
-                       repeat: bool = True):
+                       repeat: bool = True, anisotropy: float = 8.0):
     """A 2-D texture from (H, W, C) data (top row first). ``mips`` (level 0 first) are written as
-    given, so GL samples exactly the CPU ray tracer's box-filtered chain."""
+    given, so GL samples exactly the CPU ray tracer's box-filtered chain; with mips, trilinear
+    filtering plus ``anisotropy``."""
     a = np.asarray(arr)
     h, w, c = a.shape
     np_dtype = _DTYPES[dtype]
@@ -45,7 +46,7 @@ def texture_from_array(ctx, arr: np.ndarray, dtype: str = "f4", mips: list[np.nd
         import moderngl
 
         tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        tex.anisotropy = 8.0
+        tex.anisotropy = float(anisotropy)
     tex.repeat_x = tex.repeat_y = repeat
     return tex
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from serenity.raster.context import anisotropy
 from serenity.raster.interop import texture_from_array
 
 
@@ -40,6 +41,7 @@ class SceneGL:
         self.ibo = ctx.buffer(faces.astype(np.int32).tobytes())
         self.materials = scene.materials
         self.textures = {}
+        aniso = anisotropy(ctx)
         self.mean_texture_albedo = {}
         """material index → mean linear RGB of its albedo texture (passes coarser than the texture use it)."""
         for i, m in enumerate(scene.materials):
@@ -47,7 +49,7 @@ class SceneGL:
                 t = m.albedo_texture
                 self.mean_texture_albedo[i] = t.mips[0][..., :3].reshape(-1, 3).astype(np.float64).mean(axis=0)
                 self.textures[i] = texture_from_array(ctx, t.mips[0][..., :3], dtype="f2",
-                                                      mips=[mm[..., :3] for mm in t.mips])
+                                                      mips=[mm[..., :3] for mm in t.mips], anisotropy=aniso)
         self.triangle_count = len(faces)
 
     def vao(self, program, with_attributes=("in_position", "in_normal", "in_uv")):
