@@ -104,3 +104,19 @@ def load_program(ctx, name: str, defines: dict | None = None, stages=("VERTEX_SH
 def fullscreen_vao(ctx, program):
     """A VAO with no buffers: fullscreen passes draw one triangle from gl_VertexID."""
     return ctx.vertex_array(program, [])
+
+
+def draw_fullscreen(ctx, vao, rects=None) -> None:
+    """Draw a fullscreen pass, restricted to ``rects`` ((x, y, w, h) in framebuffer pixels, GL
+    origin bottom-left) when given: the ray-traced views light only the rectangles that hold
+    traced pixels (llvmpipe runs a fragment shader's every path for every covered pixel, so an
+    early-out per pixel saves nothing there; a scissor does)."""
+    if rects is None:
+        vao.render(vertices=3)
+        return
+    try:
+        for r in rects:
+            ctx.scissor = tuple(int(v) for v in r)
+            vao.render(vertices=3)
+    finally:
+        ctx.scissor = None

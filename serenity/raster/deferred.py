@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_program
 
 
 @dataclass
@@ -88,7 +88,7 @@ class DeferredPass:
             self._set(p, "u_camera_pos", light.camera_position)
             self._set(p, "u_sky_radiance", light.sky_radiance)
             self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
-            self.vao.render(vertices=3)
+            draw_fullscreen(ctx, self.vao, None if rt_view is None else rt_view.rects)
         return LitImage(self.hdr, self.direct)
 
     def _set_shadow_uniforms(self, p, shadow, light: LightingInputs) -> None:

@@ -9,7 +9,7 @@ The volumes' textures and uniforms are bound by their owners (``SkyTexturesGL.bi
 
 from __future__ import annotations
 
-from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_program
 
 TECHNIQUES = {"sky": 1, "lpv": 2}
 #: texture units 0..5 are the G-buffer, eye and AO; the volume's own textures start here
@@ -58,5 +58,5 @@ class IndirectPass:
                 if name in p:
                     p[name].value = value
             bind(p, FIRST_VOLUME_UNIT)
-            self.vao.render(vertices=3)
+            draw_fullscreen(ctx, self.vao, None if rt_view is None else rt_view.rects)
             ctx.disable(moderngl.BLEND)

@@ -34,6 +34,9 @@ class RTView:
     ray_dir: object
     width: int
     height: int  # of ONE half (the view's height); the textures are 2 * height tall
+    rects: list = None
+    """(x, y, w, h), GL pixels of the stacked target, of each half's traced pixels' bounding box:
+    the only texels written this frame and the only ones the lighting passes draw."""
 
 
 class RTGBufferUpload:
@@ -68,22 +71,31 @@ class RTGBufferUpload:
         ``rcb``: the frame's :class:`~serenity.raster.raycast.RayCastingBuffer`. ``reflection`` /
         ``refraction``: the ray tracer's outputs for ``rcb.reflection_rays()`` /
         ``rcb.refraction_rays()``, in the order of ``rcb.pixels``, each with (N, 4) arrays under the
-        names of ``_NAMES`` (``eye``/``ray_dir`` are filled here from the rays themselves)."""
+        names of ``_NAMES`` (``eye``/``ray_dir`` are filled here from the rays themselves). Only the
+        bounding rectangle of each half's traced pixels is written (``RTView.rects``); texels
+        outside them are stale and nothing reads them (the lighting passes draw the rectangles
+        only, the composite reads traced pixels only)."""
         w, h = self.size
-        for a in self._staging.values():
-            a.fill(0.0)
+        rects = []
         for half, res, dirs, sel in ((0, reflection, rcb.reflect_dirs, rcb.reflection_rays()),
                                      (1, refraction, rcb.refract_dirs, rcb.refraction_rays())):
-            if res is None:
+            if res is None or not sel.any():
                 continue
             pix = rcb.pixels[sel]
             rows, cols = np.divmod(pix, w)
             rows = rows + half * h
+            r0, r1, c0, c1 = int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
+            for n in _NAMES:
+                self._staging[n][r0:r1, c0:c1] = 0.0
             for n in ("albedo", "normal", "position", "material"):
                 self._staging[n][rows, cols] = res[n]
             self._staging["eye"][rows, cols, :3] = rcb.origins[sel]
             self._staging["ray_dir"][rows, cols, :3] = dirs[sel]
-        for n in _NAMES:
-            # GL rows run bottom-up: flip so image row 0 (top) is the texture's last row
-            getattr(self.view, n).write(np.ascontiguousarray(self._staging[n][::-1]).tobytes())
+            # GL rows run bottom-up: image row r is texture row 2h - 1 - r
+            rect = (c0, 2 * h - r1, c1 - c0, r1 - r0)
+            for n in _NAMES:
+                block = np.ascontiguousarray(self._staging[n][r0:r1, c0:c1][::-1])
+                getattr(self.view, n).write(block.tobytes(), viewport=rect)
+            rects.append(rect)
+        self.view.rects = rects
         return self.view
