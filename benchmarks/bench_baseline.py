@@ -7,7 +7,9 @@ every surface, SSAO applied — the classic hack the paper replaces), for ``cour
 The reference (``serenity.eval.reference``, ``component="full"``) is rendered as two halves with
 different seeds (256 spp in all for the courtyard, 1024 for the Cornell box); their average is the
 reference, and mean((a − b)²/4 / (ref² + ε)) — the variance of the average over the same denominator —
-estimates how much of a relMSE figure is the reference's own noise ("ref_noise_rel_mse"). Metrics: relMSE (ε = 1e-2) on
+estimates how much of a relMSE figure is the reference's own noise ("ref_noise_rel_mse"). "rel_mse_downward" is
+relMSE over the pixels whose normal points down (n.y < -0.5: ceilings, overhangs, the undersides the LPV's
+sky-light VPLs are for, paper Fig. 11). Metrics: relMSE (ε = 1e-2) on
 linear HDR (also with the worst 0.1% of pixels left out: "rel_mse_trimmed", charted) and FLIP on the
 tone-mapped images (our exposure, Reinhard, sRGB), over all pixels.
 Our frames use the default ``RenderConfig`` otherwise (ray-traced reflections/refractions where the
@@ -85,14 +87,17 @@ def main(argv=None) -> int:
             frame, ms = our_frame(scene, width, height, args.frames, **cfg)
             m = compare(frame.hdr, ref, exposure=frame.exposure)
             trimmed = rel_mse(frame.hdr, ref, trim=TRIM)
+            down = frame.aovs["normal"][..., 1] < -0.5  # ceilings, overhangs: lit only indirectly (paper Fig. 11)
+            down_err = rel_mse(frame.hdr, ref, mask=down) if down.any() else None
             row = {"scene": name, "config": label, "render_config": cfg, "ms": ms, "rel_mse": m["rel_mse"],
-                   "rel_mse_trimmed": trimmed,
+                   "rel_mse_trimmed": trimmed, "rel_mse_downward": down_err, "downward_pixels": int(down.sum()),
                    "rel_mse_rgb": m["rel_mse_rgb"], "flip": m["flip"], "ref_noise_rel_mse": noise,
                    "ref_spp": 2 * half, "mean_ours": frame.hdr.reshape(-1, 3).mean(0).tolist(),
                    "mean_ref": ref.reshape(-1, 3).mean(0).tolist()}
             results.append(row)
             points.append({"technique": label, "label": f"{label} ({name})", "ms": ms, "error": trimmed})
-            print(f"  {label:<27} {ms:8.1f} ms  relMSE {m['rel_mse']:.4f} (0.1% trimmed {trimmed:.4f})"
+            print(f"  {label:<27} {ms:8.1f} ms  relMSE {m['rel_mse']:.4f} (0.1% trimmed {trimmed:.4f}, "
+                  f"downward-facing px {down_err if down_err is None else round(down_err, 4)})"
                   f"  FLIP {m['flip']:.4f}", flush=True)
         chart = os.path.join(args.chart_dir, f"baseline_{name}.png")
         save_speed_accuracy_chart(points, chart, error_name="relMSE vs full reference (0.1% trimmed)",
