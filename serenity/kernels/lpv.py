@@ -87,7 +87,9 @@ light from sources within N of its (small) cells. Two measures, both on by defau
         Σ_{d>c} (s_c/s_d)²·far_d, trilinear at its cell centres (intensity scales with the cell's
         face area for the same radiance). The finer cascade then holds near light at its own
         resolution plus far light at the coarser ones', with no light counted twice (each far
-        wavefront is beyond the reach of every finer grid it is added to).
+        wavefront is beyond the reach of every finer grid it is added to). Still missing: light
+        from sources outside a finer cascade's box within its reach of the border (the finer grid
+        never had them and their coarse wavefronts are still "near"); the blend band hides the step.
     Measured (Cornell box, indirect only, 160×90, ``benchmarks/bench_lpv.py``; courtyard full
     image vs the full reference): see the README's LPV section — together they took the
     courtyard's FLIP from 0.235 to 0.124 and the Cornell box's trimmed relMSE from 18 to 1.0.
@@ -1208,7 +1210,8 @@ class LightPropagationVolume:
     def propagate(self, iterations: int | None = None, early_stop: float | None = None) -> list[int]:
         """Propagate every fitted cascade that received light; return the iterations run per fitted
         cascade (0 for a skipped one). Restarts from the injected grids each call (so it may be
-        re-run, e.g. with other settings)."""
+        re-run, e.g. with other settings). ``iterations`` overrides the config for every cascade
+        (and turns off ``cross_scene``'s extension)."""
         t0 = time.perf_counter()
         cfg = self.config
         nl = len(self._levels)
