@@ -48,8 +48,8 @@ def chunk_ranges(dim: int, threads: int, min_items: int = MIN_ITEMS_PER_THREAD) 
     return out
 
 
-def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None = None) -> None:
-    """Launch ``kernel`` over ``[0, dim)``; the kernel's trailing ``offset: int`` is appended.
+def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None = None, start: int = 0) -> None:
+    """Launch ``kernel`` over ``[start, start + dim)``; the kernel's trailing ``offset: int`` is appended.
 
     On ``cpu`` the range is split over ``threads`` worker threads (default: all usable CPUs,
     ``SERENITY_THREADS`` overrides) and this call returns when every chunk is done. On CUDA it is a
@@ -60,18 +60,18 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     if dim <= 0:
         return
     if not str(device).startswith("cpu"):
-        wp.launch(kernel, dim=dim, inputs=[*inputs, 0], device=device)
+        wp.launch(kernel, dim=dim, inputs=[*inputs, int(start)], device=device)
         return
     chunks = chunk_ranges(dim, threads or cpu_threads())
     if len(chunks) == 1:
-        wp.launch(kernel, dim=dim, inputs=[*inputs, 0], device=device)
+        wp.launch(kernel, dim=dim, inputs=[*inputs, int(start)], device=device)
         return
     # compile/load the module on this thread first so worker threads never race to build it
     kernel.module.load(wp.get_device(device))
     pool = _executor(len(chunks))
     futures = [
-        pool.submit(wp.launch, kernel, dim=count, inputs=[*inputs, start], device=device)
-        for start, count in chunks
+        pool.submit(wp.launch, kernel, dim=count, inputs=[*inputs, int(start) + first], device=device)
+        for first, count in chunks
     ]
     for f in futures:
         f.result()

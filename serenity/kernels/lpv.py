@@ -1141,10 +1141,15 @@ class LightPropagationVolume:
                    device=self.device, threads=self.threads)
             self._gv_slots_used = 0
 
-    def _level_sums(self, a: wp.array) -> np.ndarray:
-        """Σ of a per-cell array over each config level's cells (float64)."""
-        h = a.numpy().astype(np.float64)
-        return np.array([h[v.cell_base:v.cell_base + v.res**3].sum() for v in self._levels])
+    def _level_sums(self, a: wp.array, levels=None) -> np.ndarray:
+        """Σ of a per-cell array over each config level's cells (float64; 0 for levels not in
+        ``levels`` when given — the early-stop test sums only the cascades still iterating)."""
+        h = a.numpy()  # a view on the CPU; one copy from CUDA
+        out = np.zeros(len(self._levels))
+        for k, v in enumerate(self._levels):
+            if levels is None or k in levels:
+                out[k] = np.sum(h[v.cell_base:v.cell_base + v.res**3], dtype=np.float64)
+        return out
 
     # -- stages --------------------------------------------------------------------------------
 
@@ -1255,17 +1260,20 @@ class LightPropagationVolume:
             src = self._inj if k == 0 else bufs[(k - 1) % 2]
             dst = bufs[k % 2]
             self._level_on.assign(on)
-            # cells past the last cascade still on need no threads (skipped cascades are the coarse ones)
-            dim = max(self._levels[lv].cell_base + self._levels[lv].res ** 3 for lv in np.flatnonzero(on))
+            # threads only for the cells of the cascades still iterating (the coarsest may run on alone)
+            active = [self._levels[lv] for lv in np.flatnonzero(on)]
+            lo = min(v.cell_base for v in active)
+            dim = max(v.cell_base + v.res**3 for v in active) - lo
             launch(self._propagate, dim,
                    [src, self._accum, self._trans_pos, self._trans_neg, self._level_table, nl, self._level_on,
                     self._far_from, k + 1, dst, self._accum, self._far, self._change, self._total], device=dev,
-                   threads=self.threads)
+                   threads=self.threads, start=lo)
             for lv in np.flatnonzero(on):
                 done[lv] += 1
                 last[int(lv)] = dst
             if thresh > 0.0:
-                change, total = self._level_sums(self._change), self._level_sums(self._total)
+                live = set(np.flatnonzero(on).tolist())
+                change, total = self._level_sums(self._change, live), self._level_sums(self._total, live)
                 on = on & ~((change <= thresh * total) | (total <= 0.0))
         if hand_over:
             for c in range(len(self.grids) - 1):
