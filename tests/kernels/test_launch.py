@@ -41,3 +41,16 @@ def test_split_launch_matches_single_launch(device):
     a, b = one.numpy(), many.numpy()
     assert np.array_equal(a, b)
     assert a[0] == 0 and a[26] == 111  # 27 takes 111 steps
+
+
+def test_launch_from_a_start_index_covers_exactly_that_range(device):
+    n, first, count = 5000, 1234, 3000
+    start = wp.array(np.arange(1, n + 1, dtype=np.int32), device=device)
+    steps = wp.full(n, -1, dtype=wp.int32, device=device)
+    launch(_collatz_steps, count, [start, steps], device=device, threads=3, start=first)
+    got = steps.numpy()
+    assert np.all(got[:first] == -1) and np.all(got[first + count:] == -1)
+    assert np.all(got[first:first + count] >= 0)
+    full = wp.zeros(n, dtype=wp.int32, device=device)
+    launch(_collatz_steps, n, [start, full], device=device, threads=1)
+    np.testing.assert_array_equal(got[first:first + count], full.numpy()[first:first + count])
