@@ -303,18 +303,21 @@ def eval_volume_irradiance(coeffs_zyx: np.ndarray, origin, cell, resolution, nor
     a = g - i0
     ri = np.asarray(resolution, np.int64)
     i1 = np.minimum(i0 + 1, ri - 1)
-    c = np.asarray(coeffs_zyx, np.float64)
-    out = np.zeros((len(p), COEFFS))
+    c = np.asarray(coeffs_zyx).reshape(-1, COEFFS)
+    # the 8 corners at once: flat cell indices (N, 8) and trilinear weights (N, 8), one gather
+    idx = np.empty((len(p), 8), np.int64)
+    wts = np.empty((len(p), 8))
+    k = 0
     for dz in (0, 1):
-        zi = i1[:, 2] if dz else i0[:, 2]
-        wz = a[:, 2] if dz else 1 - a[:, 2]
+        zi, wz = (i1[:, 2], a[:, 2]) if dz else (i0[:, 2], 1 - a[:, 2])
         for dy in (0, 1):
-            yi = i1[:, 1] if dy else i0[:, 1]
-            wy = a[:, 1] if dy else 1 - a[:, 1]
+            yi, wy = (i1[:, 1], a[:, 1]) if dy else (i0[:, 1], 1 - a[:, 1])
             for dx in (0, 1):
-                xi = i1[:, 0] if dx else i0[:, 0]
-                wx = a[:, 0] if dx else 1 - a[:, 0]
-                out += (wx * wy * wz)[:, None] * c[zi, yi, xi]
+                xi, wx = (i1[:, 0], a[:, 0]) if dx else (i0[:, 0], 1 - a[:, 0])
+                idx[:, k] = (zi * ri[1] + yi) * ri[0] + xi
+                wts[:, k] = wx * wy * wz
+                k += 1
+    out = np.einsum("nk,nkc->nc", wts, c[idx], dtype=np.float64)
     y = sh_basis(n)
     e = np.einsum("nk,nkc->nc", y, out.reshape(-1, 9, 3))
     return np.maximum(e, 0.0)
