@@ -85,6 +85,10 @@ class RenderConfig:
     """Wait for the GL queue after each stage so per-stage wall times are exact (costs overlap)."""
     ray_tracing: bool = True
     """Ray-traced reflections and refractions for mirror/metal/glass pixels (paper §9)."""
+    transmissions: int = 4
+    """Transparent interfaces a refraction ray is bent through before the surface it shows (the
+    back face of a glass solid, a second pane, total internal reflection inside a prism); 0 = the
+    paper's single refraction, where glass solids show their own back faces."""
     overlap: bool = True
     """Run the CPU ray tracing in a worker thread while the GL work proceeds (paper §10); False
     traces inline first (the serial schedule, for comparison)."""

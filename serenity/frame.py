@@ -257,7 +257,7 @@ class Renderer:
         sel = rcb.refraction_rays()
         if sel.any():
             refr = self.tracer.trace(rcb.origins[sel], rcb.refract_dirs[sel], rcb.cone_width[sel],
-                                     rcb.cone_spread[sel])
+                                     rcb.cone_spread[sel], transmissions=self.config.transmissions)
         self._record(RT_LANE, "cpu ray tracing", t0, time.perf_counter())
         return refl, refr
 

@@ -17,7 +17,18 @@ surface each one hits is written into a G-buffer with **the same layout as the r
              pass looks up the sky; w = hit distance in m (0 on a miss). A ray with a zero, NaN or
              infinite direction (e.g. no refraction under total internal reflection) gets all
              zeros everywhere: "not traced", as the deferred pass reads ``ray_dir``.
+    eye      (N,4): xyz = where the last segment of the ray starts: the viewer of the hit (the ray's
+             origin, or the last transparent interface it passed).
 Misses write zeros to albedo, normal, position and material.
+
+Transmission (beyond the paper, whose tracer stops at the first hit, §12): with ``transmissions``
+= K > 0 a ray that hits a transparent material (transparency > 0) is bent there instead of
+shaded — refracted by Snell's law with the material's index (entering where the interpolated
+normal faces the ray, leaving where it faces away; air outside), or mirrored under total internal
+reflection — and traced on, up to K times; ``ray_dir``/``eye`` then describe the last segment
+and ``ray_dir.w`` the whole path length. Refraction rays use it so that a glass solid shows what
+lies behind it rather than its own back face; the interfaces after the first (which the GL
+composite shades, Fresnel and tint) are taken as lossless.
 
 Texture filtering: ray cones (Akenine-Möller et al., "Texture Level of Detail Strategies for
 Real-Time Ray Tracing", Ray Tracing Gems ch. 20). The cone's width at the hit is
@@ -50,7 +61,7 @@ wp.set_module_options({"enable_backward": False})
 # constants
 # ----------------------------------------------------------------------------------------------
 
-GBUFFER_KEYS = ("albedo", "normal", "position", "material", "ray_dir")
+GBUFFER_KEYS = ("albedo", "normal", "position", "material", "ray_dir", "eye")
 RAY_EPSILON_REL = 1e-4  # default tmin: this fraction of the scene's bounding-box diagonal (m)
 MIN_COSINE = 1e-4  # |n·d| floor in the LOD formula (grazing hits get the coarsest mips, not inf)
 
@@ -155,6 +166,22 @@ def eval_texture_lod(scene: SceneData, tex: int, p0: wp.vec3, p1: wp.vec3, p2: w
 # ----------------------------------------------------------------------------------------------
 
 
+@wp.func
+def bend(d: wp.vec3, n_out: wp.vec3, ior: float) -> wp.vec3:
+    """Direction after the interface of normal ``n_out`` (pointing out of the medium of index
+    ``ior``, air outside): refracted (Snell), or mirrored under total internal reflection."""
+    nn = n_out
+    eta = 1.0 / ior
+    if wp.dot(n_out, d) > 0.0:  # leaving the medium
+        nn = -n_out
+        eta = ior
+    c = -wp.dot(nn, d)
+    k = 1.0 - eta * eta * (1.0 - c * c)
+    if k < 0.0:
+        return wp.normalize(d + 2.0 * c * nn)
+    return wp.normalize(eta * d + (eta * c - wp.sqrt(k)) * nn)
+
+
 @wp.kernel(enable_backward=False)
 def trace_gbuffer(
     # inputs
@@ -165,12 +192,14 @@ def trace_gbuffer(
     cone_spread: wp.array(dtype=float),
     tmin: float,
     tmax: float,
+    transmissions: int,
     # outputs
     out_albedo: wp.array(dtype=wp.vec4),
     out_normal: wp.array(dtype=wp.vec4),
     out_position: wp.array(dtype=wp.vec4),
     out_material: wp.array(dtype=wp.vec4),
     out_ray: wp.array(dtype=wp.vec4),
+    out_eye: wp.array(dtype=wp.vec4),
     offset: int,
 ):
     i = wp.tid() + offset
@@ -180,47 +209,60 @@ def trace_gbuffer(
     out_position[i] = zero
     out_material[i] = zero
     out_ray[i] = zero
+    out_eye[i] = zero
     d = directions[i]
     len_d = wp.length(d)
     if not (wp.isfinite(len_d) and len_d > 0.0):
         return
     dn = d / len_d
     o = origins[i]
-    prim, t, u, v = trace_kd(scene.tree, o, dn, tmin, tmax, False)
-    if prim < 0:
-        out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], 0.0)
+    travelled = float(0.0)
+    # pass through up to ``transmissions`` transparent interfaces, then shade the hit
+    for k in range(transmissions + 1):
+        prim, t, u, v = trace_kd(scene.tree, o, dn, tmin, tmax, False)
+        out_eye[i] = wp.vec4(o[0], o[1], o[2], 0.0)
+        if prim < 0:
+            out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], 0.0)
+            return
+        f = scene.faces[prim]
+        b0 = 1.0 - u - v
+        p0 = scene.tree.tri_verts[3 * prim]
+        p1 = scene.tree.tri_verts[3 * prim + 1]
+        p2 = scene.tree.tri_verts[3 * prim + 2]
+        p = b0 * p0 + u * p1 + v * p2
+        ng = wp.normalize(wp.cross(p1 - p0, p2 - p0))
+        n = b0 * scene.normals[f[0]] + u * scene.normals[f[1]] + v * scene.normals[f[2]]
+        ln = wp.length(n)
+        if ln > 0.0:
+            n = n / ln
+        else:
+            n = ng
+        m = scene.face_material[prim]
+        prm = scene.mat_params[m]
+        if k < transmissions and prm[2] > 0.0 and prm[3] > 0.0:
+            dn = bend(dn, n, prm[3])
+            o = p
+            travelled += t
+            continue
+        t_all = travelled + t
+        out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], t_all)
+        if wp.dot(n, dn) > 0.0:  # two-sided: face the viewer of this ray, as the G-buffer pass does
+            n = -n
+        albedo = scene.mat_albedo[m]
+        tex = scene.mat_texture[m]
+        if tex >= 0:
+            uv0 = scene.uvs[f[0]]
+            uv1 = scene.uvs[f[1]]
+            uv2 = scene.uvs[f[2]]
+            uv = b0 * uv0 + u * uv1 + v * uv2
+            cone = cone_width[i] + cone_spread[i] * t_all
+            lod = eval_texture_lod(scene, tex, p0, p1, p2, uv0, uv1, uv2, cone, wp.abs(wp.dot(ng, dn)))
+            albedo = wp.cw_mul(albedo, sample_trilinear(scene, tex, uv, lod))
+        out_albedo[i] = wp.vec4(albedo[0], albedo[1], albedo[2], float(m))
+        out_normal[i] = wp.vec4(n[0], n[1], n[2], scene.mat_specular[m])
+        out_position[i] = wp.vec4(p[0], p[1], p[2], 1.0)
+        out_material[i] = prm
         return
-    out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], t)
-    f = scene.faces[prim]
-    b0 = 1.0 - u - v
-    p0 = scene.tree.tri_verts[3 * prim]
-    p1 = scene.tree.tri_verts[3 * prim + 1]
-    p2 = scene.tree.tri_verts[3 * prim + 2]
-    p = b0 * p0 + u * p1 + v * p2
-    ng = wp.normalize(wp.cross(p1 - p0, p2 - p0))
-    n = b0 * scene.normals[f[0]] + u * scene.normals[f[1]] + v * scene.normals[f[2]]
-    ln = wp.length(n)
-    if ln > 0.0:
-        n = n / ln
-    else:
-        n = ng
-    if wp.dot(n, dn) > 0.0:  # two-sided: face the viewer of this ray, as the G-buffer pass does
-        n = -n
-    m = scene.face_material[prim]
-    albedo = scene.mat_albedo[m]
-    tex = scene.mat_texture[m]
-    if tex >= 0:
-        uv0 = scene.uvs[f[0]]
-        uv1 = scene.uvs[f[1]]
-        uv2 = scene.uvs[f[2]]
-        uv = b0 * uv0 + u * uv1 + v * uv2
-        cone = cone_width[i] + cone_spread[i] * t
-        lod = eval_texture_lod(scene, tex, p0, p1, p2, uv0, uv1, uv2, cone, wp.abs(wp.dot(ng, dn)))
-        albedo = wp.cw_mul(albedo, sample_trilinear(scene, tex, uv, lod))
-    out_albedo[i] = wp.vec4(albedo[0], albedo[1], albedo[2], float(m))
-    out_normal[i] = wp.vec4(n[0], n[1], n[2], scene.mat_specular[m])
-    out_position[i] = wp.vec4(p[0], p[1], p[2], 1.0)
-    out_material[i] = scene.mat_params[m]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -318,11 +360,12 @@ class RayTracer:
         self.textures = textures
 
     def trace(self, origins, directions, cone_width=0.0, cone_spread=0.0, *, tmin: float | None = None,
-              tmax: float = np.inf, threads: int | None = None) -> dict[str, np.ndarray]:
+              tmax: float = np.inf, threads: int | None = None, transmissions: int = 0) -> dict[str, np.ndarray]:
         """Trace N rays; returns the G-buffer as a dict of (N,4) float32 arrays (``GBUFFER_KEYS``).
 
         ``tmin`` (m) defaults to ``ray_epsilon`` (hits closer than that are ignored: rays start on
-        the reflecting surface)."""
+        the reflecting surface). ``transmissions``: how many transparent interfaces a ray is bent
+        through (module doc) before the hit it reports; 0 = the first hit, as the paper does."""
         dev = self.device
         o = np.ascontiguousarray(np.asarray(origins, np.float32).reshape(-1, 3))
         d = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
@@ -335,19 +378,21 @@ class RayTracer:
         if n:
             args = [self.data, wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
                     wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev),
-                    float(self.ray_epsilon if tmin is None else tmin), float(tmax), *outs]
+                    float(self.ray_epsilon if tmin is None else tmin), float(tmax), int(max(0, transmissions)), *outs]
             launch(trace_gbuffer, n, args, device=dev, threads=threads)
         return {k: a.numpy().reshape(n, 4) for k, a in zip(GBUFFER_KEYS, outs, strict=True)}
 
-    def trace_casting_buffer(self, buffer, threads: int | None = None) -> dict[str, dict[str, np.ndarray]]:
+    def trace_casting_buffer(self, buffer, threads: int | None = None,
+                             transmissions: int = 0) -> dict[str, dict[str, np.ndarray]]:
         """Both G-buffers of a ray-casting buffer (``raster.raycast.RayCastingBuffer`` or anything
         with its fields): ``{"reflection": {...}, "refraction": {...}}``, each (N,4) per key in the
         buffer's ray order. Rays whose flag is not set (refraction without TRACE_REFRACTION) come
-        back as "not traced" (all zeros)."""
+        back as "not traced" (all zeros). ``transmissions`` applies to the refraction rays."""
         flags = np.asarray(buffer.flags)
         refl = np.where((flags & 1)[:, None] > 0, buffer.reflect_dirs, 0.0)
         refr = np.where((flags & 2)[:, None] > 0, buffer.refract_dirs, 0.0)
         return {
             "reflection": self.trace(buffer.origins, refl, buffer.cone_width, buffer.cone_spread, threads=threads),
-            "refraction": self.trace(buffer.origins, refr, buffer.cone_width, buffer.cone_spread, threads=threads),
+            "refraction": self.trace(buffer.origins, refr, buffer.cone_width, buffer.cone_spread, threads=threads,
+                                     transmissions=transmissions),
         }

@@ -71,14 +71,13 @@ class RTGBufferUpload:
         ``rcb``: the frame's :class:`~serenity.raster.raycast.RayCastingBuffer`. ``reflection`` /
         ``refraction``: the ray tracer's outputs for ``rcb.reflection_rays()`` /
         ``rcb.refraction_rays()``, in the order of ``rcb.pixels``, each with (N, 4) arrays under the
-        names of ``_NAMES`` (``eye``/``ray_dir`` are filled here from the rays themselves). Only the
+        names of ``_NAMES`` (``eye``/``ray_dir``: the last segment of each ray). Only the
         bounding rectangle of each half's traced pixels is written (``RTView.rects``); texels
         outside them are stale and nothing reads them (the lighting passes draw the rectangles
         only, the composite reads traced pixels only)."""
         w, h = self.size
         rects = []
-        for half, res, dirs, sel in ((0, reflection, rcb.reflect_dirs, rcb.reflection_rays()),
-                                     (1, refraction, rcb.refract_dirs, rcb.refraction_rays())):
+        for half, res, sel in ((0, reflection, rcb.reflection_rays()), (1, refraction, rcb.refraction_rays())):
             if res is None or not sel.any():
                 continue
             pix = rcb.pixels[sel]
@@ -89,8 +88,9 @@ class RTGBufferUpload:
                 self._staging[n][r0:r1, c0:c1] = 0.0
             for n in ("albedo", "normal", "position", "material"):
                 self._staging[n][rows, cols] = res[n]
-            self._staging["eye"][rows, cols, :3] = rcb.origins[sel]
-            self._staging["ray_dir"][rows, cols, :3] = dirs[sel]
+            # the viewer and direction of the ray's last segment (after any transmissions)
+            self._staging["eye"][rows, cols, :3] = res["eye"][:, :3]
+            self._staging["ray_dir"][rows, cols, :3] = res["ray_dir"][:, :3]
             # GL rows run bottom-up: image row r is texture row 2h - 1 - r
             rect = (c0, 2 * h - r1, c1 - c0, r1 - r0)
             for n in _NAMES:

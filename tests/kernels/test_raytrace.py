@@ -283,3 +283,51 @@ def test_cpu_and_cuda_gbuffers_are_identical(cuda_devices):
         got = RayTracer(scene, device=dev).trace(o, d, 0.0, 1e-3)
         for k in GBUFFER_KEYS:
             assert np.allclose(got[k], ref[k], atol=1e-6), k
+
+
+def _glass_slab_and_wall():
+    """A glass slab 6×2×0.2 m (x in [−3, 3], z in [−0.1, 0.1], ior 1.5, outward normals, one normal
+    per face) and a diffuse wall at z = 2 facing it."""
+    box = trimesh.creation.box(extents=(6.0, 2.0, 0.2))
+    box.unmerge_vertices()
+    nrm = np.repeat(box.face_normals, 3, axis=0).astype(np.float32)
+    slab = Mesh("slab", box.vertices.astype(np.float32), nrm, np.zeros((len(box.vertices), 2), np.float32),
+                box.faces.astype(np.int32), np.zeros(len(box.faces), np.int32))
+    wp_ = np.array([[-5, -5, 2], [5, -5, 2], [5, 5, 2], [-5, 5, 2]], np.float32)
+    wall = Mesh("wall", wp_, np.tile([0, 0, -1.0], (4, 1)).astype(np.float32), np.zeros((4, 2), np.float32),
+                np.array([[0, 2, 1], [0, 3, 2]], np.int32), np.ones(2, np.int32))
+    mats = [Material("glass", albedo=(0.9, 0.9, 0.9), transparency=0.9, ior=1.5), Material("wall", albedo=(0.5,) * 3)]
+    return Scene("slab", [slab, wall], mats, Camera((0, 0, -3), (0, 0, 0)), Sun((0.3, 1, 0.2)))
+
+
+def test_refraction_rays_pass_through_a_glass_solid(device):
+    """A ray refracted into the slab at 30° incidence: with transmissions it leaves through the back
+    face parallel to where it came from (Snell twice) and hits the wall, shifted sideways by the slab;
+    without (the paper's single refraction) it stops on the slab's own back face."""
+    tracer = RayTracer(_glass_slab_and_wall(), device=device)
+    s_in = math.sin(math.radians(30.0))
+    d0 = np.array([s_in, 0.0, math.cos(math.radians(30.0))])
+    st = s_in / 1.5
+    d1 = np.array([[st, 0.0, math.sqrt(1 - st * st)]], np.float32)  # inside the glass
+    o = np.array([[0.0, 0.0, -0.1]], np.float32)
+    first = tracer.trace(o, d1)
+    assert first["position"][0, 2] == pytest.approx(0.1, abs=1e-5) and first["material"][0, 2] == pytest.approx(0.9)
+    through = tracer.trace(o, d1, transmissions=2)
+    x_exit = 0.2 * st / math.sqrt(1 - st * st)
+    x_wall = x_exit + 1.9 * math.tan(math.radians(30.0))
+    np.testing.assert_allclose(through["position"][0, :3], [x_wall, 0.0, 2.0], atol=1e-4)
+    np.testing.assert_allclose(through["ray_dir"][0, :3], d0, atol=1e-5)
+    np.testing.assert_allclose(through["eye"][0, :3], [x_exit, 0.0, 0.1], atol=1e-4)
+    assert through["material"][0, 2] == 0.0  # the wall
+    assert through["ray_dir"][0, 3] == pytest.approx(0.2 / math.sqrt(1 - st * st) + 1.9 / d0[2], rel=1e-4)
+
+
+def test_total_internal_reflection_inside_the_glass(device):
+    """Beyond the critical angle (41.8° for ior 1.5) the ray is mirrored at the back face and, with
+    one transmission, reports the front face it then reaches from inside."""
+    tracer = RayTracer(_glass_slab_and_wall(), device=device)
+    d = np.array([[0.9, 0.0, 0.2]], np.float32)  # 77° from the face normal
+    g = tracer.trace(np.array([[0.0, 0.0, -0.1]], np.float32), d, transmissions=1)
+    assert g["ray_dir"][0, 2] < 0.0
+    assert g["position"][0, 2] == pytest.approx(-0.1, abs=1e-5)
+    assert g["position"][0, 0] == pytest.approx(2 * 0.9, abs=1e-4)
