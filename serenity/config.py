@@ -116,7 +116,18 @@ class RenderConfig:
     def __post_init__(self):
         if not (self.exposure > 0):
             raise SerenityError(f"exposure must be positive, got {self.exposure}")
+        if not (isinstance(self.transmissions, int) and 0 <= self.transmissions <= 16):
+            raise SerenityError(f"transmissions must be an int in 0..16, got {self.transmissions!r}")
         if not (16 <= self.osm_size <= 8192):
             raise SerenityError(f"osm_size must be in 16..8192, got {self.osm_size}")
         if self.ambient not in ("none", "constant"):
             raise SerenityError(f"ambient must be 'none' or 'constant', got {self.ambient!r}")
+        from serenity.kernels.lpv import LPVConfig
+        from serenity.kernels.skyvolume import SkyVolumeConfig
+
+        for name, kind, optional in (("shadow", ShadowConfig, False), ("ssao", SSAOConfig, False),
+                                     ("sky_settings", SkyVolumeConfig, True), ("lpv_settings", LPVConfig, True)):
+            value = getattr(self, name)
+            if not (isinstance(value, kind) or (optional and value is None)):
+                raise SerenityError(f"{name} must be a {kind.__name__}{' or None' if optional else ''}, "
+                                    f"got {value!r} (e.g. ssao=SSAOConfig(enabled=False) to turn SSAO off)")
