@@ -148,8 +148,10 @@ class _Builder:
         uv = np.stack([np.arctan2(d[:, 0], d[:, 2]) / (2 * math.pi) + 0.5, np.arcsin(d[:, 1]) / math.pi + 0.5], 1)
         self.add(mat, np.asarray(center) + d * radius, d, uv, s.faces)
 
-    def prism(self, mat: str, tri_xy, z0: float, z1: float) -> None:
-        """A triangular prism: the triangle ``tri_xy`` (3 × (x, y)) extruded from z0 to z1, flat faces."""
+    def prism(self, mat: str, tri_xy, z0: float, z1: float, skip_sides=()) -> None:
+        """A triangular prism: the triangle ``tri_xy`` (3 × (x, y)) extruded from z0 to z1, flat faces;
+        side k (from corner k to k+1) is left out for k in ``skip_sides`` (a side resting on the
+        floor: coplanar faces would make rays pick one at random)."""
         t = np.asarray(tri_xy, np.float64)
         a = np.array([[p[0], p[1], z0] for p in t])
         b = np.array([[p[0], p[1], z1] for p in t])
@@ -159,6 +161,8 @@ class _Builder:
             f = [0, 1, 2] if np.dot(np.cross(tri[1] - tri[0], tri[2] - tri[0]), n) > 0 else [0, 2, 1]
             self.add(mat, tri, np.tile(n, (3, 1)), tri[:, :2], [f])
         for k in range(3):
+            if k in skip_sides:
+                continue
             q = np.array([a[k], a[(k + 1) % 3], b[(k + 1) % 3], b[k]])
             out = q.mean(axis=0) - centre
             self.quad(mat, q, normal=out)
@@ -498,7 +502,7 @@ def glass_scene() -> Scene:
     b.rect("floor", (0.0, 0.0, 0.0), (10.0, 0.0, 0.0), (0.0, 0.0, -10.0), 0.5)
     b.box("glass", (-2.6, 0.0, -0.25), (-1.0, 1.2, 0.25), skip=("-y",))
     b.sphere("glass", (0.2, 0.8, 0.0), 0.8, subdivisions=3)
-    b.prism("glass", [(1.4, 0.0), (2.8, 0.0), (2.1, 1.2)], -0.6, 0.6)
+    b.prism("glass", [(1.4, 0.0), (2.8, 0.0), (2.1, 1.2)], -0.6, 0.6, skip_sides=(0,))  # rests on the floor
     for x, mat in ((-2.0, "red"), (0.2, "blue"), (2.1, "red")):
         b.box(mat, (x - 0.15, 0.0, -2.2), (x + 0.15, 2.0, -1.9), skip=("-y",))
     camera = Camera(position=(0.0, 1.5, 5.0), target=(0.0, 0.7, 0.0), fov_y_deg=50.0, near=0.05, far=100.0)
