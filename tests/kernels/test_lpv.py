@@ -185,19 +185,23 @@ def test_irradiance_of_a_single_cell_matches_the_formula(device):
     np.testing.assert_allclose(e, expect, rtol=1e-5, atol=1e-7)
 
 
-def _floor_scene(device, blend):
-    cfg = L.LPVConfig(resolution=16, iterations=8, early_stop=0.0, view_distance=24.0, blend_cells=blend,
-                      geometry_volume=False)
+def _lit_floor(device, **kw):
+    """A floor of exitance 50 W/m² (VPLs every 0.25 m at y = 0.01) under 3 cascades of 16³ around a
+    camera at head height; returns the volume."""
+    cfg = L.LPVConfig(resolution=16, early_stop=0.0, view_distance=24.0, geometry_volume=False, **kw)
     v = L.LightPropagationVolume(cfg, device=device)
     bounds = np.array([[-12.0, 0.0, -12.0], [12.0, 6.0, 12.0]])
     v.fit((np.array([0.0, 1.7, 0.0]), np.array([0.0, 0.0, 1.0])), bounds)
     v.clear()
     xs, zs = np.meshgrid(np.arange(-12, 12, 0.25) + 0.125, np.arange(-12, 12, 0.25) + 0.125)
     p = np.stack([xs.ravel(), np.full(xs.size, 0.01), zs.ravel()], 1)
-    flux = np.full((xs.size, 3), 0.0625 * 50.0, np.float32)  # 50 W/m² re-emitted by the floor
-    v.inject(p, np.tile([0.0, 1.0, 0.0], (xs.size, 1)), flux)
+    v.inject(p, np.tile([0.0, 1.0, 0.0], (xs.size, 1)), np.full((xs.size, 3), 0.0625 * 50.0, np.float32))
     v.propagate()
     return v
+
+
+def _floor_scene(device, blend):
+    return _lit_floor(device, iterations=8, blend_cells=blend)
 
 
 def test_cascade_seam_step_is_small(device):
@@ -393,21 +397,6 @@ def test_pixel_areas_sum_to_the_visible_plane():
     assert f[:, 0].sum() == pytest.approx(0.5 * 10.0 * area.sum(), rel=0.01)
     sp, sn, sa = L.gbuffer_surfels(pos, nrm, [0, 0, 0], [0, 0, 1], fov, stride=1)
     assert sa.sum() == pytest.approx(area.sum(), rel=1e-5)
-
-
-def _lit_floor(device, **kw):
-    """A floor of exitance 50 W/m² (VPLs every 0.25 m at y = 0.01) under 3 cascades of 16³ around a
-    camera at head height; returns the volume."""
-    cfg = L.LPVConfig(resolution=16, early_stop=0.0, view_distance=24.0, geometry_volume=False, **kw)
-    v = L.LightPropagationVolume(cfg, device=device)
-    bounds = np.array([[-12.0, 0.0, -12.0], [12.0, 6.0, 12.0]])
-    v.fit((np.array([0.0, 1.7, 0.0]), np.array([0.0, 0.0, 1.0])), bounds)
-    v.clear()
-    xs, zs = np.meshgrid(np.arange(-12, 12, 0.25) + 0.125, np.arange(-12, 12, 0.25) + 0.125)
-    p = np.stack([xs.ravel(), np.full(xs.size, 0.01), zs.ravel()], 1)
-    v.inject(p, np.tile([0.0, 1.0, 0.0], (xs.size, 1)), np.full((xs.size, 3), 0.0625 * 50.0, np.float32))
-    v.propagate()
-    return v
 
 
 def test_hand_over_gives_the_fine_cascade_light_from_beyond_its_reach(device):
