@@ -3,25 +3,12 @@
 
 from __future__ import annotations
 
-from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.context import FullscreenPass
 
 
-class CompositePass:
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.program = load_program(ctx, "composite.glsl")
-        self.vao = fullscreen_vao(ctx, self.program)
-        self.size = None
-
-    def resize(self, width: int, height: int) -> None:
-        if self.size == (width, height):
-            return
-        if self.size is not None:
-            self.fbo.release()
-            self.hdr.release()
-        self.hdr = self.ctx.texture((width, height), 4, dtype="f4")
-        self.fbo = self.ctx.framebuffer(color_attachments=[self.hdr])
-        self.size = (width, height)
+class CompositePass(FullscreenPass):
+    SHADER = "composite.glsl"
+    TARGETS = {"hdr": (4, "f4")}
 
     def render(self, surface, effects, gbuffer, flags, camera_pos):
         """``effects``: the lit ray-traced views, stacked (W, 2H): reflection on top, refraction

@@ -106,6 +106,36 @@ def fullscreen_vao(ctx, program):
     return ctx.vertex_array(program, [])
 
 
+class FullscreenPass:
+    """A fullscreen-triangle program (``SHADER``, which includes ``fullscreen.glsl``) drawing into
+    its own colour targets, named with (components, dtype) in ``TARGETS`` and (re)allocated as
+    attributes of those names, plus ``fbo``, by :meth:`resize`."""
+
+    SHADER: str = ""
+    TARGETS: dict[str, tuple[int, str]] = {}
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.program = load_program(ctx, self.SHADER)
+        self.vao = fullscreen_vao(ctx, self.program)
+        self.size = None
+
+    def resize(self, width: int, height: int) -> None:
+        if self.size == (width, height):
+            return
+        if self.size is not None:
+            self.fbo.release()
+            for name in self.TARGETS:
+                getattr(self, name).release()
+        targets = []
+        for name, (components, dtype) in self.TARGETS.items():
+            tex = self.ctx.texture((width, height), components, dtype=dtype)
+            setattr(self, name, tex)
+            targets.append(tex)
+        self.fbo = self.ctx.framebuffer(color_attachments=targets)
+        self.size = (width, height)
+
+
 def draw_fullscreen(ctx, vao, rects=None) -> None:
     """Draw a fullscreen pass, restricted to ``rects`` ((x, y, w, h) in framebuffer pixels, GL
     origin bottom-left) when given: the ray-traced views light only the rectangles that hold

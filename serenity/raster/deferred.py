@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_program
+from serenity.raster.context import FullscreenPass, draw_fullscreen
 
 
 @dataclass
@@ -34,24 +34,9 @@ class LitImage:
     direct: object  # rgba32f direct-sun component
 
 
-class DeferredPass:
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.program = load_program(ctx, "deferred.glsl")
-        self.vao = fullscreen_vao(ctx, self.program)
-        self.size = None
-
-    def resize(self, width: int, height: int) -> None:
-        if self.size == (width, height):
-            return
-        if self.size is not None:
-            self.fbo.release()
-            self.hdr.release()
-            self.direct.release()
-        self.hdr = self.ctx.texture((width, height), 4, dtype="f4")
-        self.direct = self.ctx.texture((width, height), 4, dtype="f4")
-        self.fbo = self.ctx.framebuffer(color_attachments=[self.hdr, self.direct])
-        self.size = (width, height)
+class DeferredPass(FullscreenPass):
+    SHADER = "deferred.glsl"
+    TARGETS = {"hdr": (4, "f4"), "direct": (4, "f4")}
 
     def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None) -> LitImage:
         """Light ``gbuffer``. ``rt_view`` (an object with ``eye`` and ``ray_dir`` textures) marks a

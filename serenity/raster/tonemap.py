@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.context import FullscreenPass
 from serenity.raster.interop import read_texture
 
 _LUMA = np.array([0.2126, 0.7152, 0.0722], np.float32)
@@ -33,22 +33,9 @@ def reinhard_srgb(hdr: np.ndarray, exposure: float) -> np.ndarray:
     return np.round(linear_to_srgb(reinhard(hdr, exposure)) * 255.0).astype(np.uint8)
 
 
-class TonemapPass:
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.program = load_program(ctx, "tonemap.glsl")
-        self.vao = fullscreen_vao(ctx, self.program)
-        self.size = None
-
-    def resize(self, width: int, height: int) -> None:
-        if self.size == (width, height):
-            return
-        if self.size is not None:
-            self.fbo.release()
-            self.ldr.release()
-        self.ldr = self.ctx.texture((width, height), 4, dtype="f1")
-        self.fbo = self.ctx.framebuffer(color_attachments=[self.ldr])
-        self.size = (width, height)
+class TonemapPass(FullscreenPass):
+    SHADER = "tonemap.glsl"
+    TARGETS = {"ldr": (4, "f1")}
 
     def render(self, hdr_texture, exposure: float):
         with self.ctx.debug_scope("tonemap"):

@@ -1,14 +1,8 @@
 // Separable bilateral blur of the AO: Gaussian in pixels x depth similarity x normal similarity,
 // so occlusion does not bleed across silhouettes. u_axis = (1,0) then (0,1).
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-out vec2 v_uv;
-void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_position(gl_VertexID); }
-#endif
+#include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
-in vec2 v_uv;
 uniform sampler2D u_src;
 uniform sampler2D g_position;
 uniform sampler2D g_normal;

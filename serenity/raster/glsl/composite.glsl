@@ -6,15 +6,9 @@
 //        L = F * L_reflection + (1 - F) * L_surface
 // Drawn as one fullscreen pass over the G-buffer rather than a second forward pass over the
 // reflective meshes: the G-buffer already holds every attribute the forward pass would compute.
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-out vec2 v_uv;
-void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_position(gl_VertexID); }
-#endif
+#include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
-in vec2 v_uv;
 uniform sampler2D u_surface;      // lit main view (HDR)
 uniform sampler2D u_effects;      // lit ray-traced views (HDR), (W, 2H): reflection top, refraction bottom
 uniform sampler2D g_normal;

@@ -6,17 +6,11 @@
 // Radiance of a lit pixel (W m^-2 sr^-1 per channel), E = sun irradiance facing the sun:
 //   L = (albedo/pi + k_s (n+2)/(2 pi) max(0, r.v)^n) * E * max(0, N.L) * visibility + indirect
 // (energy-normalised Phong: its lobe integrates to k_s over the hemisphere at normal incidence).
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-out vec2 v_uv;
-void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_position(gl_VertexID); }
-#endif
+#include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
 #include "shadow_sampling.glsl"
 #include "sky.glsl"
-in vec2 v_uv;
 uniform bool u_use_sky_map;         // sky dome from the paraboloid sky map (else the constant sky)
 uniform sampler2D g_albedo;
 uniform sampler2D g_normal;

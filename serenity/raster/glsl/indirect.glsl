@@ -4,12 +4,7 @@
 //   TECHNIQUE == 2  LPV (paper §8, Fig. 10):   L += albedo/pi * E_lpv(p, n) + k_s * L_glossy(p, r, m)
 // Main view: multiplied by SSAO (indirect light only, paper §3). Ray-traced views (u_rt_view): the
 // viewer is each pixel's ray origin, no SSAO, untraced pixels and misses get nothing.
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-out vec2 v_uv;
-void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_position(gl_VertexID); }
-#endif
+#include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
 #if TECHNIQUE == 1
@@ -20,7 +15,6 @@ void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_positi
 // glossy LPV light only where the specular lobe is strong enough to show it (the march costs
 // glossy_steps x 3 cascades x 3 fetches per pixel; k_s = 0.05 plaster gains < 1 % from it)
 const float GLOSSY_MIN_SPECULAR = 0.1;
-in vec2 v_uv;
 uniform sampler2D g_albedo;
 uniform sampler2D g_normal;
 uniform sampler2D g_position;

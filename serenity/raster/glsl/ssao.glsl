@@ -6,15 +6,9 @@
 // less than `thickness` (the depth buffer has no
 // back faces, so a thin object in front must not block everything behind it).
 // Output: AO in [0, 1] (1 = open). Applied to indirect light only.
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-out vec2 v_uv;
-void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_position(gl_VertexID); }
-#endif
+#include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
-in vec2 v_uv;
 uniform sampler2D g_position;   // world xyz, w = covered
 uniform sampler2D g_normal;     // world normal
 uniform mat4 u_view_proj;

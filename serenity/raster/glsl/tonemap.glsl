@@ -1,15 +1,9 @@
 // Exposure, Reinhard (2002) global operator on luminance, sRGB encoding.
 //   Lw = luminance(exposure * hdr);  Ld = Lw / (1 + Lw);  ldr = srgb(exposure * hdr * Ld / Lw)
 // Scaling the colour by Ld/Lw keeps hue; channels above 1 (saturated highlights) clip.
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-out vec2 v_uv;
-void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_position(gl_VertexID); }
-#endif
+#include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
-in vec2 v_uv;
 uniform sampler2D u_hdr;
 uniform float u_exposure;
 out vec4 o_ldr;
