@@ -498,31 +498,6 @@ def eval_transmittance(b: wp.vec4, axis: int, sign: float) -> float:
 
 
 @wp.func
-def sample_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3) -> wp.vec4:
-    """Trilinear SH at grid coordinate u (cells), cell centres at i + 0.5, clamp to edge (GL_LINEAR)."""
-    p = u - wp.vec3(0.5, 0.5, 0.5)
-    fx = wp.floor(p[0])
-    fy = wp.floor(p[1])
-    fz = wp.floor(p[2])
-    tx = p[0] - fx
-    ty = p[1] - fy
-    tz = p[2] - fz
-    x0 = wp.clamp(int(fx), 0, res - 1)
-    y0 = wp.clamp(int(fy), 0, res - 1)
-    z0 = wp.clamp(int(fz), 0, res - 1)
-    x1 = wp.clamp(int(fx) + 1, 0, res - 1)
-    y1 = wp.clamp(int(fy) + 1, 0, res - 1)
-    z1 = wp.clamp(int(fz) + 1, 0, res - 1)
-    r0 = base + z0 * res * res
-    r1 = base + z1 * res * res
-    c00 = wp.lerp(grid[r0 + y0 * res + x0], grid[r0 + y0 * res + x1], tx)
-    c01 = wp.lerp(grid[r0 + y1 * res + x0], grid[r0 + y1 * res + x1], tx)
-    c10 = wp.lerp(grid[r1 + y0 * res + x0], grid[r1 + y0 * res + x1], tx)
-    c11 = wp.lerp(grid[r1 + y1 * res + x0], grid[r1 + y1 * res + x1], tx)
-    return wp.lerp(wp.lerp(c00, c01, ty), wp.lerp(c10, c11, ty), tz)
-
-
-@wp.func
 def guard_weight(n: wp.vec3, us: wp.vec3, x: int, y: int, z: int) -> float:
     """g = clamp(4·n·(centre − us), 0, 1) of cell (x, y, z) for a surface at us (cells)."""
     c = wp.vec3(float(x) + 0.5, float(y) + 0.5, float(z) + 0.5)
@@ -530,9 +505,11 @@ def guard_weight(n: wp.vec3, us: wp.vec3, x: int, y: int, z: int) -> float:
 
 
 @wp.func
-def sample_sh_guarded(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3, us: wp.vec3,
-                      n: wp.vec3) -> wp.vec4:
-    """``sample_sh`` with each of the 8 cells also weighted by ``guard_weight`` (module doc)."""
+def trilinear_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3, us: wp.vec3, n: wp.vec3,
+                 guard: int) -> wp.vec4:
+    """Trilinear SH at grid coordinate u (cells), cell centres at i + 0.5, clamp to edge (GL_LINEAR).
+    With ``guard``, each of the 8 cells' weights is also multiplied by ``guard_weight`` for a surface
+    at us with normal n and renormalised (module doc), plain trilinear where they sum below 1e-4."""
     p = u - wp.vec3(0.5, 0.5, 0.5)
     fx = wp.floor(p[0])
     fy = wp.floor(p[1])
@@ -546,6 +523,7 @@ def sample_sh_guarded(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.
     x1 = wp.clamp(int(fx) + 1, 0, res - 1)
     y1 = wp.clamp(int(fy) + 1, 0, res - 1)
     z1 = wp.clamp(int(fz) + 1, 0, res - 1)
+    plain = wp.vec4()
     acc = wp.vec4()
     wsum = float(0.0)
     for k in range(8):
@@ -564,12 +542,22 @@ def sample_sh_guarded(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.
         if k // 4 == 1:
             zi = z1
             wz = tz
-        w = wx * wy * wz * guard_weight(n, us, xi, yi, zi)
-        acc += w * grid[base + (zi * res + yi) * res + xi]
-        wsum += w
-    if wsum < 1.0e-4:
-        return sample_sh(grid, base, res, u)
+        w = wx * wy * wz
+        s = grid[base + (zi * res + yi) * res + xi]
+        plain += w * s
+        if guard != 0:
+            gw = w * guard_weight(n, us, xi, yi, zi)
+            acc += gw * s
+            wsum += gw
+    if guard == 0 or wsum < 1.0e-4:
+        return plain
     return acc / wsum
+
+
+@wp.func
+def sample_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3) -> wp.vec4:
+    """Plain trilinear SH at grid coordinate u (``trilinear_sh`` without the guard)."""
+    return trilinear_sh(grid, base, res, u, u, wp.vec3(), 0)
 
 
 @wp.func
@@ -884,6 +872,56 @@ def hand_over_far(
     accum[j + 2 * n3] = accum[j + 2 * n3] + add_b
 
 
+@wp.func
+def cascade_irradiance(grids: wp.array(dtype=wp.vec4), cas_geom: wp.array(dtype=wp.vec4),
+                       cas_int: wp.array(dtype=wp.vec4i), c: int, n_cascades: int, p: wp.vec3, n: wp.vec3,
+                       lookup_offset: float, leak_guard: int, margin: float, band: float, keep: float) -> wp.vec4:
+    """Cascade c's share of the irradiance at p (normal n): (α·E_rgb, α), α its blend weight times
+    what the finer cascades left (``keep``). The twin of lpv.glsl's lpv_cascade_irradiance."""
+    g = cas_geom[c]
+    res = cas_int[c][0]
+    base = cas_int[c][1]
+    cell = g[3]
+    us = (p - wp.vec3(g[0], g[1], g[2])) / cell
+    u = us + n * lookup_offset
+    last = int(0)
+    if c == n_cascades - 1:
+        last = 1
+    alpha = cascade_weight(u, res, margin, band, last) * keep
+    if alpha <= 0.0:
+        return wp.vec4()
+    inv_area = 1.0 / (cell * cell)
+    n3 = res * res * res
+    sr = trilinear_sh(grids, base, res, u, us, n, leak_guard)
+    sg = trilinear_sh(grids, base + n3, res, u, us, n, leak_guard)
+    sb = trilinear_sh(grids, base + 2 * n3, res, u, us, n, leak_guard)
+    return wp.vec4(alpha * eval_irradiance(sr, n, inv_area), alpha * eval_irradiance(sg, n, inv_area),
+                   alpha * eval_irradiance(sb, n, inv_area), alpha)
+
+
+@wp.func
+def cascade_radiance(grids: wp.array(dtype=wp.vec4), cas_geom: wp.array(dtype=wp.vec4),
+                     cas_int: wp.array(dtype=wp.vec4i), c: int, n_cascades: int, q: wp.vec3, w: wp.vec3,
+                     a1: float, margin: float, band: float, keep: float) -> wp.vec4:
+    """Cascade c's share of the radiance travelling along w at q: (α·L_rgb, α), as above."""
+    g = cas_geom[c]
+    res = cas_int[c][0]
+    base = cas_int[c][1]
+    cell = g[3]
+    u = (q - wp.vec3(g[0], g[1], g[2])) / cell
+    last = int(0)
+    if c == n_cascades - 1:
+        last = 1
+    alpha = cascade_weight(u, res, margin, band, last) * keep
+    if alpha <= 0.0:
+        return wp.vec4()
+    inv_area = 1.0 / (cell * cell)
+    n3 = res * res * res
+    return wp.vec4(alpha * eval_radiance(sample_sh(grids, base, res, u), w, a1, inv_area),
+                   alpha * eval_radiance(sample_sh(grids, base + n3, res, u), w, a1, inv_area),
+                   alpha * eval_radiance(sample_sh(grids, base + 2 * n3, res, u), w, a1, inv_area), alpha)
+
+
 @wp.kernel(enable_backward=False)
 def lookup_irradiance(
     # inputs
@@ -908,33 +946,10 @@ def lookup_irradiance(
     e = wp.vec3()
     keep = float(1.0)
     for c in range(n_cascades):
-        g = cas_geom[c]
-        res = cas_int[c][0]
-        base = cas_int[c][1]
-        cell = g[3]
-        us = (p - wp.vec3(g[0], g[1], g[2])) / cell
-        u = us + n * lookup_offset
-        last = int(0)
-        if c == n_cascades - 1:
-            last = 1
-        alpha = cascade_weight(u, res, margin, band, last) * keep
-        if alpha > 0.0:
-            inv_area = 1.0 / (cell * cell)
-            n3 = res * res * res
-            sr = wp.vec4()
-            sg = wp.vec4()
-            sb = wp.vec4()
-            if leak_guard != 0:
-                sr = sample_sh_guarded(grids, base, res, u, us, n)
-                sg = sample_sh_guarded(grids, base + n3, res, u, us, n)
-                sb = sample_sh_guarded(grids, base + 2 * n3, res, u, us, n)
-            else:
-                sr = sample_sh(grids, base, res, u)
-                sg = sample_sh(grids, base + n3, res, u)
-                sb = sample_sh(grids, base + 2 * n3, res, u)
-            e += alpha * wp.vec3(eval_irradiance(sr, n, inv_area), eval_irradiance(sg, n, inv_area),
-                                 eval_irradiance(sb, n, inv_area))
-            keep = keep - alpha
+        r = cascade_irradiance(grids, cas_geom, cas_int, c, n_cascades, p, n, lookup_offset, leak_guard, margin,
+                               band, keep)
+        e += wp.vec3(r[0], r[1], r[2])
+        keep = keep - r[3]
     out[i] = e
 
 
@@ -968,24 +983,9 @@ def lookup_glossy(
         q = p + r * (step_len * float(k + 1))
         keep = float(1.0)
         for c in range(n_cascades):
-            g = cas_geom[c]
-            res = cas_int[c][0]
-            base = cas_int[c][1]
-            cell = g[3]
-            u = (q - wp.vec3(g[0], g[1], g[2])) / cell
-            last = int(0)
-            if c == n_cascades - 1:
-                last = 1
-            alpha = cascade_weight(u, res, margin, band, last) * keep
-            if alpha > 0.0:
-                inv_area = 1.0 / (cell * cell)
-                n3 = res * res * res
-                acc += alpha * wp.vec3(
-                    eval_radiance(sample_sh(grids, base, res, u), w, a1, inv_area),
-                    eval_radiance(sample_sh(grids, base + n3, res, u), w, a1, inv_area),
-                    eval_radiance(sample_sh(grids, base + 2 * n3, res, u), w, a1, inv_area),
-                )
-                keep = keep - alpha
+            s = cascade_radiance(grids, cas_geom, cas_int, c, n_cascades, q, w, a1, margin, band, keep)
+            acc += wp.vec3(s[0], s[1], s[2])
+            keep = keep - s[3]
     out[i] = acc / float(steps)
 
 
