@@ -37,24 +37,7 @@ import numpy as np
 from serenity.device import cpu_threads, init_warp
 from serenity.kernels.kdtree import KdTree
 from serenity.kernels.launch import launch
-
-
-def lumpy_scene(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
-    """A displaced icosphere (radius ~1) on a wavy terrain grid of about as many triangles."""
-    import trimesh
-
-    s = trimesh.creation.icosphere(subdivisions=subdivisions)
-    v = s.vertices * (1 + 0.1 * np.sin(5 * s.vertices[:, :1]) * np.cos(7 * s.vertices[:, 1:2]))
-    n = int(np.sqrt(len(s.faces) / 2)) + 1
-    xs = np.linspace(-3, 3, n)
-    gx, gz = np.meshgrid(xs, xs)
-    gy = -1.2 + 0.1 * np.sin(3 * gx) * np.cos(2 * gz)
-    tv = np.stack([gx, gy, gz], -1).reshape(-1, 3)
-    idx = np.arange(n * n).reshape(n, n)
-    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
-    tf = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
-    return (np.concatenate([v, tv]).astype(np.float32),
-            np.concatenate([s.faces, tf + len(v)]).astype(np.int32))
+from serenity.scene.procedural import lumpy_mesh
 
 
 def camera_rays(width: int, height: int, position=(0.0, 0.6, 3.5), target=(0.0, -0.3, 0.0), fov_deg=60.0):
@@ -127,7 +110,7 @@ def main(argv=None) -> dict:
     wp = init_warp()
     threads = cpu_threads()
 
-    v, f = lumpy_scene(args.subdivisions)
+    v, f = lumpy_mesh(args.subdivisions)
     build_times = []
     for _ in range(max(1, min(3, args.repeats))):
         t0 = time.perf_counter()
@@ -189,7 +172,7 @@ def main(argv=None) -> dict:
     sweep = []
     for target in [int(x) for x in args.build_sizes.split(",") if x.strip()]:
         sub = max(1, min(8, int(round(math.log(max(target, 80) / 40, 4)))))
-        vs, fs = lumpy_scene(sub)
+        vs, fs = lumpy_mesh(sub)
         t0 = time.perf_counter()
         KdTree.build(vs, fs, cache=False, progress=False)
         sweep.append({"triangles": len(fs), "seconds": time.perf_counter() - t0})

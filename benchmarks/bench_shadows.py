@@ -29,49 +29,10 @@ import sys
 import numpy as np
 
 from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
+from serenity.eval.exact import exact_ao, exact_sun_visibility
 from serenity.frame import Renderer
 from serenity.kernels.kdtree import KdTree
 from serenity.scene import load
-
-
-def _frame_basis(n: np.ndarray):
-    a = np.where(np.abs(n[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    t = np.cross(n, a)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    return t, np.cross(n, t)
-
-
-def exact_sun_visibility(tree, points, normals, sun_dir, diameter_deg, n=1024, seed=0):
-    """Fraction of the sun disc visible from each point (stratified disc samples, same per point)."""
-    rng = np.random.default_rng(seed)
-    k = int(np.sqrt(n))
-    u = (np.arange(k)[:, None] + rng.random((k, k))) / k
-    v = (np.arange(k)[None, :] + rng.random((k, k))) / k
-    r = np.sqrt(u.ravel()) * np.tan(np.radians(diameter_deg) / 2)
-    phi = 2 * np.pi * v.ravel()
-    s = np.asarray(sun_dir, np.float64)
-    t, b = _frame_basis(s[None])
-    dirs = s[None] + r[:, None] * (np.cos(phi)[:, None] * t + np.sin(phi)[:, None] * b)
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    origins = points + normals * 1e-3
-    vis = np.zeros(len(points))
-    for d in dirs:
-        vis += ~tree.occluded(origins, np.broadcast_to(d, origins.shape).astype(np.float32))
-    return vis / len(dirs)
-
-
-def exact_ao(tree, points, normals, radius, n=256, seed=0):
-    """1 − cosine-weighted fraction of hemisphere rays hitting within ``radius`` (1 = open)."""
-    rng = np.random.default_rng(seed)
-    t, b = _frame_basis(normals)
-    origins = (points + normals * 1e-3).astype(np.float32)
-    hits = np.zeros(len(points))
-    for _ in range(n):
-        u1, u2 = rng.random(len(points)), rng.random(len(points))
-        r, phi = np.sqrt(u1), 2 * np.pi * u2
-        d = r[:, None] * (np.cos(phi)[:, None] * t + np.sin(phi)[:, None] * b) + np.sqrt(1 - u1)[:, None] * normals
-        hits += tree.occluded(origins, d.astype(np.float32), radius)
-    return 1.0 - hits / n
 
 
 def _median_ms(renderer, stages, frames):

@@ -37,6 +37,7 @@ import numpy as np
 from serenity.device import cpu_threads, resolve_device
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
+from serenity.kernels.sampling import fibonacci_sphere
 from serenity.kernels.skyvolume import PAPER_RESOLUTION, SkyVolume, SkyVolumeConfig, occluded_np
 from serenity.scene.model import direction_from_angles
 from serenity.scene.procedural import build_scene
@@ -52,14 +53,6 @@ def _median_ms(fn, reps):
         fn()
         ts.append((time.perf_counter() - t) * 1e3)
     return float(np.median(ts))
-
-
-def _fibonacci(n):
-    i = np.arange(n) + 0.5
-    y = 1 - 2 * i / n
-    r = np.sqrt(1 - y * y)
-    phi = math.pi * (1 + 5**0.5) * i
-    return np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1)
 
 
 def skymap_accuracy(device, steps_list, reps):
@@ -85,8 +78,8 @@ def skymap_accuracy(device, steps_list, reps):
 
 def sh_accuracy(device):
     out = {}
-    normals = _fibonacci(1000)
-    below = _fibonacci(100000)
+    normals = fibonacci_sphere(1000)
+    below = fibonacci_sphere(100000)
     below = below[below[:, 1] < 0]
     for el in ELEVATIONS:
         m = A.bake_sky_map(direction_from_angles(el, 135.0), device=device).reshape(-1, 3).astype(np.float64)
@@ -102,8 +95,8 @@ def sh_accuracy(device):
 
 
 def quad_accuracy(vol, probes):
-    d = _fibonacci(16384)
-    normals = _fibonacci(26)
+    d = fibonacci_sphere(16384)
+    normals = fibonacci_sphere(26)
     sky = vol.sky_map()
     rad = np.where((d[:, 1] >= 0)[:, None], A.sample_sky_map_np(sky, d), vol.ground_radiance[None])
     errs = []

@@ -271,6 +271,16 @@ def cosine_hemisphere_np(u: np.ndarray) -> np.ndarray:
     return np.stack([r * np.cos(phi), np.sqrt(np.maximum(0.0, 1.0 - u[:, 0])), r * np.sin(phi)], axis=1)
 
 
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """(n, 3) float64 unit directions spread evenly over the sphere (Fibonacci lattice): test and
+    benchmark directions for comparing a sampled field against a reference."""
+    i = np.arange(n) + 0.5
+    y = 1 - 2 * i / n
+    r = np.sqrt(1 - y * y)
+    phi = math.pi * (1 + 5**0.5) * i
+    return np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1)
+
+
 def l2_star_discrepancy(points: np.ndarray) -> float:
     """L2 star discrepancy of points in [0,1]^d (Warnock 1972 closed form), O(n² d)."""
     x = np.asarray(points, np.float64)

@@ -49,7 +49,7 @@ from serenity.scene.model import (
     vertex_normals,
 )
 
-__all__ = ["scene_names", "scene_descriptions", "build_scene", "plane_scene", "tile_texture"]
+__all__ = ["scene_names", "scene_descriptions", "build_scene", "plane_scene", "tile_texture", "lumpy_mesh"]
 
 _Y = np.array([0.0, 1.0, 0.0])
 
@@ -364,6 +364,26 @@ _CB_CEILING = (0.0, 556.0, 0.0, 559.2)  # x0, x1, z0, z1
 _CB_HOLE = (213.0, 343.0, 227.0, 332.0)  # where the light was
 _CB_SHORT = [[130.0, 65.0], [82.0, 225.0], [240.0, 272.0], [290.0, 114.0]], 165.0  # (x, z) footprint, height
 _CB_TALL = [[423.0, 247.0], [265.0, 296.0], [314.0, 456.0], [472.0, 406.0]], 330.0
+
+
+def lumpy_mesh(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (V, 3) float32, faces (F, 3) int32) of a displaced icosphere (radius ~1) standing on
+    a wavy terrain grid of about as many triangles: an uneven triangle soup of any size for the
+    kd-tree's tests and benchmark (not a scene)."""
+    import trimesh
+
+    s = trimesh.creation.icosphere(subdivisions=subdivisions)
+    v = s.vertices * (1 + 0.1 * np.sin(5 * s.vertices[:, :1]) * np.cos(7 * s.vertices[:, 1:2]))
+    n = int(np.sqrt(len(s.faces) / 2)) + 1
+    xs = np.linspace(-3, 3, n)
+    gx, gz = np.meshgrid(xs, xs)
+    gy = -1.2 + 0.1 * np.sin(3 * gx) * np.cos(2 * gz)
+    tv = np.stack([gx, gy, gz], -1).reshape(-1, 3)
+    idx = np.arange(n * n).reshape(n, n)
+    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    tf = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+    return (np.concatenate([v, tv]).astype(np.float32),
+            np.concatenate([s.faces, tf + len(v)]).astype(np.int32))
 
 
 def cornell_scene() -> Scene:

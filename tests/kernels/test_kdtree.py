@@ -11,6 +11,7 @@ import trimesh
 from serenity.device import init_warp
 from serenity.errors import SerenityError
 from serenity.kernels.kdtree import KdBuildConfig, KdTree, intersect_triangle, setup_ray
+from serenity.scene.procedural import lumpy_mesh
 
 wp = init_warp()
 
@@ -76,22 +77,6 @@ def random_rays(rng, n, extent=1.5):
     o = rng.uniform(-extent, extent, (n, 3)).astype(np.float32)
     d = rng.normal(size=(n, 3)).astype(np.float32)
     return o, d
-
-
-def lumpy_scene(subdivisions: int):
-    """A displaced icosphere standing on a wavy terrain grid of similar triangle count."""
-    s = trimesh.creation.icosphere(subdivisions=subdivisions)
-    v = s.vertices * (1 + 0.1 * np.sin(5 * s.vertices[:, :1]) * np.cos(7 * s.vertices[:, 1:2]))
-    n = int(np.sqrt(len(s.faces) / 2)) + 1
-    xs = np.linspace(-3, 3, n)
-    gx, gz = np.meshgrid(xs, xs)
-    gy = -1.2 + 0.1 * np.sin(3 * gx) * np.cos(2 * gz)
-    tv = np.stack([gx, gy, gz], -1).reshape(-1, 3)
-    idx = np.arange(n * n).reshape(n, n)
-    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
-    tf = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
-    return (np.concatenate([v, tv]).astype(np.float32),
-            np.concatenate([s.faces, tf + len(v)]).astype(np.int32))
 
 
 def camera_rays(width, height, position=(0.0, 0.5, 4.0), fov_deg=60.0):
@@ -200,7 +185,7 @@ def _embree_agreement(v, f, o, d, hits):
 
 
 def test_agrees_with_embree_on_120k_triangles(device):
-    v, f = lumpy_scene(6)
+    v, f = lumpy_mesh(6)
     assert len(f) > 100_000
     tree = KdTree.build(v, f)
     rng = np.random.default_rng(7)
@@ -216,7 +201,7 @@ def test_agrees_with_embree_on_120k_triangles(device):
 
 @pytest.mark.slow
 def test_agrees_with_embree_on_330k_triangles_1m_rays(device):
-    v, f = lumpy_scene(7)
+    v, f = lumpy_mesh(7)
     tree = KdTree.build(v, f)
     rng = np.random.default_rng(8)
     o1, d1 = camera_rays(1280, 400)
@@ -420,7 +405,7 @@ def test_cache_round_trip(tmp_path, monkeypatch):
 
 
 def test_tree_is_a_real_sah_tree():
-    v, f = lumpy_scene(4)
+    v, f = lumpy_mesh(4)
     tree = KdTree.build(v, f)
     st = tree.stats
     assert st.depth <= KdBuildConfig().depth_limit(len(f))
@@ -438,7 +423,7 @@ def test_tree_is_a_real_sah_tree():
 def test_cpu_and_cuda_give_identical_hits(cuda_devices):
     if not cuda_devices:
         pytest.skip("no CUDA device")
-    v, f = lumpy_scene(4)
+    v, f = lumpy_mesh(4)
     tree = KdTree.build(v, f)
     rng = np.random.default_rng(17)
     o, d = random_rays(rng, 50_000, extent=2.0)

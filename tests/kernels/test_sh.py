@@ -9,17 +9,10 @@ import pytest
 from serenity.device import init_warp
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
+from serenity.kernels.sampling import fibonacci_sphere
 from serenity.scene.model import direction_from_angles
 
 wp = init_warp()
-
-
-def _fibonacci(n):
-    i = np.arange(n) + 0.5
-    y = 1 - 2 * i / n
-    r = np.sqrt(1 - y * y)
-    phi = math.pi * (1 + 5**0.5) * i
-    return np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1)
 
 
 @wp.kernel
@@ -31,33 +24,33 @@ def _basis_kernel(d: wp.array(dtype=wp.vec3), out: wp.array2d(dtype=float)):
 
 
 def test_warp_basis_matches_numpy(device):
-    d = _fibonacci(200).astype(np.float32)
+    d = fibonacci_sphere(200).astype(np.float32)
     out = wp.zeros((200, 9), dtype=float, device=device)
     wp.launch(_basis_kernel, 200, inputs=[wp.array(d, dtype=wp.vec3, device=device), out], device=device)
     assert np.allclose(out.numpy(), S.sh_basis(d), atol=1e-6)
 
 
 def test_orthonormal():
-    d = _fibonacci(20000)
+    d = fibonacci_sphere(20000)
     y = S.sh_basis(d)
     gram = y.T @ y * (4 * math.pi / len(d))
     assert np.allclose(gram, np.eye(9), atol=2e-3)
 
 
 def test_constant_radiance_gives_pi_l():
-    d = _fibonacci(4096)
+    d = fibonacci_sphere(4096)
     lsh = S.project_radiance(d, np.tile([1.0, 2.0, 3.0], (len(d), 1)))
     for window in S.WINDOWS:
-        e = S.eval_irradiance(S.irradiance_coefficients(lsh, window), _fibonacci(100))
+        e = S.eval_irradiance(S.irradiance_coefficients(lsh, window), fibonacci_sphere(100))
         assert np.allclose(e, math.pi * np.array([1.0, 2.0, 3.0]), rtol=1e-4)
 
 
 def test_cosine_lobe_is_reproduced_exactly():
     # radiance L(ω) = max(0, ω·a)... its irradiance needs l ≤ 2 mostly; a linear radiance 1 + ω·a is exact
     a = np.array([0.3, 0.5, -0.2])
-    d = _fibonacci(8192)
+    d = fibonacci_sphere(8192)
     lsh = S.project_radiance(d, (1 + d @ a)[:, None])
-    n = _fibonacci(50)
+    n = fibonacci_sphere(50)
     # ∫ (1 + ω·a) max(0, n·ω) dω = π + (2π/3) n·a
     exact = math.pi + 2 * math.pi / 3 * (n @ a)
     assert np.allclose(S.eval_irradiance(S.irradiance_coefficients(lsh), n)[:, 0], exact, rtol=1e-4)
@@ -82,8 +75,8 @@ SH_MEAN_TOL = {90.0: 0.03, 45.0: 0.03, 10.0: 0.04, 2.0: 0.03}
 @pytest.mark.parametrize("elevation", sorted(SH_MEAN_TOL))
 def test_sh_irradiance_vs_brute_force(elevation):
     _, m, d, w, ground = _sky_and_ground(elevation)
-    normals = _fibonacci(1000)
-    below = _fibonacci(100000)
+    normals = fibonacci_sphere(1000)
+    below = fibonacci_sphere(100000)
     below = below[below[:, 1] < 0]
     # brute force: the sky texels' cosine-weighted sum + the ground hemisphere analytically
     brute = (np.maximum(normals @ d.T, 0) * w) @ m + ground[None] * math.pi * (1 - normals[:, 1:2]) / 2
@@ -98,12 +91,12 @@ def test_sh_irradiance_vs_brute_force(elevation):
 @pytest.mark.parametrize("window", [("nonneg", 0.0), ("hanning", 4.75), ("lanczos", 4.0)])
 def test_window_removes_negative_irradiance_with_sun_disc(elevation, window):
     sun, m, d, w, ground = _sky_and_ground(elevation, size=128)
-    below = _fibonacci(50000)
+    below = fibonacci_sphere(50000)
     below = below[below[:, 1] < 0]
     lsh = (S.sh_basis(d) * w[:, None]).T @ m + (S.sh_basis(below).sum(0) * (2 * math.pi / len(below)))[:, None] * ground
     # the sun disc: a delta of irradiance E_sun along the sun direction
     lsh += S.sh_basis(sun[None])[0][:, None] * A.sun_irradiance(sun)[None]
-    normals = _fibonacci(1000)
+    normals = fibonacci_sphere(1000)
     raw = S.eval_irradiance(S.irradiance_coefficients(lsh, "none"), normals)
     win = S.eval_irradiance(S.irradiance_coefficients(lsh, *window), normals)
     brute = (np.maximum(normals @ d.T, 0) * w) @ m + ground[None] * math.pi * (1 - normals[:, 1:2]) / 2

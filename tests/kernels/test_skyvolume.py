@@ -9,6 +9,7 @@ import pytest
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
 from serenity.kernels.quadfit import fit_occlusion_quads
+from serenity.kernels.sampling import fibonacci_sphere
 from serenity.kernels.skyvolume import (
     SkyVolume,
     SkyVolumeConfig,
@@ -18,14 +19,6 @@ from serenity.kernels.skyvolume import (
 )
 from serenity.scene.model import OcclusionQuad, Sky, direction_from_angles
 from serenity.scene.procedural import build_scene, plane_scene
-
-
-def _fibonacci(n):
-    i = np.arange(n) + 0.5
-    y = 1 - 2 * i / n
-    r = np.sqrt(1 - y * y)
-    phi = math.pi * (1 + 5**0.5) * i
-    return np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1)
 
 
 def _constant_scene(radiance=(1.0, 2.0, 3.0), quads=()):
@@ -40,7 +33,7 @@ def test_white_furnace(device):
                           normal_offset=0.0)
     vol = SkyVolume(_constant_scene(), cfg, device=device)
     vol.rebuild()
-    n = _fibonacci(64)
+    n = fibonacci_sphere(64)
     p = np.repeat(vol.probe_positions()[:1], len(n), axis=0)
     e = vol.irradiance(p, n)
     assert np.allclose(e, math.pi * np.array([1.0, 2.0, 3.0]), rtol=0.01)
@@ -60,7 +53,7 @@ def test_quad_over_probe_blocks_its_solid_angle(device):
     measured = 4 * math.pi - e0 / (math.pi * S.SH_C0)
     assert abs(measured - omega) / omega < 0.02
     # and the irradiance facing up matches the brute-force cosine integral of the same visibility
-    d = _fibonacci(65536)
+    d = fibonacci_sphere(65536)
     vis = ~occluded_np(np.zeros(3), d, [quad])
     brute_up = (np.maximum(d[:, 1], 0) * vis).mean() * 4 * math.pi  # the sky around the quad
     e_up = vol.irradiance(np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]]))[0, 0]
@@ -81,8 +74,8 @@ def test_probes_among_quads_vs_brute_force(device, courtyard):
     rng = np.random.default_rng(5)
     probes = pos[rng.choice(np.nonzero(inside)[0], 24, replace=False)]
     sky = vol.sky_map()
-    d = _fibonacci(16384)
-    normals = _fibonacci(26)
+    d = fibonacci_sphere(16384)
+    normals = fibonacci_sphere(26)
     errs = []
     for p in probes:
         vis = ~occluded_np(p, d, vol.quads)
@@ -167,7 +160,7 @@ def test_quad_fit_recovers_courtyard_walls(courtyard):
     print(fit.summary())
     assert fit.coverage > 0.8 and 0.5 < fit.fill
     # visibility from points in the square agrees with the hand-placed quads for most rays
-    d = _fibonacci(4096)
+    d = fibonacci_sphere(4096)
     pts = [np.array([x, 2.0, z]) for x in (-10.0, 0.0, 10.0) for z in (-10.0, 0.0, 10.0)]
     agree = np.mean([np.mean(occluded_np(p, d, fit.quads) == occluded_np(p, d, courtyard.occlusion_quads))
                      for p in pts])

@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 
+from serenity.eval.exact import sun_disc_directions, tangent_frame
+
 
 def ray_aabb(o, d, lo, hi, tmax):
     """(N,) bool: rays o + t d, 0 < t < tmax, hit the box [lo, hi]."""
@@ -15,22 +17,6 @@ def ray_aabb(o, d, lo, hi, tmax):
     tn = np.nanmax(np.minimum(t0, t1), axis=-1)
     tf = np.nanmin(np.maximum(t0, t1), axis=-1)
     return (tn <= tf) & (tf > 1e-6) & (tn < tmax)
-
-
-def sun_disc_directions(sun_dir, angular_diameter_deg, n=4096, seed=0):
-    """n directions uniformly over the sun's disc (stratified in area)."""
-    rng = np.random.default_rng(seed)
-    k = int(math.sqrt(n))
-    u = (np.arange(k)[:, None] + rng.random((k, k))) / k
-    v = (np.arange(k)[None, :] + rng.random((k, k))) / k
-    r = np.sqrt(u.ravel()) * math.tan(math.radians(angular_diameter_deg) / 2)
-    a = 2 * math.pi * v.ravel()
-    w = np.asarray(sun_dir, np.float64)
-    t = np.cross(w, [0.0, 1.0, 0.0] if abs(w[1]) < 0.99 else [1.0, 0.0, 0.0])
-    t /= np.linalg.norm(t)
-    b = np.cross(w, t)
-    d = w[None] + (r * np.cos(a))[:, None] * t[None] + (r * np.sin(a))[:, None] * b[None]
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 def sun_visibility(points, sun_dir, angular_diameter_deg, boxes, n=4096):
@@ -54,10 +40,8 @@ def ambient_occlusion(points, normals, radius, boxes, n=256, seed=0):
     r, phi = np.sqrt(u1), 2 * math.pi * u2
     local = np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(0, 1 - u1))], axis=1)
     for i, (p, nn) in enumerate(zip(points, normals, strict=True)):
-        t = np.cross(nn, [0.0, 1.0, 0.0] if abs(nn[1]) < 0.99 else [1.0, 0.0, 0.0])
-        t /= np.linalg.norm(t)
-        b = np.cross(nn, t)
-        d = local @ np.stack([t, b, nn])
+        t, b = tangent_frame(np.asarray(nn)[None])
+        d = local @ np.stack([t[0], b[0], nn])
         o = np.broadcast_to(p + nn * 1e-4, d.shape)
         blocked = np.zeros(n, bool)
         for lo, hi in boxes:
