@@ -219,13 +219,13 @@ class Renderer:
         surfels = [rsm_surfels(rsm, scene.sun.direction)]
         s = max(1, int(cfg.sky_vpl_stride))
         c = s // 2
-        pos = read_texture(gbuf.position, 4)[c::s, c::s]
-        nrm = read_texture(gbuf.normal, 3)[c::s, c::s]
+        pos = self._gbuffer_image(gbuf, "position")[c::s, c::s]
+        nrm = self._gbuffer_image(gbuf, "normal")[c::s, c::s, :3]
         covered = pos[..., 3] > 0
         surfels.append(gbuffer_surfels(pos, nrm, cam.position, cam.forward, cam.fov_y_deg, stride=1, valid=covered))
         e_sky = self._sky_irradiance_at(pos[..., :3], nrm)
         if e_sky is not None:
-            alb = read_texture(gbuf.albedo, 3)[c::s, c::s]
+            alb = self._gbuffer_image(gbuf, "albedo")[c::s, c::s, :3]
             vpls.append(sky_vpls_from_gbuffer(pos, nrm, alb, e_sky, cam.position, cam.forward, cam.fov_y_deg,
                                               stride=1, valid=covered))
         self.lpv.update(cam, scene.bounds, vpls, surfels, key=key)
@@ -289,6 +289,7 @@ class Renderer:
 
     def render(self) -> Frame:
         self._timings, self._events = {}, []
+        self._gbuffer_images = {}
         self._t_frame = time.perf_counter()
         if self._first:
             self._timings["upload"] = self._upload_ms
@@ -377,13 +378,21 @@ class Renderer:
                      wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
                      rays=0 if rcb is None else rcb.count)
 
+    def _gbuffer_image(self, gbuf, name: str) -> np.ndarray:
+        """A main-view G-buffer target read back to (H, W, 4) float32, once per frame (the LPV's
+        VPLs and surfels and the AOVs both need position, normal and albedo)."""
+        img = self._gbuffer_images.get(name)
+        if img is None:
+            img = self._gbuffer_images[name] = read_texture(getattr(gbuf, name), 4)
+        return img
+
     def _read_aovs(self, gbuf, lit, cam) -> dict[str, np.ndarray]:
-        pos = read_texture(gbuf.position, 4)
+        pos = self._gbuffer_image(gbuf, "position")
         covered = pos[..., 3] > 0
         depth = np.where(covered, (pos[..., :3] - cam.position) @ cam.forward, np.inf).astype(np.float32)
         return {
-            "albedo": read_texture(gbuf.albedo, 3),
-            "normal": read_texture(gbuf.normal, 3),
+            "albedo": np.ascontiguousarray(self._gbuffer_image(gbuf, "albedo")[..., :3]),
+            "normal": np.ascontiguousarray(self._gbuffer_image(gbuf, "normal")[..., :3]),
             "position": np.where(covered[..., None], pos[..., :3], 0.0).astype(np.float32),
             "depth": depth[..., None],
             "direct": read_texture(lit.direct, 3),
