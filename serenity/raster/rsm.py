@@ -70,7 +70,7 @@ class RSMPass:
             self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
-            p["u_light_view_proj"].write(vp.T.astype(np.float32).tobytes())
+            p["u_view_proj"].write(vp.T.astype(np.float32).tobytes())
             p["u_sun_dir"].value = tuple(float(x) for x in sun_direction)
             p["u_sun_irradiance"].value = tuple(float(x) for x in sun_irradiance)
             p["u_texel_area"].value = float(self.texel_area)

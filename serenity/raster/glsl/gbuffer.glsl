@@ -3,23 +3,8 @@
 //   1 normal   xyz = world shading normal facing the camera, w = Phong specular strength k_s
 //   2 position xyz = world position (m), w = 1 where covered (0 = background)
 //   3 material x = Phong exponent, y = reflectivity, z = transparency, w = index of refraction
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-in vec3 in_position;
-in vec3 in_normal;
-in vec2 in_uv;
-uniform mat4 u_view_proj;
-out vec3 v_world;
-out vec3 v_normal;
-out vec2 v_uv;
-void main() {
-    v_world = in_position;
-    v_normal = in_normal;
-    v_uv = in_uv;
-    gl_Position = u_view_proj * vec4(in_position, 1.0);
-}
-#endif
+#define SCENE_VERTEX_UV
+#include "scene_vertex.glsl"
 
 #if defined FRAGMENT_SHADER
 in vec3 v_world;

@@ -8,20 +8,7 @@
 //   3 normal   xyz = shading normal facing the viewer, w = material index
 // Ray cones after Akenine-Moller et al., "Texture Level of Detail Strategies for Real-Time Ray
 // Tracing" (Ray Tracing Gems, ch. 20): spread = pixel spread angle; width = distance * spread.
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-in vec3 in_position;
-in vec3 in_normal;
-uniform mat4 u_view_proj;
-out vec3 v_world;
-out vec3 v_normal;
-void main() {
-    v_world = in_position;
-    v_normal = in_normal;
-    gl_Position = u_view_proj * vec4(in_position, 1.0);
-}
-#endif
+#include "scene_vertex.glsl"
 
 #if defined FRAGMENT_SHADER
 in vec3 v_world;

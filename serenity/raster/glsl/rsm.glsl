@@ -4,20 +4,7 @@
 //   0 flux     rgb = rho * E * A (W), a = 1 where covered
 //   1 normal   xyz = world normal facing the sun
 //   2 position xyz = world position (m)
-#include "common.glsl"
-
-#if defined VERTEX_SHADER
-in vec3 in_position;
-in vec3 in_normal;
-uniform mat4 u_light_view_proj;
-out vec3 v_world;
-out vec3 v_normal;
-void main() {
-    v_world = in_position;
-    v_normal = in_normal;
-    gl_Position = u_light_view_proj * vec4(in_position, 1.0);
-}
-#endif
+#include "scene_vertex.glsl"
 
 #if defined FRAGMENT_SHADER
 in vec3 v_world;
