@@ -561,12 +561,12 @@ def sample_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3) ->
 
 
 @wp.func
-def cascade_weight(u: wp.vec3, res: int, margin: float, band: float, last: int) -> float:
+def cascade_weight(u: wp.vec3, res: int, margin: float, band: float, last: bool) -> float:
     """α of a cascade at grid coordinate u (module doc): smoothstep(margin, margin+band, d), step if
     band = 0; the last cascade clamp(d + 1, 0, 1). d = distance to the box border in cells."""
     fr = float(res)
     d = wp.min(wp.min(wp.min(u[0], u[1]), u[2]), wp.min(wp.min(fr - u[0], fr - u[1]), fr - u[2]))
-    if last != 0:
+    if last:
         return wp.clamp(d + 1.0, 0.0, 1.0)
     if band > 0.0:
         t = wp.clamp((d - margin) / band, 0.0, 1.0)
@@ -884,10 +884,7 @@ def cascade_irradiance(grids: wp.array(dtype=wp.vec4), cas_geom: wp.array(dtype=
     cell = g[3]
     us = (p - wp.vec3(g[0], g[1], g[2])) / cell
     u = us + n * lookup_offset
-    last = int(0)
-    if c == n_cascades - 1:
-        last = 1
-    alpha = cascade_weight(u, res, margin, band, last) * keep
+    alpha = cascade_weight(u, res, margin, band, c == n_cascades - 1) * keep
     if alpha <= 0.0:
         return wp.vec4()
     inv_area = 1.0 / (cell * cell)
@@ -909,10 +906,7 @@ def cascade_radiance(grids: wp.array(dtype=wp.vec4), cas_geom: wp.array(dtype=wp
     base = cas_int[c][1]
     cell = g[3]
     u = (q - wp.vec3(g[0], g[1], g[2])) / cell
-    last = int(0)
-    if c == n_cascades - 1:
-        last = 1
-    alpha = cascade_weight(u, res, margin, band, last) * keep
+    alpha = cascade_weight(u, res, margin, band, c == n_cascades - 1) * keep
     if alpha <= 0.0:
         return wp.vec4()
     inv_area = 1.0 / (cell * cell)
