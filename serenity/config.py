@@ -112,6 +112,9 @@ class RenderConfig:
     """Texels per side of the sun's reflective shadow map (one VPL per texel)."""
     sky_vpl_stride: int = 4
     """One sky-light VPL per stride×stride block of G-buffer pixels (paper Fig. 11)."""
+    indirect_scale: int = 2
+    """The main view's SSAO and indirect light (sky volume, LPV) are computed at 1/scale of the
+    view per axis and joint-bilaterally upsampled (1 = full resolution, the paper's)."""
 
     def __post_init__(self):
         if not (self.exposure > 0):
@@ -120,6 +123,8 @@ class RenderConfig:
             raise SerenityError(f"transmissions must be an int in 0..16, got {self.transmissions!r}")
         if not (16 <= self.osm_size <= 8192):
             raise SerenityError(f"osm_size must be in 16..8192, got {self.osm_size}")
+        if not (isinstance(self.indirect_scale, int) and 1 <= self.indirect_scale <= 8):
+            raise SerenityError(f"indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
         if self.ambient not in ("none", "constant"):
             raise SerenityError(f"ambient must be 'none' or 'constant', got {self.ambient!r}")
         from serenity.kernels.lpv import LPVConfig

@@ -107,7 +107,7 @@ class Renderer:
             self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl)
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
-            self.ssao_pass = SSAOPass(self.ctx, cfg.ssao)
+            self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect_scale)
             for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass):
                 p.resize(self.width, self.height)
             # ray tracing only where a material needs it (paper §9); the kd-tree waits for the
@@ -148,6 +148,12 @@ class Renderer:
         """The volumes: the sky irradiance volume (paper §7) and the light propagation volumes
         (paper §8), each when enabled."""
         cfg, ctx = self.config, self.ctx
+        self.lowres = None
+        if cfg.indirect_scale > 1 and (cfg.sky_lighting or cfg.lpv):
+            from serenity.raster.indirect import LowResIndirect
+
+            self.lowres = LowResIndirect(ctx, cfg.indirect_scale)
+            self.lowres.resize(self.width, self.height)
         self.sky_volume = None
         if cfg.sky_lighting:
             from serenity.kernels.skyvolume import SkyVolume, SkyVolumeConfig
@@ -157,6 +163,7 @@ class Renderer:
             self.sky_volume = SkyVolume(self.scene, cfg.sky_settings or SkyVolumeConfig(), self.device)
             self.sky_gl = SkyTexturesGL(ctx)
             self.sky_pass = IndirectPass(ctx, "sky")
+            self.sky_pass_lo = IndirectPass(ctx, "sky", lowres=True) if self.lowres else None
             self._sky_built = False
             self._sky_map_version = -1
         self.lpv = None
@@ -171,6 +178,7 @@ class Renderer:
             self.lpv = LightPropagationVolume(cfg.lpv_settings or LPVConfig(), self.device)
             self.lpv_gl = LPVTexturesGL(ctx)
             self.lpv_pass = IndirectPass(ctx, "lpv")
+            self.lpv_pass_lo = IndirectPass(ctx, "lpv", lowres=True) if self.lowres else None
 
     def invalidate_lpv(self) -> None:
         """Make the next frame re-inject and re-propagate the LPV even if nothing changed (for
@@ -332,12 +340,24 @@ class Renderer:
         sky_gl = self.sky_gl if self.sky_volume is not None else None
         with self._stage("direct lighting"):
             lit = self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl)
+        lo = self.lowres
+        if lo is not None:
+            lo.clear()
         if sky_gl is not None:
             with self._stage("sky lighting"):
-                self.sky_pass.render(lit.hdr, gbuf, sky_gl.bind, cam.position, ao)
+                if lo is not None:
+                    self.sky_pass_lo.render(lo, gbuf, sky_gl.bind, cam.position, ao)
+                else:
+                    self.sky_pass.render(lit.hdr, gbuf, sky_gl.bind, cam.position, ao)
         if self.lpv is not None and self.lpv_gl.count:
             with self._stage("lpv lighting"):
-                self.lpv_pass.render(lit.hdr, gbuf, self.lpv_gl.bind, cam.position, ao)
+                if lo is not None:
+                    self.lpv_pass_lo.render(lo, gbuf, self.lpv_gl.bind, cam.position, ao)
+                else:
+                    self.lpv_pass.render(lit.hdr, gbuf, self.lpv_gl.bind, cam.position, ao)
+        if lo is not None:
+            with self._stage("indirect upsample"):
+                lo.upsample(lit.hdr, gbuf, cam.position, cam.forward)
         out_hdr = lit.hdr
 
         # 3. join the tracer (sync 2), light the ray-traced views, Fresnel composite
@@ -368,7 +388,7 @@ class Renderer:
             ldr = self.tonemap_pass.read()
             aovs = self._read_aovs(gbuf, lit, cam)
             if ao is not None:
-                aovs["ao"] = read_texture(ao, 1)
+                aovs["ao"] = self._full_res(read_texture(ao, 1))
             if rcb is not None:
                 aovs["rt_mask"] = rcb.mask()[..., None].astype(np.float32)
         wall = (time.perf_counter() - self._t_frame) * 1e3
@@ -397,6 +417,13 @@ class Renderer:
             "depth": depth[..., None],
             "direct": read_texture(lit.direct, 3),
         }
+
+    def _full_res(self, img: np.ndarray) -> np.ndarray:
+        """A 1/indirect_scale image (SSAO) as a full-size AOV: each texel repeated over its block."""
+        s = self.config.indirect_scale
+        if s == 1:
+            return img
+        return np.ascontiguousarray(np.repeat(np.repeat(img, s, axis=0), s, axis=1)[:self.height, :self.width])
 
     def close(self) -> None:
         """Stop the ray-tracing worker (the GL objects go with the process's context)."""

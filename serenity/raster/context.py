@@ -136,6 +136,12 @@ class FullscreenPass:
         self.size = (width, height)
 
 
+def low_res_size(width: int, height: int, scale: int) -> tuple[int, int]:
+    """Size of a pass run at 1/scale of a width×height view (``glsl/lowres.glsl``)."""
+    s = max(1, int(scale))
+    return (width + s - 1) // s, (height + s - 1) // s
+
+
 def draw_fullscreen(ctx, vao, rects=None) -> None:
     """Draw a fullscreen pass, restricted to ``rects`` ((x, y, w, h) in framebuffer pixels, GL
     origin bottom-left) when given: the ray-traced views light only the rectangles that hold

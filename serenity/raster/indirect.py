@@ -5,11 +5,18 @@ added onto the lit image with additive blending, so that each technique is timed
 
 The volumes' textures and uniforms are bound by their owners (``SkyTexturesGL.bind``,
 ``LPVTexturesGL.bind``) through the ``bind`` callable given to :meth:`IndirectPass.render`.
+
+Reduced resolution (``RenderConfig.indirect_scale`` > 1, main view): the passes built with
+``lowres=True`` write the light *per unit albedo* at 1/scale of the view per axis into
+:class:`LowResIndirect`'s two targets (diffuse E/π·AO and glossy·AO), and
+:meth:`LowResIndirect.upsample` adds ``albedo·E + glossy`` onto the full-resolution image with a
+joint bilateral filter (``glsl/upsample.glsl``). Indirect light is smooth, so at scale 2 a quarter
+of the pixels carry it; texture detail comes back from the full-resolution albedo.
 """
 
 from __future__ import annotations
 
-from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_program
+from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_program, low_res_size
 
 TECHNIQUES = {"sky": 1, "lpv": 2}
 #: texture units 0..5 are the G-buffer, eye and AO; the volume's own textures start here
@@ -17,12 +24,14 @@ FIRST_VOLUME_UNIT = 6
 
 
 class IndirectPass:
-    def __init__(self, ctx, technique: str):
+    def __init__(self, ctx, technique: str, lowres: bool = False):
         if technique not in TECHNIQUES:
             raise ValueError(f"technique must be one of {sorted(TECHNIQUES)}")
         self.ctx = ctx
         self.technique = technique
-        self.program = load_program(ctx, "indirect.glsl", defines={"TECHNIQUE": TECHNIQUES[technique]})
+        self.lowres = lowres
+        self.program = load_program(ctx, "indirect.glsl",
+                                    defines={"TECHNIQUE": TECHNIQUES[technique], "LOWRES": int(lowres)})
         self.vao = fullscreen_vao(ctx, self.program)
         self._fbos: dict[int, object] = {}
 
@@ -33,12 +42,17 @@ class IndirectPass:
         return self._fbos[key]
 
     def render(self, target, gbuffer, bind, camera_pos, ao=None, rt_view=None) -> None:
-        """Add this technique's light onto ``target`` (the lit HDR texture of the same size)."""
+        """Add this technique's light onto ``target``: the lit HDR texture of the same size, or for a
+        ``lowres`` pass the :class:`LowResIndirect` whose targets it adds to."""
         import moderngl
 
         ctx, p = self.ctx, self.program
         with ctx.debug_scope(f"indirect:{self.technique}"):
-            self._fbo(target).use()
+            if self.lowres:
+                target.fbo.use()
+                p["u_scale"].value = target.scale
+            else:
+                self._fbo(target).use()
             ctx.enable(moderngl.BLEND)
             ctx.blend_func = moderngl.ONE, moderngl.ONE
             ctx.blend_equation = moderngl.FUNC_ADD
@@ -59,4 +73,57 @@ class IndirectPass:
                     p[name].value = value
             bind(p, FIRST_VOLUME_UNIT)
             draw_fullscreen(ctx, self.vao, None if rt_view is None else rt_view.rects)
+            ctx.disable(moderngl.BLEND)
+
+
+class LowResIndirect:
+    """The main view's indirect light at 1/``scale`` resolution (see the module docstring): two
+    RGBA16F targets that the ``lowres`` :class:`IndirectPass` programs add to, and the joint
+    bilateral upsampling onto the full-resolution lit image."""
+
+    def __init__(self, ctx, scale: int):
+        self.ctx = ctx
+        self.scale = max(1, int(scale))
+        self.program = load_program(ctx, "upsample.glsl")
+        self.vao = fullscreen_vao(ctx, self.program)
+        self.size = None
+        self._fbos: dict[int, object] = {}
+
+    def resize(self, width: int, height: int) -> None:
+        if self.size == (width, height):
+            return
+        if self.size is not None:
+            for o in (self.fbo, self.irr, self.gloss):
+                o.release()
+        low = low_res_size(width, height, self.scale)
+        self.irr = self.ctx.texture(low, 4, dtype="f2")
+        self.gloss = self.ctx.texture(low, 4, dtype="f2")
+        self.fbo = self.ctx.framebuffer(color_attachments=[self.irr, self.gloss])
+        self.size = (width, height)
+
+    def clear(self) -> None:
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+
+    def upsample(self, target, gbuffer, camera_pos, camera_forward) -> None:
+        """Add albedo·E + glossy, upsampled, onto ``target`` (the full-resolution lit HDR texture)."""
+        import moderngl
+
+        ctx, p = self.ctx, self.program
+        with ctx.debug_scope("indirect:upsample"):
+            key = target.glo
+            if key not in self._fbos:
+                self._fbos[key] = ctx.framebuffer(color_attachments=[target])
+            self._fbos[key].use()
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = moderngl.ONE, moderngl.ONE
+            ctx.blend_equation = moderngl.FUNC_ADD
+            for loc, (name, tex) in enumerate((("g_albedo", gbuffer.albedo), ("g_normal", gbuffer.normal),
+                                               ("g_position", gbuffer.position), ("u_irr", self.irr),
+                                               ("u_gloss", self.gloss))):
+                tex.use(location=loc)
+                p[name].value = loc
+            p["u_scale"].value = self.scale
+            p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
+            p["u_camera_forward"].value = tuple(float(x) for x in camera_forward)
+            self.vao.render(vertices=3)
             ctx.disable(moderngl.BLEND)

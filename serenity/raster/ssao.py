@@ -2,19 +2,24 @@
 
 Main view only: the ray-traced views skip it (paper §9), because their pixels' neighbours are not
 their neighbours in the scene. The AO multiplies indirect light only (sky volume, LPV, ambient).
+
+``scale`` > 1 computes and blurs the AO at 1/scale of the view per axis (``glsl/lowres.glsl``: each
+AO texel is its block's representative G-buffer pixel), the resolution of the indirect light it
+multiplies; on a CPU rasteriser the pass costs in proportion to its pixels.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.context import fullscreen_vao, load_program, low_res_size
 
 
 class SSAOPass:
-    def __init__(self, ctx, config):
+    def __init__(self, ctx, config, scale: int = 1):
         self.ctx = ctx
         self.config = config
+        self.scale = max(1, int(scale))
         self.program = load_program(ctx, "ssao.glsl")
         self.blur = load_program(ctx, "bilateral_blur.glsl")
         self.vao = fullscreen_vao(ctx, self.program)
@@ -29,17 +34,18 @@ class SSAOPass:
         if self.size is not None:
             for o in (self.fbo_a, self.fbo_b, self.tex_a, self.tex_b):
                 o.release()
-        self.tex_a = self.ctx.texture((width, height), 1, dtype="f2")
-        self.tex_b = self.ctx.texture((width, height), 1, dtype="f2")
+        low = low_res_size(width, height, self.scale)
+        self.tex_a = self.ctx.texture(low, 1, dtype="f2")
+        self.tex_b = self.ctx.texture(low, 1, dtype="f2")
         for t in (self.tex_a, self.tex_b):
-            t.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            t.filter = (moderngl.LINEAR, moderngl.LINEAR)  # the blur and upsampling use texelFetch
             t.repeat_x = t.repeat_y = False
         self.fbo_a = self.ctx.framebuffer(color_attachments=[self.tex_a])
         self.fbo_b = self.ctx.framebuffer(color_attachments=[self.tex_b])
         self.size = (width, height)
 
     def render(self, gbuffer, view_proj: np.ndarray, camera_pos, camera_forward):
-        """AO texture (r16f, 1 = unoccluded) of the G-buffer."""
+        """AO texture (r16f, 1 = unoccluded) of the G-buffer, at ``low_res_size`` of the view."""
         cfg = self.config
         cam = tuple(float(x) for x in camera_pos)
         fwd = tuple(float(x) for x in camera_forward)
@@ -58,6 +64,7 @@ class SSAOPass:
             p["u_thickness"].value = float(cfg.thickness)
             p["u_directions"].value = int(cfg.directions)
             p["u_steps"].value = int(cfg.steps)
+            p["u_scale"].value = self.scale
             self.vao.render(vertices=3)
             if cfg.blur_radius <= 0:
                 return self.tex_a
@@ -65,7 +72,8 @@ class SSAOPass:
             b["g_position"].value = 0
             b["g_normal"].value = 1
             b["u_src"].value = 2
-            b["u_radius"].value = int(cfg.blur_radius)
+            b["u_radius"].value = max(1, round(cfg.blur_radius / self.scale))
+            b["u_scale"].value = self.scale
             b["u_camera_pos"].value = cam
             b["u_camera_forward"].value = fwd
             for src, dst, axis in ((self.tex_a, self.fbo_b, (1.0, 0.0)), (self.tex_b, self.fbo_a, (0.0, 1.0))):

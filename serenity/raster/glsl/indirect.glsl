@@ -4,6 +4,10 @@
 //   TECHNIQUE == 2  LPV (paper §8, Fig. 10):   L += albedo/pi * E_lpv(p, n) + k_s * L_glossy(p, r, m)
 // Main view: multiplied by SSAO (indirect light only, paper §3). Ray-traced views (u_rt_view): the
 // viewer is each pixel's ray origin, no SSAO, untraced pixels and misses get nothing.
+// LOWRES (main view at 1/u_scale resolution, lowres.glsl): no albedo here; out 0 = E/pi * AO,
+// out 1 = k_s * L_glossy * AO, summed over the techniques, then upsample.glsl multiplies by the
+// full-resolution albedo while it upsamples (textures stay sharp, the smooth light is computed on
+// fewer pixels).
 #include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
@@ -24,27 +28,49 @@ uniform sampler2D u_ao;         // SSAO (1 = open)
 uniform bool u_use_ao;
 uniform bool u_rt_view;
 uniform vec3 u_camera_pos;
+#if LOWRES
+#include "lowres.glsl"
+layout(location = 0) out vec4 o_irr;
+layout(location = 1) out vec4 o_gloss;
+#define GBUF(t) texelFetch(t, px, 0)
+#else
 out vec4 o_hdr;
+#define GBUF(t) texture(t, v_uv)
+#endif
 
 void main() {
-    vec4 pos = texture(g_position, v_uv);
+#if LOWRES
+    ivec2 px = representative_pixel(ivec2(gl_FragCoord.xy), textureSize(g_position, 0));
+    o_irr = vec4(0.0); o_gloss = vec4(0.0);
+    vec4 pos = GBUF(g_position);
+    if (pos.w == 0.0) return;
+    vec3 albedo = vec3(1.0);
+    float ao = u_use_ao ? texelFetch(u_ao, ivec2(gl_FragCoord.xy), 0).r : 1.0;
+#else
+    vec4 pos = GBUF(g_position);
     if (pos.w == 0.0) { o_hdr = vec4(0.0); return; }     // background, miss, or not traced
-    vec3 albedo = texture(g_albedo, v_uv).rgb;
-    vec4 nrm = texture(g_normal, v_uv);
+    vec3 albedo = GBUF(g_albedo).rgb;
+    float ao = (u_use_ao && !u_rt_view) ? texture(u_ao, v_uv).r : 1.0;
+#endif
+    vec4 nrm = GBUF(g_normal);
     vec3 n = normalize(nrm.xyz);
     vec3 p = pos.xyz;
-    vec3 eye = u_rt_view ? texture(g_eye, v_uv).xyz : u_camera_pos;
+    vec3 eye = u_rt_view ? GBUF(g_eye).xyz : u_camera_pos;
     vec3 v = normalize(eye - p);
     if (dot(n, v) < 0.0) n = -n;                          // lit from the viewer's side
-    vec3 L;
+    vec3 diffuse, glossy = vec3(0.0);
 #if TECHNIQUE == 1
-    L = albedo / PI * sky_irradiance(p, n);
+    diffuse = albedo / PI * sky_irradiance(p, n);
 #else
-    float shininess = texture(g_material, v_uv).x;
-    L = albedo / PI * lpv_irradiance(p, n);
-    if (nrm.w >= GLOSSY_MIN_SPECULAR) L += nrm.w * lpv_glossy(p, reflect(-v, n), shininess);
+    float shininess = GBUF(g_material).x;
+    diffuse = albedo / PI * lpv_irradiance(p, n);
+    if (nrm.w >= GLOSSY_MIN_SPECULAR) glossy = nrm.w * lpv_glossy(p, reflect(-v, n), shininess);
 #endif
-    if (u_use_ao && !u_rt_view) L *= texture(u_ao, v_uv).r;
-    o_hdr = vec4(L, 0.0);
+#if LOWRES
+    o_irr = vec4(diffuse * ao, 0.0);
+    o_gloss = vec4(glossy * ao, 0.0);
+#else
+    o_hdr = vec4((diffuse + glossy) * ao, 0.0);
+#endif
 }
 #endif

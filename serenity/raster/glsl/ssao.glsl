@@ -5,10 +5,12 @@
 // the surface seen there (below its tangent plane) by more than `bias`, and behind it in depth by
 // less than `thickness` (the depth buffer has no
 // back faces, so a thin object in front must not block everything behind it).
-// Output: AO in [0, 1] (1 = open). Applied to indirect light only.
+// Output: AO in [0, 1] (1 = open). Applied to indirect light only. Runs at 1/u_scale resolution
+// (lowres.glsl): each output pixel is the AO of its representative G-buffer pixel.
 #include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
+#include "lowres.glsl"
 uniform sampler2D g_position;   // world xyz, w = covered
 uniform sampler2D g_normal;     // world normal
 uniform mat4 u_view_proj;
@@ -24,10 +26,11 @@ out float o_ao;
 float ign(vec2 pixel) { return fract(52.9829189 * fract(dot(pixel, vec2(0.06711056, 0.00583715)))); }
 
 void main() {
-    vec4 pw = texture(g_position, v_uv);
+    ivec2 px = representative_pixel(ivec2(gl_FragCoord.xy), textureSize(g_position, 0));
+    vec4 pw = texelFetch(g_position, px, 0);
     if (pw.w == 0.0) { o_ao = 1.0; return; }
     vec3 p = pw.xyz;
-    vec3 n = normalize(texture(g_normal, v_uv).xyz);
+    vec3 n = normalize(texelFetch(g_normal, px, 0).xyz);
     vec3 t = normalize(abs(n.y) < 0.99 ? cross(n, vec3(0.0, 1.0, 0.0)) : cross(n, vec3(1.0, 0.0, 0.0)));
     vec3 b = cross(n, t);
     float phi = 6.2831853 * ign(gl_FragCoord.xy);

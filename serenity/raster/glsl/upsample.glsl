@@ -1,0 +1,53 @@
+// Joint bilateral upsampling of the low-resolution indirect light (indirect.glsl with LOWRES) onto
+// the full-resolution lit image, added with additive blending:
+//   L = albedo * E_lo + G_lo,   E_lo, G_lo = sum_i w_i X_i / sum_i w_i over the 2x2 low-res texels
+//   around the pixel, w_i = bilinear_i * exp(-|z_i - z| / (0.05 z)) * max(0, n_i . n)^8
+// where z, n are the pixel's view depth and normal and z_i, n_i those of texel i's representative
+// G-buffer pixel (lowres.glsl). Across a silhouette or a crease the texels of the other surface get
+// ~no weight; when every weight vanishes (a pixel unlike all four) the most similar texel is used.
+#include "fullscreen.glsl"
+
+#if defined FRAGMENT_SHADER
+#include "lowres.glsl"
+uniform sampler2D g_albedo;
+uniform sampler2D g_normal;
+uniform sampler2D g_position;
+uniform sampler2D u_irr;     // E/pi * AO (W m^-2 sr^-1 per unit albedo)
+uniform sampler2D u_gloss;   // k_s * glossy * AO (W m^-2 sr^-1)
+uniform vec3 u_camera_pos;
+uniform vec3 u_camera_forward;
+out vec4 o_hdr;
+
+void main() {
+    ivec2 full = textureSize(g_position, 0);
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    vec4 pos = texelFetch(g_position, px, 0);
+    if (pos.w == 0.0) { o_hdr = vec4(0.0); return; }
+    vec3 n = texelFetch(g_normal, px, 0).xyz;
+    float z = dot(pos.xyz - u_camera_pos, u_camera_forward);
+    ivec2 low_max = textureSize(u_irr, 0) - 1;
+    // low-res coordinate whose integers are the texels' representatives
+    vec2 t = (vec2(px) - float(u_scale / 2)) / float(u_scale);
+    ivec2 i0 = ivec2(floor(t));
+    vec2 f = t - vec2(i0);
+    vec3 irr = vec3(0.0), gloss = vec3(0.0);
+    float wsum = 0.0, best = -1.0;
+    vec3 best_irr = vec3(0.0), best_gloss = vec3(0.0);
+    for (int k = 0; k < 4; ++k) {
+        ivec2 o = ivec2(k & 1, k >> 1);
+        ivec2 q = clamp(i0 + o, ivec2(0), low_max);
+        ivec2 rq = representative_pixel(q, full);
+        vec4 pq = texelFetch(g_position, rq, 0);
+        vec3 nq = texelFetch(g_normal, rq, 0).xyz;
+        float zq = dot(pq.xyz - u_camera_pos, u_camera_forward);
+        float bil = (o.x == 1 ? f.x : 1.0 - f.x) * (o.y == 1 ? f.y : 1.0 - f.y);
+        float sim = pq.w == 0.0 ? 0.0 : exp(-abs(zq - z) / (0.05 * z + 1e-3)) * pow(max(dot(nq, n), 0.0), 8.0);
+        float w = (bil + 1e-3) * sim;
+        vec3 xi = texelFetch(u_irr, q, 0).rgb, xg = texelFetch(u_gloss, q, 0).rgb;
+        irr += w * xi; gloss += w * xg; wsum += w;
+        if (sim > best) { best = sim; best_irr = xi; best_gloss = xg; }
+    }
+    if (wsum > 1e-6) { irr /= wsum; gloss /= wsum; } else { irr = best_irr; gloss = best_gloss; }
+    o_hdr = vec4(texelFetch(g_albedo, px, 0).rgb * irr + gloss, 0.0);
+}
+#endif
