@@ -122,6 +122,7 @@ from functools import cache
 import numpy as np
 import warp as wp
 
+from serenity.config import LPV_MAX_CASCADES, LPVConfig
 from serenity.device import cpu_threads, init_warp, resolve_device
 from serenity.kernels.launch import chunk_ranges, launch
 
@@ -182,87 +183,13 @@ G1 = wp.constant(GV_K1)
 E0 = wp.constant(COS_LOBE_0)  # irradiance: E = E0·l0 − E1·(l.xyz·n)
 E1 = wp.constant(COS_LOBE_1)
 
-MAX_CASCADES = 3  # the kernels and the GLSL take up to this many cascades
+MAX_CASCADES = LPV_MAX_CASCADES  # the kernels and the GLSL take up to this many cascades
 MAX_SLOTS = 8  # private scatter grids on the CPU (one per worker thread, capped)
 
 
 # ----------------------------------------------------------------------------------------------
 # config and cascade geometry (plain Python)
 # ----------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class LPVConfig:
-    """Light propagation volume settings (frozen: kernels are specialised on it)."""
-
-    resolution: int | tuple[int, ...] = 16
-    """Cells per axis of each cascade's cubic grid; an int for all cascades or one per cascade."""
-    cascades: int = 3
-    """Nested grids around the camera (1..3), finest first."""
-    iterations: int | tuple[int, ...] = 8
-    """Propagation iterations (light travels one cell per iteration); an int for all cascades or one
-    per cascade, finest first."""
-    cross_scene: bool = True
-    """The coarsest fitted cascade runs at least as many iterations as it has cells across the scene's
-    largest side (capped at its resolution), so light can reach from one end of the scene to the other."""
-    handover: bool = True
-    """Cascaded reach (module doc, "Hand-over"): each cascade also accumulates the light of its
-    iterations past the reach of the next finer one, and that far light is added into the finer
-    cascades, so a fine cascade's lookups see light from beyond its own N cells."""
-    early_stop: float = 0.01
-    """Stop a cascade when an iteration adds less than this fraction of its accumulated |DC| (0 = never)."""
-    geometry_volume: bool = True
-    """Fuzzy occlusion from surfels during propagation (compiled in/out)."""
-    injection_offset: float = 0.5
-    """VPLs are moved this many cells along their normal before picking their cell (Kaplanyan)."""
-    lookup_offset: float = 0.5
-    """Lookup points are moved this many cells along the receiver normal (less self-lighting/leaks)."""
-    leak_guard: bool = True
-    """Irradiance lookups weight each of the 8 trilinear cells by how far its centre lies in front of
-    the receiving surface (module doc): stops light behind a wall thinner than a cell leaking onto
-    its dark side through the interpolation. Costs 8 unfiltered fetches instead of 1 filtered."""
-    view_distance: float = 64.0
-    """Metres the outermost cascade reaches along the view direction (capped by the scene size)."""
-    cascade_scale: float = 2.0
-    """Extent ratio between consecutive cascades."""
-    forward_shift: float = 0.25
-    """Each box is pushed along the view direction by this fraction of its extent."""
-    blend_cells: float = 2.0
-    """Width of the cascade blend band, in the cascade's cells (0: hard switch)."""
-    edge_margin: float = 0.5
-    """Cells at a (non-last) cascade's border given zero weight (no light from outside reaches them)."""
-    glossy_steps: int = 8
-    """Samples along the reflected direction for glossy lookups."""
-    glossy_step: float = 1.0
-    """Spacing of glossy samples, in cells of the finest active cascade."""
-
-    def __post_init__(self):
-        if not (1 <= self.cascades <= MAX_CASCADES):
-            raise ValueError(f"cascades must be in 1..{MAX_CASCADES}, got {self.cascades}")
-        res = self.resolutions
-        if len(res) != self.cascades or any(r < 2 or r > 256 for r in res):
-            raise ValueError(f"resolution must be one int in 2..256 or one per cascade, got {self.resolution!r}")
-        its = self.iteration_counts
-        if len(its) != self.cascades or any(i < 0 for i in its):
-            raise ValueError(f"iterations must be one int >= 0 or one per cascade, got {self.iterations!r}")
-        if not (self.early_stop >= 0):
-            raise ValueError(f"early_stop must be >= 0, got {self.early_stop}")
-        if not (self.view_distance > 0 and self.cascade_scale >= 1 and 0 <= self.forward_shift < 0.5):
-            raise ValueError("need view_distance > 0, cascade_scale >= 1, 0 <= forward_shift < 0.5")
-        if self.blend_cells < 0 or self.edge_margin < 0 or self.glossy_steps < 1 or self.glossy_step <= 0:
-            raise ValueError("need blend_cells >= 0, edge_margin >= 0, glossy_steps >= 1, glossy_step > 0")
-
-    @property
-    def iteration_counts(self) -> tuple[int, ...]:
-        if isinstance(self.iterations, int):
-            return (int(self.iterations),) * self.cascades
-        return tuple(int(i) for i in self.iterations)
-
-    @property
-    def resolutions(self) -> tuple[int, ...]:
-        if isinstance(self.resolution, int):
-            return (int(self.resolution),) * self.cascades
-        return tuple(int(r) for r in self.resolution)
 
 
 @dataclass(frozen=True)
