@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from serenity.config import RenderConfig
+from serenity.config import LPVConfig, RenderConfig, SkyConfig
 from serenity.eval.charts import save_speed_accuracy_chart
 from serenity.eval.metrics import REL_MSE_EPS, compare, rel_mse
 from serenity.eval.reference import render_reference
@@ -44,10 +44,11 @@ TRIM = 1e-3
 gave the Cornell box relMSE 4.30; without the worst 0.1% it is 0.45)."""
 #: the baselines (a), (b) and the paper's techniques added one at a time (all with ray tracing)
 CONFIGS = {
-    "direct only": {"ambient": "none", "sky_lighting": False, "lpv": False},
-    "direct + constant ambient": {"ambient": "constant", "sky_lighting": False, "lpv": False},
-    "direct + sky volume": {"sky_lighting": True, "lpv": False},
-    "direct + sky volume + LPV (all)": {"sky_lighting": True, "lpv": True},
+    "direct only": {"ambient": "none", "sky": SkyConfig(enabled=False), "lpv": LPVConfig(enabled=False)},
+    "direct + constant ambient": {"ambient": "constant", "sky": SkyConfig(enabled=False),
+                                  "lpv": LPVConfig(enabled=False)},
+    "direct + sky volume": {"lpv": LPVConfig(enabled=False)},
+    "direct + sky volume + LPV (all)": {},
 }
 
 

@@ -35,8 +35,9 @@ import time
 
 import numpy as np
 
+from serenity.config import LPVConfig
 from serenity.device import cpu_threads, resolve_device
-from serenity.kernels.lpv import LightPropagationVolume, LPVConfig
+from serenity.kernels.lpv import LightPropagationVolume
 
 BOUNDS = np.array([[-30.0, 0.0, -30.0], [30.0, 20.0, 30.0]])
 CAMERA = (np.array([0.0, 1.7, -12.0]), np.array([0.0, -0.1, 1.0]))
@@ -149,7 +150,7 @@ def cornell_indirect(grid=CORNELL_GRID, size=CORNELL_SIZE, spp=CORNELL_SPP, reps
     print(f"cornell indirect reference {width}x{height}, {spp} spp: mean {ref.reshape(-1, 3).mean(0).round(3)}, "
           f"own noise relMSE {noise:.4f}", flush=True)
     exposure = 0.18 / max(float(ref.mean()), 1e-9)
-    base = Renderer(scene, width, height, config=RenderConfig(lpv=False)).render().hdr
+    base = Renderer(scene, width, height, config=RenderConfig(lpv=LPVConfig(enabled=False))).render().hdr
 
     def row(label, ours, extra):
         m = compare(ours, ref, exposure=exposure)
@@ -164,7 +165,7 @@ def cornell_indirect(grid=CORNELL_GRID, size=CORNELL_SIZE, spp=CORNELL_SPP, reps
     configs = [(f"{res}^3 x {it} it", LPVConfig(resolution=res, iterations=it)) for res, it in grid]
     configs.append(("default", default or LPVConfig()))
     for label, cfg in configs:
-        r = Renderer(scene, width, height, config=RenderConfig(lpv_settings=cfg))
+        r = Renderer(scene, width, height, config=RenderConfig(lpv=cfg))
         ours = r.render().hdr - base
         upd, lit = [], []
         for _ in range(reps):
@@ -243,7 +244,7 @@ def thin_wall_leak(size=THIN_WALL_SIZE, spp=THIN_WALL_SPP, configs=THIN_WALL_CON
     half = max(1, spp // 2)
     ref = (render_reference(scene, width, height, spp=half, component="indirect", seed=0)
            + render_reference(scene, width, height, spp=half, component="indirect", seed=1)) / 2
-    base = Renderer(scene, width, height, config=RenderConfig(lpv=False)).render()
+    base = Renderer(scene, width, height, config=RenderConfig(lpv=LPVConfig(enabled=False))).render()
     nrm, pos = base.aovs["normal"], base.aovs["position"]
     dark = (nrm[..., 2] < -0.9) & (np.abs(pos[..., 2]) < 0.1)
     ground = (nrm[..., 1] > 0.9) & (pos[..., 2] < -0.5) & (pos[..., 2] > -4.0) & (np.abs(pos[..., 0]) < 5.0)
@@ -253,7 +254,7 @@ def thin_wall_leak(size=THIN_WALL_SIZE, spp=THIN_WALL_SPP, configs=THIN_WALL_CON
     print(f"thin wall: {int(dark.sum())} north-face px, {int(ground.sum())} ground px; reference {spp} spp",
           flush=True)
     for label, kw in configs.items():
-        ours = Renderer(scene, width, height, config=RenderConfig(lpv_settings=LPVConfig(**kw))).render().hdr
+        ours = Renderer(scene, width, height, config=RenderConfig(lpv=LPVConfig(**kw))).render().hdr
         ours = ours - base.hdr
         images[label] = ours
         row = {"config": label, **kw}

@@ -34,11 +34,12 @@ import time
 
 import numpy as np
 
+from serenity.config import SkyConfig
 from serenity.device import cpu_threads, resolve_device
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
 from serenity.kernels.sampling import fibonacci_sphere
-from serenity.kernels.skyvolume import PAPER_RESOLUTION, SkyVolume, SkyVolumeConfig, occluded_np
+from serenity.kernels.skyvolume import PAPER_RESOLUTION, SkyVolume, occluded_np
 from serenity.scene.model import direction_from_angles
 from serenity.scene.procedural import build_scene
 
@@ -126,7 +127,7 @@ def main(argv=None):
 
     sh = sh_accuracy(device)
 
-    cfg = SkyVolumeConfig(resolution=PAPER_RESOLUTION, normal_offset=0.0)
+    cfg = SkyConfig(resolution=PAPER_RESOLUTION, normal_offset=0.0)
     vol = SkyVolume(scene, cfg, device=device)
     vol.rebuild()
     pos = vol.probe_positions()
@@ -139,7 +140,7 @@ def main(argv=None):
 
     rays_sweep = []
     for rays in ((32, 128, 512) if args.quick else (16, 32, 64, 128, 256, 512, 1024)):
-        v = SkyVolume(scene, SkyVolumeConfig(resolution=PAPER_RESOLUTION, normal_offset=0.0, rays_per_probe=rays),
+        v = SkyVolume(scene, SkyConfig(resolution=PAPER_RESOLUTION, normal_offset=0.0, rays_per_probe=rays),
                       device=device)
         v.rebuild()
         ms = _median_ms(lambda v=v: v._integrate(v.sky.sky_map_wp, 0, v.resolution[1]), max(1, args.reps // 2))
@@ -147,7 +148,7 @@ def main(argv=None):
         rays_sweep.append({"rays_per_probe": rays, "full_ms": ms, "mean_rel_error": m, "worst_rel_error": w})
 
     # time-of-day lag: layers until a sun step is fully reflected
-    lag = SkyVolume(scene, SkyVolumeConfig(rays_per_probe=8, resolution=PAPER_RESOLUTION), device=device)
+    lag = SkyVolume(scene, SkyConfig(rays_per_probe=8, resolution=PAPER_RESOLUTION), device=device)
     lag.rebuild()
     el = math.degrees(math.asin(scene.sun.direction[1]))
     new_sun = direction_from_angles(el - 10.0, scene.sun.azimuth_deg)

@@ -16,7 +16,7 @@ import sys
 import numpy as np
 from PIL import Image, ImageDraw
 
-from serenity.config import RenderConfig
+from serenity.config import LPVConfig, RenderConfig, SkyConfig
 from serenity.frame import Renderer
 from serenity.io.png import write_png
 from serenity.scene import load, sun_from_time
@@ -52,9 +52,10 @@ def main(argv: list[str]) -> int:
     write_png(os.path.join(out, "time_of_day.png"), panel_row(panels))
     scene = load("courtyard")
     pair = []
-    for label, cfg in (("constant ambient (pi * L_sky everywhere)", RenderConfig(ambient="constant",
-                                                                                  sky_lighting=False, lpv=False)),
-                       ("sky lighting volume (occluded, paper §7)", RenderConfig(lpv=False))):
+    no_lpv = LPVConfig(enabled=False)
+    for label, cfg in (("constant ambient (pi * L_sky everywhere)",
+                        RenderConfig(ambient="constant", sky=SkyConfig(enabled=False), lpv=no_lpv)),
+                       ("sky lighting volume (occluded, paper §7)", RenderConfig(lpv=no_lpv))):
         pair.append((label, Renderer(scene, *size, config=cfg).render().ldr))
     write_png(os.path.join(out, "sky_vs_ambient.png"), panel_row(pair))
     print(f"wrote {out}/time_of_day.png and {out}/sky_vs_ambient.png")

@@ -1,11 +1,26 @@
-"""Frozen render settings. Units are stated on each attribute; defaults are the paper's where it
-gives them. Later features add their own config classes here (SkyConfig, LPVConfig, ...)."""
+"""Frozen render settings, one typed tree: ``RenderConfig`` holds a ``ShadowConfig``, an
+``SSAOConfig``, a ``SkyConfig`` and an ``LPVConfig``. Units are stated on each attribute; defaults
+are the paper's where it gives them. Every invalid value raises a ``ConfigError`` (a
+``SerenityError``) whose message starts with ``Class.field``.
+
+Plain Python only: importing this module imports neither Warp nor moderngl, so the kernels and
+the GL passes both read their settings from here.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from serenity.errors import SerenityError
+from serenity.errors import ConfigError
+
+#: SH windows against ringing (``serenity.kernels.sh.window_weights``)
+SH_WINDOWS = ("none", "hanning", "lanczos", "nonneg")
+#: per-probe direction sequences of the sky volume
+SKY_SEQUENCES = ("hammersley", "sobol-owen")
+#: texels per side of the paraboloid sky map (``serenity.kernels.atmosphere``)
+SKY_MAP_SIZE = 256
+#: cascades the LPV kernels and ``lpv.glsl`` take at most
+LPV_MAX_CASCADES = 3
 
 
 @dataclass(frozen=True)
@@ -39,13 +54,15 @@ class ShadowConfig:
 
     def __post_init__(self):
         if not 16 <= self.size <= 8192:
-            raise SerenityError(f"shadow map size must be in 16..8192, got {self.size}")
+            raise ConfigError(f"ShadowConfig.size must be in 16..8192, got {self.size}")
         if not 1 <= self.cascades <= 4:
-            raise SerenityError(f"shadow cascades must be 1..4, got {self.cascades}")
+            raise ConfigError(f"ShadowConfig.cascades must be 1..4, got {self.cascades}")
         if self.filter not in ("hard", "pcf", "pcss"):
-            raise SerenityError(f"shadow filter must be hard, pcf or pcss, got {self.filter!r}")
-        if not (1 <= self.blocker_samples <= 128 and 1 <= self.filter_samples <= 256):
-            raise SerenityError("shadow sample counts must be in 1..128 (blocker) and 1..256 (filter)")
+            raise ConfigError(f"ShadowConfig.filter must be hard, pcf or pcss, got {self.filter!r}")
+        if not 1 <= self.blocker_samples <= 128:
+            raise ConfigError(f"ShadowConfig.blocker_samples must be in 1..128, got {self.blocker_samples}")
+        if not 1 <= self.filter_samples <= 256:
+            raise ConfigError(f"ShadowConfig.filter_samples must be in 1..256, got {self.filter_samples}")
 
 
 @dataclass(frozen=True)
@@ -67,12 +84,167 @@ class SSAOConfig:
     """Bilateral blur half-width in pixels (0 = off)."""
 
     def __post_init__(self):
-        if not (self.radius > 0 and 1 <= self.directions <= 256 and 1 <= self.steps <= 64):
-            raise SerenityError("SSAO needs radius > 0, 1..256 directions and 1..64 steps")
+        if not self.radius > 0:
+            raise ConfigError(f"SSAOConfig.radius must be positive, got {self.radius}")
+        if not 1 <= self.directions <= 256:
+            raise ConfigError(f"SSAOConfig.directions must be in 1..256, got {self.directions}")
+        if not 1 <= self.steps <= 64:
+            raise ConfigError(f"SSAOConfig.steps must be in 1..64, got {self.steps}")
+
+
+@dataclass(frozen=True)
+class SkyConfig:
+    """Sky lighting irradiance volume (paper §7): probes of L2 SH irradiance on a grid over the
+    scene, occluded by quads. See ``serenity/kernels/skyvolume.py``."""
+
+    enabled: bool = True
+    """Occluded sky light on every surface; the sky dome and the sun's colour from the atmosphere
+    (paper §5, §6) for "atmosphere" skies. False: no sky term (and no sky-light VPLs)."""
+    rays_per_probe: int = 256
+    """QMC directions per probe over the whole sphere."""
+    cell_size: float | None = None
+    """Probe spacing in metres; None: from the scene's bounds and ``target_probes``."""
+    resolution: tuple[int, int, int] | None = None
+    """(X, Y, Z) probes fitted exactly to the bounds (overrides ``cell_size``), e.g. (32, 16, 23)."""
+    target_probes: int = 32 * 16 * 23
+    """Probe budget the automatic cell size aims at (the paper's volume)."""
+    normal_offset: float = 0.5
+    """Lookup offset along the surface normal, in cells (of the smallest cell edge)."""
+    window: str = "none"
+    """SH window against ringing: one of ``SH_WINDOWS`` (``sh.window_weights``)."""
+    window_size: float = 4.0
+    """Window size W of the Hanning/Lanczos window."""
+    rebuild_angle_deg: float = 0.5
+    """Rebake the sky map (and restart the layer sweep) when the sun moved more than this (degrees)."""
+    sky_map_size: int = SKY_MAP_SIZE
+    """Texels per side of the paraboloid sky map."""
+    ground_albedo: float = 0.2
+    """Albedo of the ground seen below the horizon (lit by the sky only); 0 = black."""
+    sequence: str = "hammersley"
+    """"hammersley" (Cranley–Patterson rotated per probe) or "sobol-owen" (Owen-scrambled per probe)."""
+    seed: int = 0
+    """Salt of the per-probe decorrelation."""
+    auto_quads: bool = True
+    """Fit occlusion quads from the meshes (``quadfit``) when the scene has none."""
+
+    def __post_init__(self):
+        if not (1 <= self.rays_per_probe <= 1 << 20):
+            raise ConfigError(f"SkyConfig.rays_per_probe must be in 1..2^20, got {self.rays_per_probe}")
+        if self.cell_size is not None and not self.cell_size > 0:
+            raise ConfigError(f"SkyConfig.cell_size must be positive, got {self.cell_size}")
+        if self.resolution is not None and (len(self.resolution) != 3 or min(self.resolution) < 1):
+            raise ConfigError(f"SkyConfig.resolution must be 3 positive ints, got {self.resolution}")
+        if self.window not in SH_WINDOWS:
+            raise ConfigError(f"SkyConfig.window must be one of {SH_WINDOWS}, got {self.window!r}")
+        if self.sequence not in SKY_SEQUENCES:
+            raise ConfigError(f"SkyConfig.sequence must be one of {SKY_SEQUENCES}, got {self.sequence!r}")
+        if not 0.0 <= self.ground_albedo <= 1.0:
+            raise ConfigError(f"SkyConfig.ground_albedo must be in [0, 1], got {self.ground_albedo}")
+        if not self.normal_offset >= 0.0:
+            raise ConfigError(f"SkyConfig.normal_offset must be >= 0, got {self.normal_offset}")
+        if self.target_probes < 8:
+            raise ConfigError(f"SkyConfig.target_probes must be >= 8, got {self.target_probes}")
+
+
+@dataclass(frozen=True)
+class LPVConfig:
+    """Light propagation volumes (paper §8): one-bounce diffuse + glossy light from the sun's RSM and
+    the sky-lit G-buffer, propagated in nested grids around the camera. Frozen: kernels are
+    specialised on it. See ``serenity/kernels/lpv/`` (the package docstring has the maths)."""
+
+    enabled: bool = True
+    """Render the LPV's indirect light (False: no RSM, no injection, no LPV lighting pass)."""
+    resolution: int | tuple[int, ...] = 16
+    """Cells per axis of each cascade's cubic grid; an int for all cascades or one per cascade.
+    16³, not the paper's 32³: at 32³ cells are finer than the propagation can cross in a frame's
+    budget, and the measured error is lower at 16³ (README, LPV section)."""
+    cascades: int = 3
+    """Nested grids around the camera (1..3), finest first."""
+    iterations: int | tuple[int, ...] = 8
+    """Propagation iterations (light travels one cell per iteration); an int for all cascades or one
+    per cascade, finest first."""
+    cross_scene: bool = True
+    """The coarsest fitted cascade runs at least as many iterations as it has cells across the scene's
+    largest side (capped at its resolution), so light can reach from one end of the scene to the other."""
+    handover: bool = True
+    """Cascaded reach (``kernels/lpv`` docstring, "Hand-over"): each cascade also accumulates the light
+    of its iterations past the reach of the next finer one, and that far light is added into the
+    finer cascades, so a fine cascade's lookups see light from beyond its own N cells."""
+    early_stop: float = 0.01
+    """Stop a cascade when an iteration adds less than this fraction of its accumulated |DC| (0 = never)."""
+    geometry_volume: bool = True
+    """Fuzzy occlusion from surfels during propagation (compiled in/out)."""
+    injection_offset: float = 0.5
+    """VPLs are moved this many cells along their normal before picking their cell (Kaplanyan)."""
+    lookup_offset: float = 0.5
+    """Lookup points are moved this many cells along the receiver normal (less self-lighting/leaks)."""
+    leak_guard: bool = True
+    """Irradiance lookups weight each of the 8 trilinear cells by how far its centre lies in front of
+    the receiving surface: stops light behind a wall thinner than a cell leaking onto its dark side
+    through the interpolation. Costs 8 unfiltered fetches instead of 1 filtered (compiled in/out)."""
+    view_distance: float = 64.0
+    """Metres the outermost cascade reaches along the view direction (capped by the scene size)."""
+    cascade_scale: float = 2.0
+    """Extent ratio between consecutive cascades."""
+    forward_shift: float = 0.25
+    """Each box is pushed along the view direction by this fraction of its extent."""
+    blend_cells: float = 2.0
+    """Width of the cascade blend band, in the cascade's cells (0: hard switch)."""
+    edge_margin: float = 0.5
+    """Cells at a (non-last) cascade's border given zero weight (no light from outside reaches them)."""
+    glossy_steps: int = 8
+    """Samples along the reflected direction for glossy lookups."""
+    glossy_step: float = 1.0
+    """Spacing of glossy samples, in cells of the finest active cascade."""
+
+    def __post_init__(self):
+        if not (1 <= self.cascades <= LPV_MAX_CASCADES):
+            raise ConfigError(f"LPVConfig.cascades must be in 1..{LPV_MAX_CASCADES}, got {self.cascades}")
+        res = self.resolutions
+        if len(res) != self.cascades or any(r < 2 or r > 256 for r in res):
+            raise ConfigError(f"LPVConfig.resolution must be one int in 2..256 or one per cascade, "
+                              f"got {self.resolution!r}")
+        its = self.iteration_counts
+        if len(its) != self.cascades or any(i < 0 for i in its):
+            raise ConfigError(f"LPVConfig.iterations must be one int >= 0 or one per cascade, got {self.iterations!r}")
+        if not (self.early_stop >= 0):
+            raise ConfigError(f"LPVConfig.early_stop must be >= 0, got {self.early_stop}")
+        if not self.view_distance > 0:
+            raise ConfigError(f"LPVConfig.view_distance must be positive, got {self.view_distance}")
+        if not self.cascade_scale >= 1:
+            raise ConfigError(f"LPVConfig.cascade_scale must be >= 1, got {self.cascade_scale}")
+        if not 0 <= self.forward_shift < 0.5:
+            raise ConfigError(f"LPVConfig.forward_shift must be in [0, 0.5), got {self.forward_shift}")
+        if not self.blend_cells >= 0:
+            raise ConfigError(f"LPVConfig.blend_cells must be >= 0, got {self.blend_cells}")
+        if not self.edge_margin >= 0:
+            raise ConfigError(f"LPVConfig.edge_margin must be >= 0, got {self.edge_margin}")
+        if not self.glossy_steps >= 1:
+            raise ConfigError(f"LPVConfig.glossy_steps must be >= 1, got {self.glossy_steps}")
+        if not self.glossy_step > 0:
+            raise ConfigError(f"LPVConfig.glossy_step must be positive, got {self.glossy_step}")
+
+    @property
+    def iteration_counts(self) -> tuple[int, ...]:
+        if isinstance(self.iterations, int):
+            return (int(self.iterations),) * self.cascades
+        return tuple(int(i) for i in self.iterations)
+
+    @property
+    def resolutions(self) -> tuple[int, ...]:
+        if isinstance(self.resolution, int):
+            return (int(self.resolution),) * self.cascades
+        return tuple(int(r) for r in self.resolution)
 
 
 @dataclass(frozen=True)
 class RenderConfig:
+    """Everything one ``serenity.frame.Renderer`` renders with: exposure, the ambient baseline, the
+    sun's shadows (``shadow``), SSAO (``ssao``), the sky lighting volume (``sky``), the light
+    propagation volumes (``lpv``), and the ray-tracing pass (``ray_tracing`` and the fields after
+    it). Each GI technique is a sub-config with an ``enabled`` flag, e.g.
+    ``RenderConfig(lpv=LPVConfig(enabled=False))`` renders without the LPV."""
+
     exposure: float = 0.02
     """Multiplier applied to radiance (W·m⁻²·sr⁻¹) before Reinhard; 0.02 maps a white wall in
     noon sun (≈300) to about 0.86 display luminance."""
@@ -81,6 +253,12 @@ class RenderConfig:
     ambient hack, irradiance π·L_sky on every surface — the baseline the GI must beat)."""
     shadow: ShadowConfig = field(default_factory=ShadowConfig)
     ssao: SSAOConfig = field(default_factory=SSAOConfig)
+    sky: SkyConfig = field(default_factory=SkyConfig)
+    """The sky lighting irradiance volume (paper §7); ``enabled=False`` turns the sky term off."""
+    lpv: LPVConfig = field(default_factory=LPVConfig)
+    """Light propagation volumes (paper §8); ``enabled=False`` turns the LPV off. Default: 3 cascades
+    of 16³, 8 iterations, the coarsest extended to cross the scene, far light handed over to the finer
+    cascades."""
     sync_stages: bool = True
     """Wait for the GL queue after each stage so per-stage wall times are exact (costs overlap)."""
     ray_tracing: bool = True
@@ -94,20 +272,9 @@ class RenderConfig:
     traces inline first (the serial schedule, for comparison)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
-    sky_lighting: bool = True
-    """The sky lighting irradiance volume (paper §7): occluded sky light on every surface; the
-    sky dome and the sun's colour from the atmosphere (paper §5, §6) for "atmosphere" skies."""
-    sky_settings: object = None
-    """A ``serenity.kernels.skyvolume.SkyVolumeConfig`` (None: its defaults)."""
     sky_layers_per_frame: int = 1
     """Probe layers re-integrated per frame while the sun moves (paper: one); the first frame
     builds the whole volume."""
-    lpv: bool = True
-    """Light propagation volumes: one-bounce diffuse + glossy light from the sun's RSM and the
-    sky-lit G-buffer (paper §8)."""
-    lpv_settings: object = None
-    """A ``serenity.kernels.lpv.LPVConfig`` (None: its defaults — 3 cascades of 16³, 8 iterations, the coarsest
-    extended to cross the scene, far light handed over to the finer cascades)."""
     rsm_size: int = 256
     """Texels per side of the sun's reflective shadow map (one VPL per texel)."""
     sky_vpl_stride: int = 4
@@ -118,21 +285,17 @@ class RenderConfig:
 
     def __post_init__(self):
         if not (self.exposure > 0):
-            raise SerenityError(f"exposure must be positive, got {self.exposure}")
+            raise ConfigError(f"RenderConfig.exposure must be positive, got {self.exposure}")
         if not (isinstance(self.transmissions, int) and 0 <= self.transmissions <= 16):
-            raise SerenityError(f"transmissions must be an int in 0..16, got {self.transmissions!r}")
+            raise ConfigError(f"RenderConfig.transmissions must be an int in 0..16, got {self.transmissions!r}")
         if not (16 <= self.osm_size <= 8192):
-            raise SerenityError(f"osm_size must be in 16..8192, got {self.osm_size}")
+            raise ConfigError(f"RenderConfig.osm_size must be in 16..8192, got {self.osm_size}")
         if not (isinstance(self.indirect_scale, int) and 1 <= self.indirect_scale <= 8):
-            raise SerenityError(f"indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
+            raise ConfigError(f"RenderConfig.indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
         if self.ambient not in ("none", "constant"):
-            raise SerenityError(f"ambient must be 'none' or 'constant', got {self.ambient!r}")
-        from serenity.kernels.lpv import LPVConfig
-        from serenity.kernels.skyvolume import SkyVolumeConfig
-
-        for name, kind, optional in (("shadow", ShadowConfig, False), ("ssao", SSAOConfig, False),
-                                     ("sky_settings", SkyVolumeConfig, True), ("lpv_settings", LPVConfig, True)):
+            raise ConfigError(f"RenderConfig.ambient must be 'none' or 'constant', got {self.ambient!r}")
+        for name, kind in (("shadow", ShadowConfig), ("ssao", SSAOConfig), ("sky", SkyConfig), ("lpv", LPVConfig)):
             value = getattr(self, name)
-            if not (isinstance(value, kind) or (optional and value is None)):
-                raise SerenityError(f"{name} must be a {kind.__name__}{' or None' if optional else ''}, "
-                                    f"got {value!r} (e.g. ssao=SSAOConfig(enabled=False) to turn SSAO off)")
+            if not isinstance(value, kind):
+                hint = f" (e.g. {name}={kind.__name__}(enabled=False) to turn it off)" if name != "shadow" else ""
+                raise ConfigError(f"RenderConfig.{name} must be a {kind.__name__}, got {value!r}{hint}")

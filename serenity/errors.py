@@ -11,3 +11,7 @@ class SceneError(SerenityError, ValueError):
 
 class GLUnavailableError(SerenityError, RuntimeError):
     """No headless OpenGL context could be created; the message names the packages to install."""
+
+
+class ConfigError(SerenityError, ValueError):
+    """A render setting out of range or of the wrong type; the message starts with ``Class.field``."""

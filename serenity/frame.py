@@ -149,18 +149,18 @@ class Renderer:
         (paper §8), each when enabled."""
         cfg, ctx = self.config, self.ctx
         self.lowres = None
-        if cfg.indirect_scale > 1 and (cfg.sky_lighting or cfg.lpv):
+        if cfg.indirect_scale > 1 and (cfg.sky.enabled or cfg.lpv.enabled):
             from serenity.raster.indirect import LowResIndirect
 
             self.lowres = LowResIndirect(ctx, cfg.indirect_scale)
             self.lowres.resize(self.width, self.height)
         self.sky_volume = None
-        if cfg.sky_lighting:
-            from serenity.kernels.skyvolume import SkyVolume, SkyVolumeConfig
+        if cfg.sky.enabled:
+            from serenity.kernels.skyvolume import SkyVolume
             from serenity.raster.indirect import IndirectPass
             from serenity.raster.sky import SkyTexturesGL
 
-            self.sky_volume = SkyVolume(self.scene, cfg.sky_settings or SkyVolumeConfig(), self.device)
+            self.sky_volume = SkyVolume(self.scene, cfg.sky, self.device)
             self.sky_gl = SkyTexturesGL(ctx)
             self.sky_pass = IndirectPass(ctx, "sky")
             self.sky_pass_lo = IndirectPass(ctx, "sky", lowres=True) if self.lowres else None
@@ -168,14 +168,14 @@ class Renderer:
             self._sky_map_version = -1
         self.lpv = None
         self._lpv_key = None
-        if cfg.lpv:
-            from serenity.kernels.lpv import LightPropagationVolume, LPVConfig
+        if cfg.lpv.enabled:
+            from serenity.kernels.lpv import LightPropagationVolume
             from serenity.raster.indirect import IndirectPass
             from serenity.raster.lpv_gl import LPVTexturesGL
             from serenity.raster.rsm import RSMPass
 
             self.rsm_pass = RSMPass(ctx, self.scene_gl, cfg.rsm_size)
-            self.lpv = LightPropagationVolume(cfg.lpv_settings or LPVConfig(), self.device)
+            self.lpv = LightPropagationVolume(cfg.lpv, self.device)
             self.lpv_gl = LPVTexturesGL(ctx)
             self.lpv_pass = IndirectPass(ctx, "lpv")
             self.lpv_pass_lo = IndirectPass(ctx, "lpv", lowres=True) if self.lowres else None

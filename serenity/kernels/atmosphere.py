@@ -80,6 +80,8 @@ import math
 import numpy as np
 import warp as wp
 
+from serenity.config import SKY_MAP_SIZE
+
 wp.set_module_options({"enable_backward": False})
 
 # ---------------------------------------------------------------------------------------------
@@ -100,7 +102,6 @@ SOLAR_IRRADIANCE = (1100.0, 1100.0, 1100.0)
 NIGHT_SKY_RADIANCE = (2.5e-7, 3.0e-7, 4.0e-7)
 #: default view-march steps of the fast model (see benchmarks/bench_sky.py for error vs steps)
 DEFAULT_STEPS = 24
-SKY_MAP_SIZE = 256
 SUN_ANGULAR_DIAMETER_DEG = 0.53
 
 _R = wp.constant(EARTH_RADIUS_KM)

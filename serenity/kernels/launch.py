@@ -8,12 +8,23 @@ Convention for a splittable kernel: its **last parameter is** ``offset: int`` an
 index as ``i = wp.tid() + offset``. ``launch`` appends that offset; on CUDA it is 0 and the whole
 range goes in one launch. Chunks are contiguous so that neighbouring (coherent) items stay on one
 thread. Kernels must write only to their own index (or use atomics): chunks run concurrently.
+
+Scatter kernels (many items adding into shared cells) use a ``ScatterGrid``: Warp 1.19's CPU
+``atomic_add`` is a plain read-modify-write (warp/native/builtin.h), not atomic, so on the CPU each
+launch chunk adds into its own private copy of the grid (a "slot", found from the chunk's
+``offset`` by ``slot_base``) and ``gather`` sums the slots into the grid; on CUDA the kernel adds
+straight into the grid with real atomics. ``Staging`` turns numpy inputs into device arrays (a
+zero-copy wrap on the CPU, a copy into a grow-only buffer on CUDA). Callers never branch on the
+device: those two differences live here.
 """
 
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
+
+import numpy as np
+import warp as wp
 
 from serenity.device import cpu_threads, init_warp
 
@@ -75,3 +86,133 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     ]
     for f in futures:
         f.result()
+
+
+# ---------------------------------------------------------------------------------------------
+# scatter into private slots (CPU) or with atomics (CUDA)
+# ---------------------------------------------------------------------------------------------
+
+#: private scatter grids on the CPU (one per worker thread, capped)
+MAX_SLOTS = 8
+
+
+@wp.func
+def slot_base(offset: int, slot_starts: wp.array(dtype=int), slot_stride: int) -> int:
+    """First element of the private grid of the launch chunk starting at ``offset`` (0 when the
+    kernel writes straight into the grid: CUDA, or one CPU chunk)."""
+    s = int(0)
+    for k in range(slot_starts.shape[0]):
+        if slot_starts[k] == offset:
+            s = k
+    return s * slot_stride
+
+
+@wp.kernel(enable_backward=False)
+def gather_slots(
+    # inputs
+    slots: wp.array(dtype=wp.vec4),
+    n_slots: int,
+    stride: int,
+    # outputs
+    grid: wp.array(dtype=wp.vec4),
+    offset: int,
+):
+    """grid[i] += Σ_s slots[s·stride + i], and zero the slots (ready for the next scatter)."""
+    i = wp.tid() + offset
+    acc = grid[i]
+    for s in range(n_slots):
+        acc += slots[s * stride + i]
+        slots[s * stride + i] = wp.vec4()
+    grid[i] = acc
+
+
+class ScatterGrid:
+    """A float4 array that scatter kernels add into from every thread (module doc).
+
+    A scatter kernel's trailing parameters are ``slot_starts: wp.array(dtype=int), slot_stride: int,
+    out: wp.array(dtype=wp.vec4), offset: int``; it adds item i's contribution to cell j with
+    ``wp.atomic_add(out, slot_base(offset, slot_starts, slot_stride) + j, value)``. ``array`` holds
+    the sum once ``gather`` has run.
+    """
+
+    def __init__(self, size: int, device: str, threads: int | None = None):
+        self.size = int(size)
+        self.device = device
+        self.threads = threads
+        self.array = wp.zeros(self.size, dtype=wp.vec4, device=device)
+        on_cpu = str(device).startswith("cpu")
+        self.n_slots = max(1, min(MAX_SLOTS, threads or cpu_threads())) if on_cpu else 1
+        self._slots = wp.zeros(self.n_slots * self.size, dtype=wp.vec4, device=device) if self.n_slots > 1 else None
+        self._used = 0  # slots holding un-gathered values
+        self._no_slots = wp.zeros(1, dtype=int, device=device)
+
+    def scatter(self, kernel: Any, dim: int, inputs: list) -> None:
+        """Launch ``kernel`` over ``dim`` items, adding into this grid (its slots on the CPU)."""
+        if dim <= 0:
+            return
+        chunks = chunk_ranges(dim, min(self.n_slots, self.threads or cpu_threads()))
+        if self._slots is None or len(chunks) == 1:
+            launch(kernel, dim, [*inputs, self._no_slots, 0, self.array], device=self.device, threads=1)
+            return
+        starts = wp.array(np.array([s for s, _ in chunks], np.int32), dtype=int, device=self.device)
+        launch(kernel, dim, [*inputs, starts, self.size, self._slots], device=self.device, threads=len(chunks))
+        self._used = max(self._used, len(chunks))
+
+    def gather(self) -> None:
+        """Sum the private slots into ``array`` (nothing to do on CUDA or after one-chunk launches)."""
+        if self._used:
+            launch(gather_slots, self.size, [self._slots, self._used, self.size, self.array], device=self.device,
+                   threads=self.threads)
+            self._used = 0
+
+    def zero(self) -> None:
+        """Zero the grid and any un-gathered slots."""
+        self.array.zero_()
+        if self._used:
+            self._slots.zero_()
+            self._used = 0
+
+
+# ---------------------------------------------------------------------------------------------
+# host inputs
+# ---------------------------------------------------------------------------------------------
+
+
+class Staging:
+    """Device arrays for host inputs, by name: numpy is wrapped without a copy on the CPU and copied
+    into a grow-only buffer (power-of-two sizes) on CUDA; Warp arrays pass through (on this device)."""
+
+    def __init__(self, device: str):
+        self.device = device
+        self._copy = not str(device).startswith("cpu")
+        self._buffers: dict[str, wp.array] = {}
+
+    def buffer(self, name: str, n: int, dtype) -> wp.array:
+        """The first ``n`` elements of the grow-only buffer ``name`` (for outputs, or staged inputs)."""
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape[0] < n:
+            buf = wp.empty(max(n, 1 << max(0, int(n - 1).bit_length())), dtype=dtype, device=self.device)
+            self._buffers[name] = buf
+        return buf[:n]
+
+    def input(self, a, name: str, dtype, width: int) -> wp.array:
+        """A device array for ``a`` (numpy-like of ``width`` float32 per item, or a Warp array)."""
+        if isinstance(a, wp.array):
+            if str(a.device) != self.device:
+                raise ValueError(f"{name}: array on {a.device}, expected {self.device}")
+            return a
+        shape = (-1, width) if width > 1 else (-1,)
+        arr = np.ascontiguousarray(np.asarray(a, dtype=np.float32).reshape(shape))
+        host = wp.array(arr, dtype=dtype, device="cpu", copy=False)
+        if not self._copy:
+            return host
+        view = self.buffer(name, host.shape[0], dtype)
+        wp.copy(view, host, count=host.shape[0])
+        return view
+
+
+def host_array(a) -> np.ndarray | None:
+    """``a`` as numpy without a device copy: numpy-likes and CPU Warp arrays; None for device arrays."""
+    if isinstance(a, wp.array):
+        return a.numpy() if a.device.is_cpu else None
+    return np.ascontiguousarray(a)

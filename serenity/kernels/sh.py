@@ -51,6 +51,8 @@ import math
 import numpy as np
 import warp as wp
 
+from serenity.config import SH_WINDOWS
+
 wp.set_module_options({"enable_backward": False})
 
 # ---------------------------------------------------------------------------------------------
@@ -65,7 +67,7 @@ SH_C22 = 0.546274215296040  # √15/(4√π)
 A_HAT = (math.pi, 2.0 * math.pi / 3.0, math.pi / 4.0)
 #: band of each coefficient index
 BAND = (0, 1, 1, 1, 2, 2, 2, 2, 2)
-WINDOWS = ("none", "hanning", "lanczos", "nonneg")
+WINDOWS = SH_WINDOWS
 
 vec9 = wp.types.vector(length=9, dtype=wp.float32)
 

@@ -3,7 +3,7 @@ and shadowed by occlusion quads, computed one layer per frame.
 
 Grid: probes at ``grid_origin + (x, y, z)·cell_size`` for x < X, y < Y, z < Z (``resolution`` =
 (X, Y, Z)), fitted to the scene's bounds (centred on them). The cell is cubic,
-``SkyVolumeConfig.cell_size`` metres, or by default chosen from the scene's scale so that the
+``SkyConfig.cell_size`` metres, or by default chosen from the scene's scale so that the
 bounds hold about ``target_probes`` = 32·16·23 probes (the paper's reference volume);
 ``resolution=(X, Y, Z)`` instead fits exactly that many probes to the bounds (per-axis cells).
 A **layer** is one y slice (X·Z probes; the paper's 32×16×23 volume has 16 layers).
@@ -52,13 +52,12 @@ rebuild bit for bit.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
+from serenity.config import SKY_SEQUENCES, SkyConfig
 from serenity.kernels.atmosphere import (
-    SKY_MAP_SIZE,
     SkyMapCache,
     horizontal_irradiance,
     sample_sky_map,
@@ -70,7 +69,7 @@ from serenity.kernels.sampling import (
     sample_sobol_owen,
     sample_uniform_sphere,
 )
-from serenity.kernels.sh import WINDOWS, eval_sh9, irradiance_scale, sh_basis, vec9
+from serenity.kernels.sh import eval_sh9, irradiance_scale, sh_basis, vec9
 
 wp.set_module_options({"enable_backward": False})
 
@@ -78,61 +77,11 @@ wp.set_module_options({"enable_backward": False})
 # constants
 
 PAPER_RESOLUTION = (32, 16, 23)
-SEQUENCES = ("hammersley", "sobol-owen")
+SEQUENCES = SKY_SEQUENCES
 COEFFS = 27
 _FOUR_PI = wp.constant(4.0 * math.pi)
 _ONE_MINUS_EPS = wp.constant(0.99999994)
 _PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
-
-
-@dataclass(frozen=True)
-class SkyVolumeConfig:
-    """Settings of the sky lighting irradiance volume (see the module docstring)."""
-
-    rays_per_probe: int = 256
-    """QMC directions per probe over the whole sphere."""
-    cell_size: float | None = None
-    """Probe spacing in metres; None: from the scene's bounds and ``target_probes``."""
-    resolution: tuple[int, int, int] | None = None
-    """(X, Y, Z) probes fitted exactly to the bounds (overrides ``cell_size``), e.g. (32, 16, 23)."""
-    target_probes: int = 32 * 16 * 23
-    """Probe budget the automatic cell size aims at (the paper's volume)."""
-    normal_offset: float = 0.5
-    """Lookup offset along the surface normal, in cells (of the smallest cell edge)."""
-    window: str = "none"
-    """SH window against ringing: "none", "hanning" or "lanczos" (``sh.window_weights``)."""
-    window_size: float = 4.0
-    """Window size W of the Hanning/Lanczos window."""
-    rebuild_angle_deg: float = 0.5
-    """Rebake the sky map (and restart the layer sweep) when the sun moved more than this."""
-    sky_map_size: int = SKY_MAP_SIZE
-    """Texels per side of the paraboloid sky map."""
-    ground_albedo: float = 0.2
-    """Albedo of the ground seen below the horizon (lit by the sky only); 0 = black."""
-    sequence: str = "hammersley"
-    """"hammersley" (Cranley–Patterson rotated per probe) or "sobol-owen" (Owen-scrambled per probe)."""
-    seed: int = 0
-    """Salt of the per-probe decorrelation."""
-    auto_quads: bool = True
-    """Fit occlusion quads from the meshes (``quadfit``) when the scene has none."""
-
-    def __post_init__(self):
-        if not (1 <= self.rays_per_probe <= 1 << 20):
-            raise ValueError(f"rays_per_probe must be in 1..2^20, got {self.rays_per_probe}")
-        if self.cell_size is not None and not self.cell_size > 0:
-            raise ValueError(f"cell_size must be positive, got {self.cell_size}")
-        if self.resolution is not None and (len(self.resolution) != 3 or min(self.resolution) < 1):
-            raise ValueError(f"resolution must be 3 positive ints, got {self.resolution}")
-        if self.window not in WINDOWS:
-            raise ValueError(f"window must be one of {WINDOWS}, got {self.window!r}")
-        if self.sequence not in SEQUENCES:
-            raise ValueError(f"sequence must be one of {SEQUENCES}, got {self.sequence!r}")
-        if not 0.0 <= self.ground_albedo <= 1.0:
-            raise ValueError(f"ground_albedo must be in [0, 1], got {self.ground_albedo}")
-        if not self.normal_offset >= 0.0:
-            raise ValueError(f"normal_offset must be >= 0, got {self.normal_offset}")
-        if self.target_probes < 8:
-            raise ValueError(f"target_probes must be >= 8, got {self.target_probes}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -229,7 +178,7 @@ def integrate_sky_layer(
 # host
 
 
-def fit_grid(bounds: np.ndarray, config: SkyVolumeConfig) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
+def fit_grid(bounds: np.ndarray, config: SkyConfig) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
     """(origin (3,), cell_size (3,), resolution (X, Y, Z)) of the probe grid for scene bounds (2,3)."""
     lo, hi = np.asarray(bounds, np.float64)
     extent = np.maximum(hi - lo, 0.0)
@@ -331,11 +280,11 @@ class SkyVolume:
     :class:`~serenity.kernels.atmosphere.SkyMapCache` (its ``sky_map`` is what the dome samples).
     """
 
-    def __init__(self, scene, config: SkyVolumeConfig | None = None, device: str | None = None):
+    def __init__(self, scene, config: SkyConfig | None = None, device: str | None = None):
         from serenity.device import resolve_device
 
         self.scene = scene
-        self.config = cfg = config or SkyVolumeConfig()
+        self.config = cfg = config or SkyConfig()
         self.device = resolve_device(device)
         self.grid_origin, self.cell_size, self.resolution = fit_grid(scene.bounds, cfg)
         self.normal_offset_m = float(cfg.normal_offset * float(np.min(self.cell_size)))

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from serenity.config import LPV_MAX_CASCADES
 from serenity.raster.context import fullscreen_vao, load_program
 from serenity.raster.interop import texture3d_from_array
 
-MAX_CASCADES = 3
+MAX_CASCADES = LPV_MAX_CASCADES
 CHANNELS = ("r", "g", "b")
 UNITS = MAX_CASCADES * len(CHANNELS)  # texture units ``bind`` uses, from ``first_unit`` on
 

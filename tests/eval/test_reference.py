@@ -168,10 +168,10 @@ def test_material_mapping():
 def our_direct(scene):
     """Our direct-only frame (no ambient term, no ray tracing: Mitsuba's depth 2 has no mirror bounce
     lit by the sun either, and those pixels are left out)."""
-    from serenity.config import RenderConfig
+    from serenity.config import LPVConfig, RenderConfig, SkyConfig
     from serenity.frame import Renderer
 
-    cfg = RenderConfig(ambient="none", ray_tracing=False, lpv=False, sky_lighting=False)
+    cfg = RenderConfig(ambient="none", ray_tracing=False, lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False))
     frame = Renderer(scene, W, H, config=cfg).render()
     return frame.hdr, frame.aovs["depth"][..., 0]
 

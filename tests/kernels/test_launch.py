@@ -1,9 +1,17 @@
 import numpy as np
+import pytest
 
 from serenity.device import init_warp
-from serenity.kernels.launch import chunk_ranges, launch
+from serenity.kernels.launch import ScatterGrid, Staging, chunk_ranges, host_array, launch, slot_base
 
 wp = init_warp()
+
+
+@wp.kernel
+def _histogram(values: wp.array(dtype=wp.int32), slot_starts: wp.array(dtype=int), slot_stride: int,
+               out: wp.array(dtype=wp.vec4), offset: int):
+    i = wp.tid() + offset
+    wp.atomic_add(out, slot_base(offset, slot_starts, slot_stride) + values[i], wp.vec4(1.0, float(i % 16), 0.0, 0.0))
 
 
 @wp.kernel
@@ -54,3 +62,35 @@ def test_launch_from_a_start_index_covers_exactly_that_range(device):
     full = wp.zeros(n, dtype=wp.int32, device=device)
     launch(_collatz_steps, n, [start, full], device=device, threads=1)
     np.testing.assert_array_equal(got[first:first + count], full.numpy()[first:first + count])
+
+
+@pytest.mark.parametrize("threads", [1, 3, 8])
+def test_scatter_grid_sums_every_item_once(device, threads):
+    """Many items adding into few cells: the CPU's private slots (or CUDA's atomics) lose nothing, and
+    a second scatter before the gather adds to the first."""
+    n, cells = 40_000, 7
+    values = np.arange(n, dtype=np.int32) % cells
+    grid = ScatterGrid(cells, device, threads=threads)
+    vals = wp.array(values, dtype=wp.int32, device=device)
+    grid.scatter(_histogram, n, [vals])
+    grid.scatter(_histogram, n, [vals])
+    grid.gather()
+    got = grid.array.numpy()
+    idx = np.arange(n, dtype=np.float64) % 16  # small integers: float32 sums stay exact
+    np.testing.assert_array_equal(got[:, 0], 2 * np.bincount(values, minlength=cells))
+    np.testing.assert_array_equal(got[:, 1], 2 * np.bincount(values, weights=idx, minlength=cells))
+    grid.zero()
+    assert not grid.array.numpy().any()
+
+
+def test_staging_wraps_or_copies_and_checks_the_device(device):
+    st = Staging(device)
+    a = st.input(np.arange(12, dtype=np.float64), "p", wp.vec3, 3)
+    assert a.shape == (4,) and str(a.device) == device
+    np.testing.assert_array_equal(a.numpy(), np.arange(12, dtype=np.float32).reshape(4, 3))
+    assert st.buffer("out", 5, wp.vec3).shape == (5,)
+    other = "cpu" if device != "cpu" else None
+    if other:
+        with pytest.raises(ValueError, match="expected"):
+            st.input(wp.zeros(3, dtype=wp.vec3, device=other), "p", wp.vec3, 3)
+    assert host_array(wp.zeros(3, dtype=float, device="cpu")).shape == (3,)

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from serenity.config import LPVConfig
 from serenity.kernels import lpv as L
 
 SQ5 = math.sqrt(5.0)
@@ -18,7 +19,7 @@ def unit_grid_volume(device, res=16, iterations=8, early_stop=0.0, geometry_volu
     """One cascade with cell size 1 m and origin (−1, −1, −1): grid cell (i,j,k) = world [i−1, i)…
     (exactly ``iterations`` propagation steps: no scene-crossing extension)."""
     kw.setdefault("cross_scene", False)
-    cfg = L.LPVConfig(resolution=res, cascades=1, iterations=iterations, early_stop=early_stop,
+    cfg = LPVConfig(resolution=res, cascades=1, iterations=iterations, early_stop=early_stop,
                       geometry_volume=geometry_volume, **kw)
     v = L.LightPropagationVolume(cfg, device=device, threads=threads)
     bounds = np.array([[0.0] * 3, [float(res - 2)] * 3])
@@ -147,7 +148,7 @@ def test_geometry_volume_wall_blocks_light(device):
 
 
 def _random_volume(device, **kw):
-    cfg = L.LPVConfig(resolution=12, iterations=4, early_stop=0.0, view_distance=20.0, **kw)
+    cfg = LPVConfig(resolution=12, iterations=4, early_stop=0.0, view_distance=20.0, **kw)
     v = L.LightPropagationVolume(cfg, device=device)
     bounds = np.array([[-8.0, 0.0, -8.0], [8.0, 6.0, 8.0]])
     v.fit((np.array([0.0, 2.0, -2.0]), np.array([0.3, -0.1, 1.0])), bounds)
@@ -188,7 +189,7 @@ def test_irradiance_of_a_single_cell_matches_the_formula(device):
 def _lit_floor(device, **kw):
     """A floor of exitance 50 W/m² (VPLs every 0.25 m at y = 0.01) under 3 cascades of 16³ around a
     camera at head height; returns the volume."""
-    cfg = L.LPVConfig(resolution=16, early_stop=0.0, view_distance=24.0, geometry_volume=False, **kw)
+    cfg = LPVConfig(resolution=16, early_stop=0.0, view_distance=24.0, geometry_volume=False, **kw)
     v = L.LightPropagationVolume(cfg, device=device)
     bounds = np.array([[-12.0, 0.0, -12.0], [12.0, 6.0, 12.0]])
     v.fit((np.array([0.0, 1.7, 0.0]), np.array([0.0, 0.0, 1.0])), bounds)
@@ -292,7 +293,7 @@ def test_early_stop_and_empty_cascade_skip(device):
 
 
 def test_empty_fine_cascade_is_skipped_not_black(device):
-    cfg = L.LPVConfig(resolution=16, iterations=4, early_stop=0.0, view_distance=24.0, geometry_volume=False)
+    cfg = LPVConfig(resolution=16, iterations=4, early_stop=0.0, view_distance=24.0, geometry_volume=False)
     v = L.LightPropagationVolume(cfg, device=device)
     bounds = np.array([[-12.0, 0.0, -12.0], [12.0, 6.0, 12.0]])
     v.fit((np.array([0.0, 1.7, 0.0]), np.array([0.0, 0.0, 1.0])), bounds)
@@ -310,7 +311,7 @@ def test_empty_fine_cascade_is_skipped_not_black(device):
 
 
 def test_fit_cascades_skips_and_snaps():
-    cfg = L.LPVConfig(resolution=32, view_distance=64.0)
+    cfg = LPVConfig(resolution=32, view_distance=64.0)
     small = np.array([[0.0, 0.0, 0.0], [5.0, 5.0, 5.0]])
     grids = L.fit_cascades([2.5, 2.5, -4.0], [0, 0, 1], small, cfg)
     assert [g.level for g in grids] == [0, 1]  # cascade 1 already holds the scene: 2 is skipped
@@ -328,7 +329,7 @@ def test_fit_cascades_skips_and_snaps():
 
 
 def test_update_reinjects_only_when_inputs_or_camera_cell_change(device):
-    cfg = L.LPVConfig(resolution=8, iterations=2, view_distance=16.0)
+    cfg = LPVConfig(resolution=8, iterations=2, view_distance=16.0)
     v = L.LightPropagationVolume(cfg, device=device)
     bounds = np.array([[-8.0, 0.0, -8.0], [8.0, 4.0, 8.0]])
     rng = np.random.default_rng(0)
@@ -424,11 +425,11 @@ def test_coarsest_cascade_runs_enough_iterations_to_cross_the_scene(device):
 
 
 def test_iterations_per_cascade_are_validated():
-    assert L.LPVConfig(iterations=(2, 4, 8)).iteration_counts == (2, 4, 8)
+    assert LPVConfig(iterations=(2, 4, 8)).iteration_counts == (2, 4, 8)
     with pytest.raises(ValueError, match="iterations"):
-        L.LPVConfig(iterations=(8, 8))
+        LPVConfig(iterations=(8, 8))
     with pytest.raises(ValueError, match="iterations"):
-        L.LPVConfig(iterations=-1)
+        LPVConfig(iterations=-1)
 
 
 def test_self_illumination_of_a_lit_plane(device):

@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
+from serenity.config import SkyConfig
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
 from serenity.kernels.quadfit import fit_occlusion_quads
 from serenity.kernels.sampling import fibonacci_sphere
 from serenity.kernels.skyvolume import (
     SkyVolume,
-    SkyVolumeConfig,
     occluded_np,
     pack_textures,
     unpack_textures,
@@ -29,7 +29,7 @@ def _constant_scene(radiance=(1.0, 2.0, 3.0), quads=()):
 
 
 def test_white_furnace(device):
-    cfg = SkyVolumeConfig(rays_per_probe=512, resolution=(2, 2, 2), ground_albedo=1.0, auto_quads=False,
+    cfg = SkyConfig(rays_per_probe=512, resolution=(2, 2, 2), ground_albedo=1.0, auto_quads=False,
                           normal_offset=0.0)
     vol = SkyVolume(_constant_scene(), cfg, device=device)
     vol.rebuild()
@@ -43,7 +43,7 @@ def test_quad_over_probe_blocks_its_solid_angle(device):
     # a 4 m × 6 m quad 2 m above the probe: Ω = 4·asin(ab / sqrt((a² + 4c²)(b² + 4c²)))
     a, b, c = 4.0, 6.0, 2.0
     quad = OcclusionQuad((0.0, c, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), a / 2, b / 2)
-    cfg = SkyVolumeConfig(rays_per_probe=4096, resolution=(1, 1, 1), ground_albedo=1.0, normal_offset=0.0)
+    cfg = SkyConfig(rays_per_probe=4096, resolution=(1, 1, 1), ground_albedo=1.0, normal_offset=0.0)
     scene = _constant_scene((1.0, 1.0, 1.0), [quad])
     vol = SkyVolume(scene, cfg, device=device)
     vol.grid_origin = np.zeros(3)  # the single probe right under the quad's centre
@@ -66,7 +66,7 @@ def courtyard():
 
 
 def test_probes_among_quads_vs_brute_force(device, courtyard):
-    cfg = SkyVolumeConfig(resolution=(32, 16, 23), normal_offset=0.0)  # default rays per probe
+    cfg = SkyConfig(resolution=(32, 16, 23), normal_offset=0.0)  # default rays per probe
     vol = SkyVolume(courtyard, cfg, device=device)
     vol.rebuild()
     pos = vol.probe_positions()
@@ -89,7 +89,7 @@ def test_probes_among_quads_vs_brute_force(device, courtyard):
 
 
 def test_layer_sweep_equals_rebuild(device, courtyard):
-    cfg = SkyVolumeConfig(rays_per_probe=32, cell_size=8.0)
+    cfg = SkyConfig(rays_per_probe=32, cell_size=8.0)
     a = SkyVolume(courtyard, cfg, device=device)
     b = SkyVolume(courtyard, cfg, device=device)
     b.rebuild()
@@ -109,7 +109,7 @@ def test_layer_sweep_equals_rebuild(device, courtyard):
 
 
 def test_textures_layout(device, courtyard):
-    vol = SkyVolume(courtyard, SkyVolumeConfig(rays_per_probe=16, cell_size=10.0), device=device)
+    vol = SkyVolume(courtyard, SkyConfig(rays_per_probe=16, cell_size=10.0), device=device)
     vol.rebuild()
     tex = vol.textures()
     x, y, z = vol.resolution
@@ -124,7 +124,7 @@ def test_textures_layout(device, courtyard):
 
 @pytest.mark.parametrize("elevation", [0.0, -5.0, -30.0])
 def test_night_and_horizon_are_finite(device, courtyard, elevation):
-    vol = SkyVolume(courtyard, SkyVolumeConfig(rays_per_probe=32, cell_size=10.0), device=device)
+    vol = SkyVolume(courtyard, SkyConfig(rays_per_probe=32, cell_size=10.0), device=device)
     vol.rebuild(sun_direction=direction_from_angles(elevation, 270.0))
     c = vol.coefficients()
     assert np.all(np.isfinite(c))
@@ -133,7 +133,7 @@ def test_night_and_horizon_are_finite(device, courtyard, elevation):
 
 
 def test_probe_inside_a_building_is_dark_above(device, courtyard):
-    cfg = SkyVolumeConfig(rays_per_probe=256, resolution=(1, 1, 1), normal_offset=0.0)
+    cfg = SkyConfig(rays_per_probe=256, resolution=(1, 1, 1), normal_offset=0.0)
     vol = SkyVolume(courtyard, cfg, device=device)
     vol.grid_origin = np.array([0.0, 6.0, -19.0])  # inside the north building (x ±23, y 0..12.3, z -23..-15)
     vol.rebuild()
@@ -147,8 +147,8 @@ def test_probe_inside_a_building_is_dark_above(device, courtyard):
 
 def test_owen_sequence_agrees(device, courtyard):
     base = dict(rays_per_probe=256, cell_size=12.0)
-    a = SkyVolume(courtyard, SkyVolumeConfig(**base), device=device)
-    b = SkyVolume(courtyard, SkyVolumeConfig(sequence="sobol-owen", **base), device=device)
+    a = SkyVolume(courtyard, SkyConfig(**base), device=device)
+    b = SkyVolume(courtyard, SkyConfig(sequence="sobol-owen", **base), device=device)
     a.rebuild()
     b.rebuild()
     ca, cb = a.coefficients()[..., 0, :], b.coefficients()[..., 0, :]
@@ -171,5 +171,5 @@ def test_quad_fit_recovers_courtyard_walls(courtyard):
 def test_volume_fits_quads_when_scene_has_none(device):
     s = build_scene("thin-wall")
     s.occlusion_quads = []
-    vol = SkyVolume(s, SkyVolumeConfig(rays_per_probe=16, cell_size=5.0), device=device)
+    vol = SkyVolume(s, SkyConfig(rays_per_probe=16, cell_size=5.0), device=device)
     assert vol.quad_fit is not None and len(vol.quads) >= 1

@@ -1,17 +1,18 @@
 """Deferred direct lighting against analytic answers."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from serenity.config import RenderConfig
+from serenity.config import LPVConfig, RenderConfig, SkyConfig
 from serenity.frame import Renderer
 
 from .scenes import plane_scene, project
 
 #: direct light only: these tests check it against analytic answers
-DIRECT = RenderConfig(lpv=False, sky_lighting=False)
+DIRECT = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False))
 
 
 @pytest.mark.parametrize("zenith", [0.0, 30.0, 60.0, 80.0])
@@ -52,7 +53,7 @@ def test_sun_below_horizon_gives_no_direct_light_and_finite_image(gl_ctx):
 def test_constant_ambient_adds_pi_L_sky(gl_ctx):
     scene = plane_scene(zenith_deg=95.0)
     scene.sky.radiance = np.array([10.0, 20.0, 30.0])
-    frame = Renderer(scene, 64, 36, config=RenderConfig(ambient="constant", lpv=False, sky_lighting=False)).render()
+    frame = Renderer(scene, 64, 36, config=replace(DIRECT, ambient="constant")).render()
     covered = np.isfinite(frame.aovs["depth"][..., 0])
     expected = 0.5 / math.pi * math.pi * np.array([10.0, 20.0, 30.0])
     assert np.allclose(frame.hdr[covered], expected, rtol=2e-3)

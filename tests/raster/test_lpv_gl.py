@@ -6,12 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from serenity.config import LPVConfig
 from serenity.kernels import lpv as L
 from serenity.raster.lpv_gl import LPVProbeGL
 
 
 def _volume(leak_guard: bool, cascades: int = 3):
-    cfg = L.LPVConfig(resolution=16, cascades=cascades, iterations=6, early_stop=0.0, view_distance=12.0,
+    cfg = LPVConfig(resolution=16, cascades=cascades, iterations=6, early_stop=0.0, view_distance=12.0,
                       leak_guard=leak_guard)
     v = L.LightPropagationVolume(cfg, device="cpu")
     bounds = np.array([[-10.0, 0.0, -10.0], [10.0, 6.0, 10.0]])

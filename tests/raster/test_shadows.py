@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
+from serenity.config import LPVConfig, RenderConfig, ShadowConfig, SSAOConfig
 from serenity.frame import Renderer
 from serenity.raster.shadow import fit_cascades
 from serenity.scene.model import Camera
@@ -21,7 +21,7 @@ BOX = ((-1.0, 0.0, -1.0), (1.0, 2.0, 1.0))
 @pytest.mark.parametrize("mode", ["hard", "pcf", "pcss"])
 def test_no_acne_at_grazing_sun(gl_ctx, elevation, mode):
     scene = plane_scene(zenith_deg=90.0 - elevation)
-    cfg = RenderConfig(lpv=False, shadow=ShadowConfig(filter=mode))
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False), shadow=ShadowConfig(filter=mode))
     frame = Renderer(scene, 160, 90, config=cfg).render()
     covered = np.isfinite(frame.aovs["depth"][..., 0])
     expected = 0.5 / math.pi * 1000.0 * math.sin(math.radians(elevation))
@@ -53,7 +53,7 @@ def test_shadows_do_not_shimmer_when_camera_moves(gl_ctx):
     """Fixed ground points: their shadowed/lit state must not flip when the camera moves by a texel."""
     scene = plane_scene(zenith_deg=45.0, azimuth_deg=60.0, with_box=True)
     w, h = 320, 180
-    cfg = RenderConfig(lpv=False, shadow=ShadowConfig(filter="hard"), ssao=SSAOConfig(enabled=False))
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False), shadow=ShadowConfig(filter="hard"), ssao=SSAOConfig(enabled=False))
     r = Renderer(scene, w, h, config=cfg)
     xs, zs = np.meshgrid(np.linspace(-4, 1, 40), np.linspace(-3, 2, 40))
     pts = np.stack([xs.ravel(), np.zeros(xs.size), zs.ravel()], axis=1)
@@ -81,7 +81,7 @@ def _penumbra_profile(mode, samples=32):
     scene.camera = Camera(position=(x_edge, 1.2, 0.0), target=(x_edge, 0.0, 0.0), up=(0.0, 0.0, -1.0),
                           fov_y_deg=20.0, near=0.05, far=50.0)
     w = h = 256
-    cfg = RenderConfig(lpv=False,
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False),
                        shadow=ShadowConfig(filter=mode, filter_samples=samples, blocker_samples=samples // 2),
                        ssao=SSAOConfig(enabled=False))
     frame = Renderer(scene, w, h, config=cfg).render()

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from serenity.config import SkyConfig
 from serenity.kernels import atmosphere as A
-from serenity.kernels.skyvolume import SkyVolume, SkyVolumeConfig
+from serenity.kernels.skyvolume import SkyVolume
 from serenity.raster.context import load_program
 from serenity.raster.sky import SkyTexturesGL
 from serenity.scene.procedural import build_scene
@@ -12,7 +13,7 @@ from serenity.scene.procedural import build_scene
 
 @pytest.fixture(scope="module")
 def volume():
-    vol = SkyVolume(build_scene("courtyard"), SkyVolumeConfig(rays_per_probe=64, resolution=(12, 6, 10)))
+    vol = SkyVolume(build_scene("courtyard"), SkyConfig(rays_per_probe=64, resolution=(12, 6, 10)))
     vol.rebuild()
     return vol
 

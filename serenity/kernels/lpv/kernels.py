@@ -1,0 +1,567 @@
+"""LPV Warp functions and kernels (package docstring: what is stored, propagation, lookups).
+
+A cascade in a kernel is a ``Cascade`` struct (its grid's placement and its offsets in the shared
+arrays). Two tables of them: the **levels** (one per config cascade, offsets only: which cells of
+the per-cell arrays belong to which grid) and the **cascades** (the fitted or active ones, finest
+first, with origin and cell size). Every kernel is 1-D with a trailing ``offset`` (see
+``serenity.kernels.launch``); the scatter kernels (``inject_vpls``, ``inject_geometry``) follow
+``ScatterGrid``'s convention. Flags are compiled in or out by cached factories
+(``propagate_kernel(geometry_volume)``, ``lookup_irradiance_kernel(leak_guard)``).
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import warp as wp
+
+from serenity.kernels.launch import slot_base
+from serenity.kernels.lpv.basis import C0, C1, E0, E1, G0, G1, K0, K1, T_AX_AX, T_AX_DC, T_DC_AX, T_DC_DC, T_PERP
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class Cascade:
+    """One cascade's grid and where its cells live in the shared arrays."""
+
+    origin: wp.vec3
+    """World position of the grid's min corner (m); unused in the level table."""
+    cell: float
+    """Edge of a cubic cell (m); unused in the level table."""
+    res: int
+    """Cells per axis."""
+    base: int
+    """First vec4 of this grid in the SH arrays (3·res³ vec4: R, G, B blocks, each z, y, x)."""
+    cell_base: int
+    """First cell in the per-cell arrays (res³)."""
+    gv_base: int
+    """First vec4 in the geometry volume ((res+1)³)."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Warp functions
+# ----------------------------------------------------------------------------------------------
+
+
+@wp.func
+def find_level(i: int, levels: wp.array(dtype=Cascade), n_levels: int) -> int:
+    """Config level whose cells [cell_base, cell_base + res³) hold global cell i (−1: none)."""
+    found = int(-1)
+    for l in range(n_levels):
+        e = levels[l]
+        if i >= e.cell_base and i < e.cell_base + e.res * e.res * e.res:
+            found = l
+    return found
+
+
+@wp.func
+def grid_coord(g: Cascade, p: wp.vec3) -> wp.vec3:
+    """Grid coordinate (cells, float) of world point p in cascade g."""
+    return (p - g.origin) / g.cell
+
+
+@wp.func
+def inside(u: wp.vec3, res: int) -> bool:
+    """u in [0, res)³."""
+    fr = float(res)
+    return u[0] >= 0.0 and u[1] >= 0.0 and u[2] >= 0.0 and u[0] < fr and u[1] < fr and u[2] < fr
+
+
+@wp.func
+def gather_pair(out: wp.vec4, p: wp.vec4, m: wp.vec4, axis: int) -> wp.vec4:
+    """Add what a cell gathers along one axis: ``p`` = (weighted) SH of the source at −e_axis
+    (light travelling +e_axis), ``m`` = source at +e_axis (travelling −e_axis).
+
+    The sparse transfer (``basis.TRANSFER``) for d = ±e_axis, summed for the pair: with σ = p + m,
+    δ = p − m: out0 += T_DC_DC·σ0 + T_DC_AX·δ_a, out_a += T_AX_DC·δ0 + T_AX_AX·σ_a,
+    out_⟂ += T_PERP·σ_⟂.
+    """
+    s = p + m
+    d = p - m
+    if axis == 0:
+        return out + wp.vec4(T_DC_DC * s[0] + T_DC_AX * d[1], T_AX_DC * d[0] + T_AX_AX * s[1],
+                             T_PERP * s[2], T_PERP * s[3])
+    if axis == 1:
+        return out + wp.vec4(T_DC_DC * s[0] + T_DC_AX * d[2], T_PERP * s[1],
+                             T_AX_DC * d[0] + T_AX_AX * s[2], T_PERP * s[3])
+    return out + wp.vec4(T_DC_DC * s[0] + T_DC_AX * d[3], T_PERP * s[1], T_PERP * s[2],
+                         T_AX_DC * d[0] + T_AX_AX * s[3])
+
+
+@wp.func
+def gv_at(gv: wp.array(dtype=wp.vec4), base: int, r1: int, x: int, y: int, z: int) -> wp.vec4:
+    return gv[base + (z * r1 + y) * r1 + x]
+
+
+@wp.func
+def gv_face(gv: wp.array(dtype=wp.vec4), base: int, r1: int, axis: int, x: int, y: int, z: int) -> wp.vec4:
+    """Mean blocking SH of the 4 geometry cells at the corners of the face ⟂ axis whose low corner is (x,y,z)."""
+    if axis == 0:
+        return 0.25 * (gv_at(gv, base, r1, x, y, z) + gv_at(gv, base, r1, x, y + 1, z)
+                       + gv_at(gv, base, r1, x, y, z + 1) + gv_at(gv, base, r1, x, y + 1, z + 1))
+    if axis == 1:
+        return 0.25 * (gv_at(gv, base, r1, x, y, z) + gv_at(gv, base, r1, x + 1, y, z)
+                       + gv_at(gv, base, r1, x, y, z + 1) + gv_at(gv, base, r1, x + 1, y, z + 1))
+    return 0.25 * (gv_at(gv, base, r1, x, y, z) + gv_at(gv, base, r1, x + 1, y, z)
+                   + gv_at(gv, base, r1, x, y + 1, z) + gv_at(gv, base, r1, x + 1, y + 1, z))
+
+
+@wp.func
+def eval_transmittance(b: wp.vec4, axis: int, sign: float) -> float:
+    """1 − clamp(B(−d)) for light travelling along d = sign·e_axis through a face of blocking SH b."""
+    blk = C0 * b[0] - sign * C1 * b[axis + 1]
+    return 1.0 - wp.clamp(blk, 0.0, 1.0)
+
+
+@wp.func
+def guard_weight(n: wp.vec3, us: wp.vec3, x: int, y: int, z: int) -> float:
+    """g = clamp(4·n·(centre − us), 0, 1) of cell (x, y, z) for a surface at us (cells)."""
+    c = wp.vec3(float(x) + 0.5, float(y) + 0.5, float(z) + 0.5)
+    return wp.clamp(4.0 * wp.dot(n, c - us), 0.0, 1.0)
+
+
+@wp.func
+def trilinear_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3, us: wp.vec3, n: wp.vec3,
+                 guard: bool) -> wp.vec4:
+    """Trilinear SH at grid coordinate u (cells), cell centres at i + 0.5, clamp to edge (GL_LINEAR).
+    With ``guard`` (a compile-time constant at every call), each of the 8 cells' weights is also
+    multiplied by ``guard_weight`` for a surface at us with normal n and renormalised (package doc),
+    plain trilinear where they sum below 1e-4."""
+    p = u - wp.vec3(0.5, 0.5, 0.5)
+    fx = wp.floor(p[0])
+    fy = wp.floor(p[1])
+    fz = wp.floor(p[2])
+    tx = p[0] - fx
+    ty = p[1] - fy
+    tz = p[2] - fz
+    x0 = wp.clamp(int(fx), 0, res - 1)
+    y0 = wp.clamp(int(fy), 0, res - 1)
+    z0 = wp.clamp(int(fz), 0, res - 1)
+    x1 = wp.clamp(int(fx) + 1, 0, res - 1)
+    y1 = wp.clamp(int(fy) + 1, 0, res - 1)
+    z1 = wp.clamp(int(fz) + 1, 0, res - 1)
+    plain = wp.vec4()
+    acc = wp.vec4()
+    wsum = float(0.0)
+    for k in range(8):
+        xi = x0
+        wx = 1.0 - tx
+        if k % 2 == 1:
+            xi = x1
+            wx = tx
+        yi = y0
+        wy = 1.0 - ty
+        if (k // 2) % 2 == 1:
+            yi = y1
+            wy = ty
+        zi = z0
+        wz = 1.0 - tz
+        if k // 4 == 1:
+            zi = z1
+            wz = tz
+        w = wx * wy * wz
+        s = grid[base + (zi * res + yi) * res + xi]
+        plain += w * s
+        if guard:
+            gw = w * guard_weight(n, us, xi, yi, zi)
+            acc += gw * s
+            wsum += gw
+    if not guard or wsum < 1.0e-4:
+        return plain
+    return acc / wsum
+
+
+@wp.func
+def sample_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3) -> wp.vec4:
+    """Plain trilinear SH at grid coordinate u (``trilinear_sh`` without the guard)."""
+    return trilinear_sh(grid, base, res, u, u, wp.vec3(), False)
+
+
+@wp.func
+def cascade_weight(u: wp.vec3, res: int, margin: float, band: float, last: bool) -> float:
+    """α of a cascade at grid coordinate u (package doc): smoothstep(margin, margin+band, d), step if
+    band = 0; the last cascade clamp(d + 1, 0, 1). d = distance to the box border in cells."""
+    fr = float(res)
+    d = wp.min(wp.min(wp.min(u[0], u[1]), u[2]), wp.min(wp.min(fr - u[0], fr - u[1]), fr - u[2]))
+    if last:
+        return wp.clamp(d + 1.0, 0.0, 1.0)
+    if band > 0.0:
+        t = wp.clamp((d - margin) / band, 0.0, 1.0)
+        return t * t * (3.0 - 2.0 * t)
+    if d > margin:
+        return 1.0
+    return 0.0
+
+
+@wp.func
+def eval_irradiance(s: wp.vec4, n: wp.vec3, inv_area: float) -> float:
+    """Irradiance (W/m²) on a surface of normal n from an intensity SH s of a cell of area 1/inv_area."""
+    e = E0 * s[0] - E1 * (s[1] * n[0] + s[2] * n[1] + s[3] * n[2])
+    return wp.max(e * inv_area, 0.0)
+
+
+@wp.func
+def eval_radiance(s: wp.vec4, w: wp.vec3, a1: float, inv_area: float) -> float:
+    """Radiance (W·m⁻²·sr⁻¹) travelling along w, band 1 scaled by a1 (lobe prefilter), clamped ≥ 0."""
+    e = C0 * s[0] + a1 * C1 * (s[1] * w[0] + s[2] * w[1] + s[3] * w[2])
+    return wp.max(e * inv_area, 0.0)
+
+
+@wp.func
+def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p: wp.vec3, n: wp.vec3,
+                       lookup_offset: float, leak_guard: bool, margin: float, band: float, keep: float) -> wp.vec4:
+    """Cascade g's share of the irradiance at p (normal n): (α·E_rgb, α), α its blend weight times
+    what the finer cascades left (``keep``). The twin of lpv.glsl's lpv_cascade_irradiance."""
+    us = grid_coord(g, p)
+    u = us + n * lookup_offset
+    alpha = cascade_weight(u, g.res, margin, band, last) * keep
+    if alpha <= 0.0:
+        return wp.vec4()
+    inv_area = 1.0 / (g.cell * g.cell)
+    n3 = g.res * g.res * g.res
+    sr = trilinear_sh(grids, g.base, g.res, u, us, n, leak_guard)
+    sg = trilinear_sh(grids, g.base + n3, g.res, u, us, n, leak_guard)
+    sb = trilinear_sh(grids, g.base + 2 * n3, g.res, u, us, n, leak_guard)
+    return wp.vec4(alpha * eval_irradiance(sr, n, inv_area), alpha * eval_irradiance(sg, n, inv_area),
+                   alpha * eval_irradiance(sb, n, inv_area), alpha)
+
+
+@wp.func
+def cascade_radiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, q: wp.vec3, w: wp.vec3,
+                     a1: float, margin: float, band: float, keep: float) -> wp.vec4:
+    """Cascade g's share of the radiance travelling along w at q: (α·L_rgb, α), as above."""
+    u = grid_coord(g, q)
+    alpha = cascade_weight(u, g.res, margin, band, last) * keep
+    if alpha <= 0.0:
+        return wp.vec4()
+    inv_area = 1.0 / (g.cell * g.cell)
+    n3 = g.res * g.res * g.res
+    return wp.vec4(alpha * eval_radiance(sample_sh(grids, g.base, g.res, u), w, a1, inv_area),
+                   alpha * eval_radiance(sample_sh(grids, g.base + n3, g.res, u), w, a1, inv_area),
+                   alpha * eval_radiance(sample_sh(grids, g.base + 2 * n3, g.res, u), w, a1, inv_area), alpha)
+
+
+# ----------------------------------------------------------------------------------------------
+# kernels
+# ----------------------------------------------------------------------------------------------
+
+
+@wp.kernel(enable_backward=False)
+def inject_vpls(
+    # inputs
+    positions: wp.array(dtype=wp.vec3),
+    normals: wp.array(dtype=wp.vec3),
+    flux: wp.array(dtype=wp.vec3),
+    cascades: wp.array(dtype=Cascade),
+    n_cascades: int,
+    shift: float,
+    slot_starts: wp.array(dtype=int),
+    slot_stride: int,
+    # outputs
+    grid: wp.array(dtype=wp.vec4),
+    offset: int,
+):
+    """Add each VPL's clamped-cosine intensity lobe to the cell at p + shift·s·n of every cascade."""
+    i = wp.tid() + offset
+    n = normals[i]
+    ln = wp.length(n)
+    if not (ln > 0.0):
+        return
+    n = n / ln
+    f = flux[i]
+    lobe = wp.vec4(K0, K1 * n[0], K1 * n[1], K1 * n[2])
+    sbase = slot_base(offset, slot_starts, slot_stride)
+    for c in range(n_cascades):
+        g = cascades[c]
+        res = g.res
+        u = grid_coord(g, positions[i]) + n * shift
+        if inside(u, res):
+            n3 = res * res * res
+            cell = sbase + g.base + (int(u[2]) * res + int(u[1])) * res + int(u[0])
+            wp.atomic_add(grid, cell, lobe * f[0])
+            wp.atomic_add(grid, cell + n3, lobe * f[1])
+            wp.atomic_add(grid, cell + 2 * n3, lobe * f[2])
+
+
+@wp.kernel(enable_backward=False)
+def inject_geometry(
+    # inputs
+    positions: wp.array(dtype=wp.vec3),
+    normals: wp.array(dtype=wp.vec3),
+    areas: wp.array(dtype=float),
+    cascades: wp.array(dtype=Cascade),
+    n_cascades: int,
+    slot_starts: wp.array(dtype=int),
+    slot_stride: int,
+    # outputs
+    gv: wp.array(dtype=wp.vec4),
+    offset: int,
+):
+    """Add each surfel's blocking lobe to the geometry cell centred on its nearest cell corner."""
+    i = wp.tid() + offset
+    n = normals[i]
+    ln = wp.length(n)
+    if not (ln > 0.0):
+        return
+    n = n / ln
+    sbase = slot_base(offset, slot_starts, slot_stride)
+    for c in range(n_cascades):
+        g = cascades[c]
+        r1 = g.res + 1
+        u = grid_coord(g, positions[i]) + wp.vec3(0.5, 0.5, 0.5)
+        if inside(u, r1):
+            cover = areas[i] / (g.cell * g.cell)
+            cell = sbase + g.gv_base + (int(u[2]) * r1 + int(u[1])) * r1 + int(u[0])
+            wp.atomic_add(gv, cell, wp.vec4(G0 * cover, G1 * cover * n[0], G1 * cover * n[1], G1 * cover * n[2]))
+
+
+@wp.kernel(enable_backward=False)
+def measure_cells(
+    # inputs
+    grid: wp.array(dtype=wp.vec4),
+    levels: wp.array(dtype=Cascade),
+    n_levels: int,
+    # outputs
+    total: wp.array(dtype=float),
+    offset: int,
+):
+    """total[cell] = Σ_RGB |DC| of each cell (per-cascade sums say which cascades received light)."""
+    i = wp.tid() + offset
+    l = find_level(i, levels, n_levels)
+    if l < 0:
+        return
+    e = levels[l]
+    n3 = e.res * e.res * e.res
+    j = e.base + i - e.cell_base
+    total[i] = wp.abs(grid[j][0]) + wp.abs(grid[j + n3][0]) + wp.abs(grid[j + 2 * n3][0])
+
+
+@wp.kernel(enable_backward=False)
+def eval_face_transmittance(
+    # inputs
+    gv: wp.array(dtype=wp.vec4),
+    levels: wp.array(dtype=Cascade),
+    n_levels: int,
+    # outputs
+    trans_pos: wp.array(dtype=wp.vec3),
+    trans_neg: wp.array(dtype=wp.vec3),
+    offset: int,
+):
+    """Per receiving cell: transmittance of the face shared with the source at −d, for d = ±x, ±y, ±z."""
+    i = wp.tid() + offset
+    l = find_level(i, levels, n_levels)
+    if l < 0:
+        return
+    e = levels[l]
+    res = e.res
+    k = i - e.cell_base
+    x = k % res
+    y = (k // res) % res
+    z = k // (res * res)
+    r1 = res + 1
+    b = e.gv_base
+    tp = wp.vec3()
+    tn = wp.vec3()
+    tp[0] = eval_transmittance(gv_face(gv, b, r1, 0, x, y, z), 0, 1.0)
+    tn[0] = eval_transmittance(gv_face(gv, b, r1, 0, x + 1, y, z), 0, -1.0)
+    tp[1] = eval_transmittance(gv_face(gv, b, r1, 1, x, y, z), 1, 1.0)
+    tn[1] = eval_transmittance(gv_face(gv, b, r1, 1, x, y + 1, z), 1, -1.0)
+    tp[2] = eval_transmittance(gv_face(gv, b, r1, 2, x, y, z), 2, 1.0)
+    tn[2] = eval_transmittance(gv_face(gv, b, r1, 2, x, y, z + 1), 2, -1.0)
+    trans_pos[i] = tp
+    trans_neg[i] = tn
+
+
+@cache
+def propagate_kernel(geometry_volume: bool):
+    """The propagation kernel (one launch covers every cascade), geometry volume compiled in or out."""
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def propagate_lpv(
+        # inputs
+        src: wp.array(dtype=wp.vec4),
+        acc_src: wp.array(dtype=wp.vec4),
+        trans_pos: wp.array(dtype=wp.vec3),
+        trans_neg: wp.array(dtype=wp.vec3),
+        levels: wp.array(dtype=Cascade),
+        n_levels: int,
+        level_on: wp.array(dtype=int),
+        far_from: wp.array(dtype=int),
+        iteration: int,
+        # outputs
+        dst: wp.array(dtype=wp.vec4),
+        accum: wp.array(dtype=wp.vec4),
+        far: wp.array(dtype=wp.vec4),
+        change: wp.array(dtype=float),
+        total: wp.array(dtype=float),
+        offset: int,
+    ):
+        i = wp.tid() + offset
+        l = find_level(i, levels, n_levels)
+        if l < 0:
+            return
+        if level_on[l] == 0:
+            return
+        e = levels[l]
+        res = e.res
+        k = i - e.cell_base
+        x = k % res
+        y = (k // res) % res
+        z = k // (res * res)
+        n3 = res * res * res
+        rr = res * res
+        tp = wp.vec3(1.0, 1.0, 1.0)
+        tn = wp.vec3(1.0, 1.0, 1.0)
+        if wp.static(geometry_volume):
+            tp = trans_pos[i]
+            tn = trans_neg[i]
+        dc_change = float(0.0)
+        dc_total = float(0.0)
+        to_far = iteration >= far_from[l]
+        for ch in range(3):
+            j = e.base + ch * n3 + k
+            out = wp.vec4()
+            # x pair: p = source at x−1 (light travelling +x), m = source at x+1
+            p = wp.vec4()
+            m = wp.vec4()
+            if x > 0:
+                p = tp[0] * src[j - 1]
+            if x < res - 1:
+                m = tn[0] * src[j + 1]
+            out = gather_pair(out, p, m, 0)
+            p = wp.vec4()
+            m = wp.vec4()
+            if y > 0:
+                p = tp[1] * src[j - res]
+            if y < res - 1:
+                m = tn[1] * src[j + res]
+            out = gather_pair(out, p, m, 1)
+            p = wp.vec4()
+            m = wp.vec4()
+            if z > 0:
+                p = tp[2] * src[j - rr]
+            if z < res - 1:
+                m = tn[2] * src[j + rr]
+            out = gather_pair(out, p, m, 2)
+            dst[j] = out
+            a = acc_src[j] + out
+            accum[j] = a
+            if to_far:
+                far[j] = far[j] + out
+            dc_change += wp.abs(out[0])
+            dc_total += wp.abs(a[0])
+        change[i] = dc_change
+        total[i] = dc_total
+
+    return propagate_lpv
+
+
+@wp.kernel(enable_backward=False)
+def hand_over_far(
+    # inputs
+    far: wp.array(dtype=wp.vec4),
+    cascades: wp.array(dtype=Cascade),
+    n_cascades: int,
+    c: int,
+    # outputs
+    accum: wp.array(dtype=wp.vec4),
+    offset: int,
+):
+    """accum of active cascade c += Σ_{d>c} (s_c/s_d)²·far_d at each cell centre (trilinear): the
+    light coarser cascades carried beyond the finer ones' reach (package doc, "Hand-over")."""
+    i = wp.tid() + offset
+    g = cascades[c]
+    res = g.res
+    n3 = res * res * res
+    x = i % res
+    y = (i // res) % res
+    z = i // (res * res)
+    centre = g.origin + g.cell * wp.vec3(float(x) + 0.5, float(y) + 0.5, float(z) + 0.5)
+    add_r = wp.vec4()
+    add_g = wp.vec4()
+    add_b = wp.vec4()
+    for d in range(c + 1, n_cascades):
+        gd = cascades[d]
+        rd = gd.res
+        u = grid_coord(gd, centre)
+        if inside(u, rd):
+            scale = (g.cell / gd.cell) * (g.cell / gd.cell)
+            nd = rd * rd * rd
+            add_r += scale * sample_sh(far, gd.base, rd, u)
+            add_g += scale * sample_sh(far, gd.base + nd, rd, u)
+            add_b += scale * sample_sh(far, gd.base + 2 * nd, rd, u)
+    j = g.base + i
+    accum[j] = accum[j] + add_r
+    accum[j + n3] = accum[j + n3] + add_g
+    accum[j + 2 * n3] = accum[j + 2 * n3] + add_b
+
+
+@cache
+def lookup_irradiance_kernel(leak_guard: bool):
+    """Irradiance lookups (W/m², RGB) at points with unit normals, cascades blended finest first; the
+    leak guard (package doc) compiled in or out."""
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def lookup_irradiance(
+        # inputs
+        points: wp.array(dtype=wp.vec3),
+        normals: wp.array(dtype=wp.vec3),
+        grids: wp.array(dtype=wp.vec4),
+        cascades: wp.array(dtype=Cascade),
+        n_cascades: int,
+        lookup_offset: float,
+        margin: float,
+        band: float,
+        # outputs
+        out: wp.array(dtype=wp.vec3),
+        offset: int,
+    ):
+        i = wp.tid() + offset
+        p = points[i]
+        n = wp.normalize(normals[i])
+        e = wp.vec3()
+        keep = float(1.0)
+        for c in range(n_cascades):
+            r = cascade_irradiance(grids, cascades[c], c == n_cascades - 1, p, n, lookup_offset,
+                                   wp.static(leak_guard), margin, band, keep)
+            e += wp.vec3(r[0], r[1], r[2])
+            keep = keep - r[3]
+        out[i] = e
+
+    return lookup_irradiance
+
+
+@wp.kernel(enable_backward=False)
+def lookup_glossy(
+    # inputs
+    points: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    shininess: wp.array(dtype=float),
+    grids: wp.array(dtype=wp.vec4),
+    cascades: wp.array(dtype=Cascade),
+    n_cascades: int,
+    steps: int,
+    step_len: float,
+    margin: float,
+    band: float,
+    # outputs
+    out: wp.array(dtype=wp.vec3),
+    offset: int,
+):
+    """Radiance (W·m⁻²·sr⁻¹, RGB) arriving at points from the reflected directions, marched (Fig. 10)."""
+    i = wp.tid() + offset
+    p = points[i]
+    r = wp.normalize(directions[i])
+    m = shininess[i]
+    a1 = (m + 1.0) / (m + 2.0)
+    w = -r
+    acc = wp.vec3()
+    for k in range(steps):
+        q = p + r * (step_len * float(k + 1))
+        keep = float(1.0)
+        for c in range(n_cascades):
+            s = cascade_radiance(grids, cascades[c], c == n_cascades - 1, q, w, a1, margin, band, keep)
+            acc += wp.vec3(s[0], s[1], s[2])
+            keep = keep - s[3]
+    out[i] = acc / float(steps)

@@ -1,0 +1,391 @@
+"""The LPV host class: ``LightPropagationVolume`` owns the device arrays of every cascade and runs
+fit → clear → inject (VPLs, surfels) → propagate → lookup (package docstring for the maths).
+
+Every launch goes through ``serenity.kernels.launch`` (split over all CPU cores); the scatter
+(injection) goes through its ``ScatterGrid`` and host inputs through its ``Staging``, so nothing
+here depends on the device kind.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from serenity.config import LPVConfig
+from serenity.device import init_warp, resolve_device
+from serenity.kernels.launch import ScatterGrid, Staging, host_array, launch
+from serenity.kernels.lpv.basis import MAX_CASCADES, SH_FLUX
+from serenity.kernels.lpv.cascades import CascadeGrid, fit_cascades
+from serenity.kernels.lpv.kernels import (
+    Cascade,
+    eval_face_transmittance,
+    hand_over_far,
+    inject_geometry,
+    inject_vpls,
+    lookup_glossy,
+    lookup_irradiance_kernel,
+    measure_cells,
+    propagate_kernel,
+)
+
+
+@dataclass
+class _Level:
+    """Offsets of one config level (cascade) in the shared arrays."""
+
+    res: int
+    base: int  # first vec4 of this level in the SH grids (3·res³ vec4: R, G, B blocks)
+    cell_base: int  # first cell in the per-cell arrays (res³)
+    gv_base: int  # first vec4 in the geometry volume ((res+1)³)
+
+    @property
+    def size(self) -> int:
+        return 3 * self.res**3
+
+    def struct(self, grid: CascadeGrid | None = None) -> Cascade:
+        """This level as a kernel ``Cascade``, placed as ``grid`` (origin 0, cell 0 without one)."""
+        c = Cascade()
+        c.res, c.base, c.cell_base, c.gv_base = self.res, self.base, self.cell_base, self.gv_base
+        c.origin = wp.vec3(*(grid.origin if grid else (0.0, 0.0, 0.0)))
+        c.cell = float(grid.cell_size) if grid else 0.0
+        return c
+
+
+class LightPropagationVolume:
+    """Cascaded LPV on one device: fit → clear → inject (VPLs, surfels) → propagate → lookup.
+
+    All buffers are allocated once in ``__init__`` (4 SH grids — injected, ping, pong, accumulated —
+    of 3·res³ float4 per cascade, a (res+1)³ geometry volume, face transmittances; the injected grid
+    and the geometry volume are ``ScatterGrid``s); numpy inputs go through a ``Staging``.
+    ``timings`` holds the last wall time of each stage in ms (the device is synchronised when
+    ``sync_timings``).
+
+    ``fitted``: the cascades placed by ``fit`` (by config level); ``grids``: those that received
+    light at the last ``propagate`` (the ones looked up and exported; index 0 = finest).
+    """
+
+    def __init__(self, config: LPVConfig | None = None, device: str | None = None, threads: int | None = None,
+                 sync_timings: bool = True):
+        init_warp()
+        self.config = config or LPVConfig()
+        self.device = resolve_device(device)
+        self.threads = threads
+        self.sync_timings = sync_timings
+        self.fitted: list[CascadeGrid] = []
+        self.grids: list[CascadeGrid] = []
+        self.timings: dict[str, float] = {}
+        self.iterations_run: list[int] = []
+        self._propagate = propagate_kernel(bool(self.config.geometry_volume))
+        self._lookup_irradiance = lookup_irradiance_kernel(bool(self.config.leak_guard))
+        dev = self.device
+        self._levels: list[_Level] = []
+        base = cbase = gbase = 0
+        for r in self.config.resolutions:
+            self._levels.append(_Level(r, base, cbase, gbase))
+            base, cbase, gbase = base + 3 * r**3, cbase + r**3, gbase + (r + 1) ** 3
+        self._n_vec, self._n_cells, self._n_gv = base, cbase, gbase
+        self._inj = ScatterGrid(base, dev, threads)
+        self._gv = ScatterGrid(gbase, dev, threads)
+        self._ping = wp.zeros(base, dtype=wp.vec4, device=dev)
+        self._pong = wp.zeros(base, dtype=wp.vec4, device=dev)
+        self._accum = wp.zeros(base, dtype=wp.vec4, device=dev)
+        self._far = wp.zeros(base, dtype=wp.vec4, device=dev)
+        self._far_from = wp.zeros(len(self._levels), dtype=int, device=dev)
+        self._trans_pos = wp.ones(cbase, dtype=wp.vec3, device=dev)
+        self._trans_neg = wp.ones(cbase, dtype=wp.vec3, device=dev)
+        self._change = wp.zeros(cbase, dtype=float, device=dev)
+        self._total = wp.zeros(cbase, dtype=float, device=dev)
+        self._level_table = wp.array([v.struct() for v in self._levels], dtype=Cascade, device=dev)
+        self._level_on = wp.zeros(len(self._levels), dtype=int, device=dev)
+        # injection table (fitted cascades) and lookup table (active cascades)
+        self._fit_table = wp.zeros(MAX_CASCADES, dtype=Cascade, device=dev)
+        self._cas_table = wp.zeros(MAX_CASCADES, dtype=Cascade, device=dev)
+        self._last_level: dict[int, wp.array] = {}
+        self._staging = Staging(dev)
+        self._state = None  # (grids, input key) of the last update that did work
+        self._scene_size = 0.0  # largest side of the scene bounds given to ``fit`` (m)
+        self._gv_dirty = True
+        self._has_result = False
+
+    # -- helpers ---------------------------------------------------------------------------------
+
+    def _timed(self, name: str, t0: float):
+        if self.sync_timings:
+            wp.synchronize_device(self.device)
+        self.timings[name] = (time.perf_counter() - t0) * 1e3
+
+    def _tables(self, grids: list[CascadeGrid], table: wp.array) -> None:
+        rows = [self._levels[g.level].struct(g) for g in grids]
+        rows += [Cascade() for _ in range(MAX_CASCADES - len(rows))]
+        wp.copy(table, wp.array(rows, dtype=Cascade, device="cpu"))
+
+    def _level_sums(self, a: wp.array, levels=None) -> np.ndarray:
+        """Σ of a per-cell array over each config level's cells (float64; 0 for levels not in
+        ``levels`` when given — the early-stop test sums only the cascades still iterating)."""
+        h = a.numpy()  # a view on the CPU; one copy from CUDA
+        out = np.zeros(len(self._levels))
+        for k, v in enumerate(self._levels):
+            if levels is None or k in levels:
+                out[k] = np.sum(h[v.cell_base:v.cell_base + v.res**3], dtype=np.float64)
+        return out
+
+    # -- stages --------------------------------------------------------------------------------
+
+    def fit(self, camera, scene_bounds) -> bool:
+        """Place the cascades for ``camera`` (a Camera, or (position, view_dir)); True if any moved."""
+        t0 = time.perf_counter()
+        if hasattr(camera, "position"):
+            pos, view = camera.position, camera.forward
+        else:
+            pos, view = camera
+        grids = fit_cascades(pos, view, scene_bounds, self.config)
+        b = np.asarray(scene_bounds, np.float64).reshape(2, 3)
+        self._scene_size = float(np.max(b[1] - b[0]))
+        moved = grids != self.fitted
+        self.fitted = grids
+        if moved:
+            self._tables(grids, self._fit_table)
+        self._timed("fit", t0)
+        return moved
+
+    def clear(self) -> None:
+        """Zero the injected grids and the geometry volume (call before injecting a new frame's lights)."""
+        t0 = time.perf_counter()
+        self._inj.zero()
+        self._gv.zero()
+        self._gv_dirty = True
+        self._has_result = False
+        self._timed("clear", t0)
+
+    def inject(self, positions, normals, flux) -> None:
+        """Add VPLs (positions (N,3) m, normals (N,3), flux (N,3) W) to every fitted cascade."""
+        t0 = time.perf_counter()
+        p = self._staging.input(positions, "vpl_p", wp.vec3, 3)
+        n = self._staging.input(normals, "vpl_n", wp.vec3, 3)
+        f = self._staging.input(flux, "vpl_f", wp.vec3, 3)
+        if not (p.shape[0] == n.shape[0] == f.shape[0]):
+            raise ValueError(f"VPL arrays differ in length: {p.shape[0]}, {n.shape[0]}, {f.shape[0]}")
+        self._inj.scatter(inject_vpls, p.shape[0], [p, n, f, self._fit_table, len(self.fitted),
+                                                     float(self.config.injection_offset)])
+        self._timed("inject", t0)
+
+    def inject_geometry(self, positions, normals, areas) -> None:
+        """Add occluding surfels (positions (M,3) m, normals (M,3), areas (M,) m²) to the geometry volume."""
+        t0 = time.perf_counter()
+        p = self._staging.input(positions, "gv_p", wp.vec3, 3)
+        n = self._staging.input(normals, "gv_n", wp.vec3, 3)
+        a = self._staging.input(areas, "gv_a", float, 1)
+        if not (p.shape[0] == n.shape[0] == a.shape[0]):
+            raise ValueError(f"surfel arrays differ in length: {p.shape[0]}, {n.shape[0]}, {a.shape[0]}")
+        self._gv.scatter(inject_geometry, p.shape[0], [p, n, a, self._fit_table, len(self.fitted)])
+        self._gv_dirty = True
+        self._timed("inject_geometry", t0)
+
+    def propagate(self, iterations: int | None = None, early_stop: float | None = None) -> list[int]:
+        """Propagate every fitted cascade that received light; return the iterations run per fitted
+        cascade (0 for a skipped one). Restarts from the injected grids each call (so it may be
+        re-run, e.g. with other settings). ``iterations`` overrides the config for every cascade
+        (and turns off ``cross_scene``'s extension)."""
+        t0 = time.perf_counter()
+        cfg = self.config
+        nl = len(self._levels)
+        iters = np.array(cfg.iteration_counts if iterations is None else (int(iterations),) * nl, np.int64)
+        if iterations is None and cfg.cross_scene and self.fitted:
+            g = self.fitted[-1]
+            iters[g.level] = max(iters[g.level], min(g.resolution, math.ceil(self._scene_size / g.cell_size)))
+        thresh = cfg.early_stop if early_stop is None else float(early_stop)
+        dev = self.device
+        self._inj.gather()
+        self._gv.gather()
+        inj = self._inj.array
+        # skip cascades that received nothing: not propagated, not looked up
+        launch(measure_cells, self._n_cells, [inj, self._level_table, nl, self._total], device=dev,
+               threads=self.threads)
+        injected = self._level_sums(self._total)
+        fitted = {g.level for g in self.fitted}
+        on = np.array([1 if (lv in fitted and injected[lv] > 0.0 and iters[lv] > 0) else 0 for lv in range(nl)],
+                      np.int32)
+        self.grids = [g for g in self.fitted if injected[g.level] > 0.0]
+        self._tables(self.grids, self._cas_table)
+        if cfg.geometry_volume and self._gv_dirty:
+            launch(eval_face_transmittance, self._n_cells, [self._gv.array, self._level_table, nl, self._trans_pos,
+                                                            self._trans_neg], device=dev, threads=self.threads)
+            self._gv_dirty = False
+        # hand-over: a cascade's iterations past the finer one's reach (in its own cells) go to "far"
+        far_from = np.full(nl, 1 << 30, np.int32)
+        hand_over = cfg.handover and len(self.grids) > 1
+        if hand_over:
+            for fine, coarse in zip(self.grids, self.grids[1:], strict=False):
+                reach = iters[fine.level] * fine.cell_size / coarse.cell_size
+                far_from[coarse.level] = max(1, math.ceil(reach - 1e-6))
+            self._far.zero_()
+        self._far_from.assign(far_from)
+        done = np.zeros(nl, np.int64)
+        last = {lv: inj for lv in range(nl)}
+        bufs = (self._ping, self._pong)
+        wp.copy(self._accum, inj)
+        for k in range(int(iters.max(initial=0))):
+            on = on & (iters > k)
+            if not on.any():
+                break
+            src = inj if k == 0 else bufs[(k - 1) % 2]
+            dst = bufs[k % 2]
+            self._level_on.assign(on)
+            # threads only for the cells of the cascades still iterating (the coarsest may run on alone)
+            active = [self._levels[lv] for lv in np.flatnonzero(on)]
+            lo = min(v.cell_base for v in active)
+            dim = max(v.cell_base + v.res**3 for v in active) - lo
+            launch(self._propagate, dim,
+                   [src, self._accum, self._trans_pos, self._trans_neg, self._level_table, nl, self._level_on,
+                    self._far_from, k + 1, dst, self._accum, self._far, self._change, self._total], device=dev,
+                   threads=self.threads, start=lo)
+            for lv in np.flatnonzero(on):
+                done[lv] += 1
+                last[int(lv)] = dst
+            if thresh > 0.0:
+                live = set(np.flatnonzero(on).tolist())
+                change, total = self._level_sums(self._change, live), self._level_sums(self._total, live)
+                on = on & ~((change <= thresh * total) | (total <= 0.0))
+        if hand_over:
+            for c in range(len(self.grids) - 1):
+                launch(hand_over_far, self._levels[self.grids[c].level].res ** 3,
+                       [self._far, self._cas_table, len(self.grids), c, self._accum], device=dev,
+                       threads=self.threads)
+        self._last_level = last
+        self.iterations_run = [int(done[g.level]) for g in self.fitted]
+        self._has_result = True
+        self._timed("propagate", t0)
+        return self.iterations_run
+
+    def input_key(self, vpls, surfels=None):
+        """A cheap fingerprint of the injection inputs (shapes + CRC32 of the bytes), or None when it
+        cannot be had cheaply (callables, arrays on a GPU): then every update re-injects."""
+        parts = []
+        for sets in (vpls, surfels):
+            if sets is None:
+                parts.append(None)
+                continue
+            if callable(sets):
+                return None
+            for s in sets:
+                for a in s:
+                    a = host_array(a)
+                    if a is None:
+                        return None
+                    a = np.ascontiguousarray(a)
+                    parts.append((a.shape, a.dtype.str, zlib.crc32(a.view(np.uint8).reshape(-1))))
+        return tuple(parts)
+
+    def invalidate(self) -> None:
+        """Forget the last update's inputs: the next ``update`` re-injects and propagates."""
+        self._state = None
+
+    def update(self, camera, scene_bounds, vpls, surfels=None, key=None) -> bool:
+        """One frame: refit; re-inject and propagate only when the inputs or a cascade's cells changed.
+
+        ``vpls``: a sequence of (positions, normals, flux) sets (sun RSM, sky-lit G-buffer, …), or a
+        zero-argument callable returning one (called only when work is needed); ``surfels`` likewise
+        with (positions, normals, areas). ``key``: any hashable that changes when the inputs do (sun
+        direction, scene version, …); None → ``input_key`` fingerprints the arrays. Returns True
+        when it re-injected and propagated.
+        """
+        t0 = time.perf_counter()
+        self.fit(camera, scene_bounds)
+        ikey = key if key is not None else self.input_key(vpls, surfels)
+        state = (tuple(self.fitted), ikey)
+        if self._has_result and ikey is not None and state == self._state:
+            self.timings["update"] = (time.perf_counter() - t0) * 1e3
+            return False
+        self.clear()
+        t_inj = t_gv = 0.0
+        for s in vpls() if callable(vpls) else vpls:
+            self.inject(*s)
+            t_inj += self.timings["inject"]
+        if surfels is not None and self.config.geometry_volume:
+            for s in surfels() if callable(surfels) else surfels:
+                self.inject_geometry(*s)
+                t_gv += self.timings["inject_geometry"]
+        self.timings["inject"], self.timings["inject_geometry"] = t_inj, t_gv
+        self.propagate()
+        self._state = state
+        self._timed("update", t0)
+        return True
+
+    # -- lookup --------------------------------------------------------------------------------
+
+    def irradiance(self, points, normals, blend: bool = True) -> np.ndarray:
+        """Diffuse irradiance (W/m², (N,3) float32) at points (N,3) m with normals (N,3), ≥ 0.
+
+        ``blend=False`` switches cascades hard at their borders (for measuring the seam).
+        """
+        t0 = time.perf_counter()
+        p = self._staging.input(points, "lk_p", wp.vec3, 3)
+        n = self._staging.input(normals, "lk_n", wp.vec3, 3)
+        out = self._staging.buffer("out", p.shape[0], wp.vec3)
+        cfg = self.config
+        launch(self._lookup_irradiance, p.shape[0],
+               [p, n, self._accum, self._cas_table, len(self.grids), float(cfg.lookup_offset),
+                float(cfg.edge_margin), float(cfg.blend_cells if blend else 0.0), out],
+               device=self.device, threads=self.threads)
+        res = out.numpy().copy()
+        self._timed("lookup", t0)
+        return res
+
+    def glossy_step_length(self) -> float:
+        """Spacing (m) of the glossy march: glossy_step cells of the finest active cascade."""
+        return self.config.glossy_step * (self.grids[0].cell_size if self.grids else 1.0)
+
+    def glossy(self, points, directions, shininess) -> np.ndarray:
+        """Radiance (W·m⁻²·sr⁻¹, (N,3)) arriving at points from ``directions`` (reflected view rays),
+        prefiltered by a normalised Phong lobe of exponent ``shininess`` (scalar or (N,))."""
+        t0 = time.perf_counter()
+        p = self._staging.input(points, "gl_p", wp.vec3, 3)
+        d = self._staging.input(directions, "gl_d", wp.vec3, 3)
+        m = np.broadcast_to(np.asarray(shininess, np.float32), (p.shape[0],))
+        s = self._staging.input(m, "gl_m", float, 1)
+        out = self._staging.buffer("out", p.shape[0], wp.vec3)
+        cfg = self.config
+        launch(lookup_glossy, p.shape[0],
+               [p, d, s, self._accum, self._cas_table, len(self.grids), int(cfg.glossy_steps),
+                float(self.glossy_step_length()), float(cfg.edge_margin), float(cfg.blend_cells), out],
+               device=self.device, threads=self.threads)
+        res = out.numpy().copy()
+        self._timed("glossy", t0)
+        return res
+
+    # -- export --------------------------------------------------------------------------------
+
+    def textures(self, cascade: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Accumulated intensity SH of active cascade ``cascade`` (index into ``grids``) for GL upload:
+        R, G, B, each float32 (Z, Y, X, 4), RGBA = (Y0, x, y, z) in W/sr; origin and cell size in
+        ``grids[cascade]``."""
+        g = self.level_grid(self.grids[cascade].level, "accum")
+        return g[0].copy(), g[1].copy(), g[2].copy()
+
+    def level_grid(self, level: int, which: str = "accum") -> np.ndarray:
+        """A config level's grid as numpy: (3, res, res, res, 4) float32 (RGB, z, y, x, SH) for
+        ``accum``, ``inj`` or ``last`` (the last iteration's wavefront); (res+1, res+1, res+1, 4)
+        for ``gv``."""
+        lv = self._levels[level]
+        if which == "gv":
+            self._gv.gather()
+            r1 = lv.res + 1
+            return self._gv.array.numpy()[lv.gv_base:lv.gv_base + r1**3].reshape(r1, r1, r1, 4)
+        if which == "inj":
+            self._inj.gather()
+        arr = {"accum": self._accum, "inj": self._inj.array}.get(which)
+        if which == "last":
+            arr = self._last_level.get(level, self._inj.array)
+        if arr is None:
+            raise ValueError(f"unknown grid {which!r}")
+        return arr.numpy()[lv.base:lv.base + lv.size].reshape(3, lv.res, lv.res, lv.res, 4)
+
+    def flux(self, level: int, which: str = "last") -> np.ndarray:
+        """Total flux (W, RGB) held by a config level's grid: SH_FLUX·Σ DC (the SH integral)."""
+        g = self.level_grid(level, which)
+        return SH_FLUX * g[..., 0].astype(np.float64).reshape(3, -1).sum(axis=1)
