@@ -17,6 +17,7 @@ from serenity.errors import ConfigError
 SH_WINDOWS = ("none", "hanning", "lanczos", "nonneg")
 #: per-probe direction sequences of the sky volume
 SKY_SEQUENCES = ("hammersley", "sobol-owen")
+SKY_METHODS = ("transfer", "layers")
 #: texels per side of the paraboloid sky map (``serenity.kernels.atmosphere``)
 SKY_MAP_SIZE = 256
 #: cascades the LPV kernels and ``lpv.glsl`` take at most
@@ -126,8 +127,24 @@ class SkyConfig:
     """Salt of the per-probe decorrelation."""
     auto_quads: bool = True
     """Fit occlusion quads from the meshes (``quadfit``) when the scene has none."""
+    method: str = "transfer"
+    """How probes follow the sky: "layers" (the paper) re-integrates ``RenderConfig.sky_layers_per_frame``
+    layers per frame by ray casting against the sky map, in a continuous cycle; "transfer" integrates
+    each probe's visibility once into a transfer matrix (``skytransfer``) and re-lights every probe
+    from a new sky in one cheap pass."""
+    transfer_bands: int = 5
+    """SH bands of the sky projection the transfer uses (B² functions, 1–5; more: sharper sky —
+    the sun's glow needs the most; ``tests/kernels/test_skytransfer.py`` measures each)."""
+    sky_steps: int = 24
+    """View-ray march steps of each sky-map texel's bake (``atmosphere``; error vs steps in bench_sky)."""
 
     def __post_init__(self):
+        if self.method not in SKY_METHODS:
+            raise ConfigError(f"SkyConfig.method must be one of {SKY_METHODS}, got {self.method!r}")
+        if not 1 <= self.transfer_bands <= 5:
+            raise ConfigError(f"SkyConfig.transfer_bands must be in 1..5, got {self.transfer_bands}")
+        if not 1 <= self.sky_steps <= 1024:
+            raise ConfigError(f"SkyConfig.sky_steps must be in 1..1024, got {self.sky_steps}")
         if not (1 <= self.rays_per_probe <= 1 << 20):
             raise ConfigError(f"SkyConfig.rays_per_probe must be in 1..2^20, got {self.rays_per_probe}")
         if self.cell_size is not None and not self.cell_size > 0:

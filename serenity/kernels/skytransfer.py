@@ -221,36 +221,43 @@ def project_sky(sky_map: np.ndarray, ground_radiance, functions: int) -> np.ndar
 
 class SkyTransfer:
     """Per-probe transfer matrices of a sky volume's grid (built once), and their application to a
-    sky. ``grid``: (origin, cell, (X, Y, Z)); ``quads``: the four arrays of ``quads_arrays`` as
-    Warp arrays and their count; ``base``: the Hammersley base points; ``bands`` B (1–5)."""
+    sky. ``quads_wp``: the four arrays of ``skyvolume.quads_arrays`` as Warp arrays, and their
+    count; ``base``: the Hammersley base points; ``bands`` B (1–5)."""
 
-    def __init__(self, grid, quads_wp, quad_count: int, base, rays: int, sequence: int, seed: int,
-                 bands: int, device: str):
+    def __init__(self, quads_wp, quad_count: int, base, rays: int, sequence: int, seed: int, bands: int,
+                 device: str):
         if not 1 <= bands <= MAX_BANDS:
             raise ValueError(f"transfer bands must be in 1..{MAX_BANDS}, got {bands}")
         self.functions = bands * bands
         self.device = device
-        origin, cell, (x, y, z) = grid
-        self.probes = x * y * z
-        self.transfer = wp.zeros((self.probes, 9, self.functions + 1), dtype=float, device=device)
-        self._sky = wp.zeros((self.functions + 1, 3), dtype=float, device=device)
-        self._args = [wp.vec3(*np.asarray(origin, np.float32)), wp.vec3(*np.asarray(cell, np.float32)), x, y,
-                      *quads_wp, int(quad_count), base, int(rays), wp.uint32(seed & 0xFFFFFFFF), self.functions]
+        self._args = [*quads_wp, int(quad_count), base, int(rays), wp.uint32(seed & 0xFFFFFFFF), self.functions]
         self._kernel = _integrate_transfer_kernel(int(sequence))
-        self.built = False
+        self._sky = wp.zeros((self.functions + 1, 3), dtype=float, device=device)
+        self.transfer = None
+        self.grid = None
 
-    def build(self) -> None:
-        """Integrate every probe's visibility into its transfer matrix (once per scene)."""
+    def build(self, origin, cell, resolution) -> None:
+        """Integrate the visibility of every probe of the grid into its transfer matrix (once per
+        scene, or when the grid moved)."""
         from serenity.kernels.launch import launch
 
-        launch(self._kernel, self.probes, self._args + [self.transfer], device=self.device)
-        self.built = True
+        x, y, z = resolution
+        probes = x * y * z
+        if self.transfer is None or self.transfer.shape[0] != probes:
+            self.transfer = wp.zeros((probes, 9, self.functions + 1), dtype=float, device=self.device)
+        else:
+            self.transfer.zero_()
+        launch(self._kernel, probes, [wp.vec3(*np.asarray(origin, np.float32)), wp.vec3(*np.asarray(cell, np.float32)),
+                                      x, y, *self._args, self.transfer], device=self.device)
+        self.grid = (tuple(np.asarray(origin, np.float64)), tuple(np.asarray(cell, np.float64)), tuple(resolution))
 
-    def apply(self, sky_sh: np.ndarray, scale, coeffs) -> None:
-        """Write every probe's irradiance coefficients (P, 27) for ``project_sky``'s (B² + 1, 3)."""
+    def apply(self, origin, cell, resolution, sky_sh: np.ndarray, scale, coeffs) -> None:
+        """Write every probe's irradiance coefficients (P, 27) for ``project_sky``'s (B² + 1, 3),
+        building the transfer first if the grid is new."""
         from serenity.kernels.launch import launch
 
-        if not self.built:
-            self.build()
+        grid = (tuple(np.asarray(origin, np.float64)), tuple(np.asarray(cell, np.float64)), tuple(resolution))
+        if grid != self.grid:
+            self.build(origin, cell, resolution)
         self._sky.assign(np.ascontiguousarray(sky_sh, np.float32))
-        launch(apply_transfer, self.probes, [self.transfer, self._sky, scale, coeffs], device=self.device)
+        launch(apply_transfer, self.transfer.shape[0], [self.transfer, self._sky, scale, coeffs], device=self.device)

@@ -308,14 +308,27 @@ class SkyVolume:
         self.probe_count = x * y * z
         self._coeffs = wp.zeros((self.probe_count, COEFFS), dtype=float, device=dev)
         self._constant_sky = getattr(scene.sky, "model", "atmosphere") == "constant"
-        self.sky = SkyMapCache(cfg.sky_map_size, cfg.rebuild_angle_deg, device=dev)
+        self.sky = SkyMapCache(cfg.sky_map_size, cfg.rebuild_angle_deg, device=dev, steps=cfg.sky_steps)
         self._constant_map = None
         self.ground_radiance = np.zeros(3)
-        self._pending: list[int] = list(range(y))
-        self._sky_version = -1
+        #: sky-map version each layer was last integrated against (-1: never)
+        self.layer_versions = np.full(y, -1, np.int64)
+        self._next_layer = 0
         self._host: np.ndarray | None = None
+        self._transfer = None
+        if cfg.method == "transfer":
+            from serenity.kernels.skytransfer import SkyTransfer
+
+            self._transfer = SkyTransfer(self._quads_wp, len(quads), self._base, n, SEQUENCES.index(cfg.sequence),
+                                         cfg.seed, cfg.transfer_bands, dev)
+            self._irr_scale = self._scale
 
     # -- sky
+
+    @property
+    def sky_version(self) -> int:
+        """Version of the sky the probes are lit by (the sky map's bake count; 1 for a constant sky)."""
+        return 1 if self._constant_sky else self.sky.version
 
     def _current_sky_map(self, sun_direction):
         """(Warp sky map, changed?) — the atmosphere's cached bake, or the constant sky."""
@@ -358,29 +371,57 @@ class SkyVolume:
         return np.asarray(self.scene.sun.direction if sun_direction is None else sun_direction, np.float64)
 
     def update(self, layers: int = 1, sun_direction=None) -> bool:
-        """Integrate the next ``layers`` stale layers (restarting the sweep if the sky was rebaked).
+        """Bring the volume towards the current sky; returns whether any probe changed.
 
-        ``sun_direction`` defaults to ``scene.sun.direction``. Returns whether anything changed."""
+        "transfer": every probe is re-lit whenever the sky map was rebaked (nothing to do otherwise).
+        "layers" (the paper): the next ``layers`` layers of a continuous cycle over the volume are
+        integrated against the newest sky map, so with the sun moving every frame each layer is at
+        most ceil(Y / layers) updates old; once every layer has seen the current sky, nothing is done.
+        ``sun_direction`` defaults to ``scene.sun.direction``."""
         sky_map, changed = self._current_sky_map(self._sun(sun_direction))
-        if changed:
-            self._pending = list(range(self.resolution[1]))
-        if not self._pending or layers <= 0:
+        if self._transfer is not None:
+            if changed or self._transfer.grid is None or self.layer_versions[0] != self.sky_version:
+                self._apply_transfer()
+                return True
             return False
-        todo = self._pending[:layers]
-        del self._pending[:layers]
-        self._integrate(sky_map, todo[0], len(todo))
+        y = self.resolution[1]
+        if layers <= 0 or self.pending_layers == 0:
+            return False
+        first = self._next_layer
+        count = min(int(layers), y)
+        # a cycle that wraps is two contiguous launches
+        for start, n in ((first, min(count, y - first)), (0, max(0, first + count - y))):
+            if n:
+                self._integrate(sky_map, start, n)
+                self.layer_versions[start:start + n] = self.sky_version
+        self._next_layer = (first + count) % y
         return True
+
+    def _apply_transfer(self) -> None:
+        from serenity.kernels.skytransfer import project_sky
+
+        sky = self.sky_map()
+        if self._constant_sky:  # the 2×2 map is too coarse a quadrature for the projection
+            sky = np.broadcast_to(sky[:1, :1], (64, 64, 3))
+        f = project_sky(sky, self.ground_radiance, self._transfer.functions)
+        self._transfer.apply(self.grid_origin, self.cell_size, self.resolution, f, self._irr_scale, self._coeffs)
+        self._host = None
+        self.layer_versions[:] = self.sky_version
 
     def rebuild(self, sun_direction=None) -> None:
         """Bring every layer up to date now (rebakes the sky map only if the sun moved)."""
         sky_map, _ = self._current_sky_map(self._sun(sun_direction))
+        if self._transfer is not None:
+            self._apply_transfer()
+            return
         self._integrate(sky_map, 0, self.resolution[1])
-        self._pending = []
+        self.layer_versions[:] = self.sky_version
+        self._next_layer = 0
 
     @property
     def pending_layers(self) -> int:
-        """Layers still to integrate before the volume reflects the current sky."""
-        return len(self._pending)
+        """Layers not yet integrated against the current sky (0: the volume is current)."""
+        return int(np.count_nonzero(self.layer_versions != self.sky_version))
 
     # -- outputs
 

@@ -28,9 +28,13 @@ def _constant_scene(radiance=(1.0, 2.0, 3.0), quads=()):
     return s
 
 
-def test_white_furnace(device):
+METHODS = pytest.mark.parametrize("method", ["transfer", "layers"])
+
+
+@METHODS
+def test_white_furnace(device, method):
     cfg = SkyConfig(rays_per_probe=512, resolution=(2, 2, 2), ground_albedo=1.0, auto_quads=False,
-                          normal_offset=0.0)
+                    normal_offset=0.0, method=method)
     vol = SkyVolume(_constant_scene(), cfg, device=device)
     vol.rebuild()
     n = fibonacci_sphere(64)
@@ -39,11 +43,13 @@ def test_white_furnace(device):
     assert np.allclose(e, math.pi * np.array([1.0, 2.0, 3.0]), rtol=0.01)
 
 
-def test_quad_over_probe_blocks_its_solid_angle(device):
+@METHODS
+def test_quad_over_probe_blocks_its_solid_angle(device, method):
     # a 4 m × 6 m quad 2 m above the probe: Ω = 4·asin(ab / sqrt((a² + 4c²)(b² + 4c²)))
     a, b, c = 4.0, 6.0, 2.0
     quad = OcclusionQuad((0.0, c, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), a / 2, b / 2)
-    cfg = SkyConfig(rays_per_probe=4096, resolution=(1, 1, 1), ground_albedo=1.0, normal_offset=0.0)
+    cfg = SkyConfig(rays_per_probe=4096, resolution=(1, 1, 1), ground_albedo=1.0, normal_offset=0.0,
+                    method=method)
     scene = _constant_scene((1.0, 1.0, 1.0), [quad])
     vol = SkyVolume(scene, cfg, device=device)
     vol.grid_origin = np.zeros(3)  # the single probe right under the quad's centre
@@ -65,8 +71,14 @@ def courtyard():
     return build_scene("courtyard")
 
 
-def test_probes_among_quads_vs_brute_force(device, courtyard):
-    cfg = SkyConfig(resolution=(32, 16, 23), normal_offset=0.0)  # default rays per probe
+@METHODS
+def test_probes_among_quads_vs_brute_force(device, courtyard, method):
+    """Irradiance at 24 probes among the courtyard's quads vs a 16k-direction brute-force integral
+    of the same visibility and sky, 26 normals each (exact cosine, not L2): mean relative error
+    <= 5 % for the per-ray layers at 256 rays (3.9 % measured: L2 truncation + ray noise), <= 6 %
+    for the transfer with 5 bands (5.4 % measured: it adds the sun's glow above band 4 seen past
+    the walls; 7.6 % with 4 bands)."""
+    cfg = SkyConfig(resolution=(32, 16, 23), normal_offset=0.0, method=method)  # default rays per probe
     vol = SkyVolume(courtyard, cfg, device=device)
     vol.rebuild()
     pos = vol.probe_positions()
@@ -85,11 +97,11 @@ def test_probes_among_quads_vs_brute_force(device, courtyard):
         errs.append(np.abs(ours - brute) / brute)
     rel = np.concatenate(errs)
     print(f"quad probes: mean {rel.mean():.2%} worst {rel.max():.2%}")
-    assert rel.mean() <= 0.05
+    assert rel.mean() <= (0.05 if method == "layers" else 0.06)
 
 
 def test_layer_sweep_equals_rebuild(device, courtyard):
-    cfg = SkyConfig(rays_per_probe=32, cell_size=8.0)
+    cfg = SkyConfig(rays_per_probe=32, cell_size=8.0, method="layers")
     a = SkyVolume(courtyard, cfg, device=device)
     b = SkyVolume(courtyard, cfg, device=device)
     b.rebuild()
@@ -106,6 +118,41 @@ def test_layer_sweep_equals_rebuild(device, courtyard):
     assert not a.update(sun_direction=direction_from_angles(el + 0.2, az))
     assert a.update(sun_direction=direction_from_angles(el + 5.0, az))
     assert a.pending_layers == a.resolution[1] - 1
+
+
+def test_layer_sweep_never_stalls_under_a_moving_sun(device, courtyard):
+    """The paper's mode with the sun moving every frame (a rebake each frame): the sweep goes on in
+    a cycle instead of restarting at layer 0, so after the first cycle every layer was integrated
+    against a sky at most Y frames old (Y = layers), one layer per frame."""
+    cfg = SkyConfig(rays_per_probe=8, cell_size=8.0, method="layers", rebuild_angle_deg=0.1)
+    vol = SkyVolume(courtyard, cfg, device=device)
+    sun = courtyard.sun.direction
+    el, az = math.degrees(math.asin(sun[1])), courtyard.sun.azimuth_deg
+    y = vol.resolution[1]
+    assert y >= 3
+    last_refresh = np.full(y, -1)
+    for frame in range(3 * y):
+        before = vol.layer_versions.copy()
+        assert vol.update(layers=1, sun_direction=direction_from_angles(el + 0.5 * frame, az))
+        changed = np.flatnonzero(vol.layer_versions != before)
+        assert len(changed) == 1  # one layer per frame
+        last_refresh[changed] = frame
+        assert vol.layer_versions[changed[0]] == vol.sky.version  # against the newest sky
+        if frame >= y:
+            assert (frame - last_refresh).max() < y  # no layer older than one cycle
+
+
+def test_transfer_follows_the_sky_and_skips_when_unchanged(device, courtyard):
+    """Transfer mode: every probe is re-lit when the sky is rebaked (the whole volume current each
+    frame, nothing pending), and nothing is done while the sun stays within the rebake angle."""
+    vol = SkyVolume(courtyard, SkyConfig(rays_per_probe=16, cell_size=8.0), device=device)
+    sun = courtyard.sun.direction
+    el, az = math.degrees(math.asin(sun[1])), courtyard.sun.azimuth_deg
+    assert vol.update(sun_direction=direction_from_angles(el, az)) and vol.pending_layers == 0
+    c0 = vol.coefficients().copy()
+    assert not vol.update(sun_direction=direction_from_angles(el + 0.2, az))
+    assert vol.update(sun_direction=direction_from_angles(el - 20.0, az)) and vol.pending_layers == 0
+    assert not np.allclose(vol.coefficients(), c0)
 
 
 def test_textures_layout(device, courtyard):
