@@ -528,7 +528,8 @@ class Viewer:
         self.messages.append(f"reference done: FLIP {m['flip']:.4f}, relMSE {m['rel_mse']:.4f}")
         print(f"reference {job.spp} spp: FLIP {m['flip']:.4f} relMSE {m['rel_mse']:.4f}")
         self.job = None
-        self.view = "reference split"
+        if self.view not in ("reference split", "flip error"):
+            self.view = "reference split"
 
     def wait_for_reference(self, timeout: float | None = None) -> None:
         if self.job is not None:

@@ -175,7 +175,7 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     from serenity.scene.sun import sun_from_time
 
     scene = load("courtyard")
-    still = 20  # frame 8 onwards nothing moves; the sky volume's sweep after the sun step ends well before
+    still = 12  # frame 7 on nothing moves; the sky volume's 6-layer sweep after the sun step ends by frame 7
     (tmp_path / "s.toml").write_text(SCRIPT.replace("{still}", str(still)).replace("{still_plus}", str(still + 1)))
     env = {**os.environ, "PYTHONPATH": ROOT}
     cmd = _xvfb_prefix() + [sys.executable, "-m", "serenity", "view", "courtyard", "--size", f"{SIZE[0]}x{SIZE[1]}",
