@@ -28,9 +28,9 @@ VIEWS = {
     "albedo": "G-buffer albedo",
     "normal": "G-buffer world normal (0.5 + 0.5 n)",
     "direct": "direct sun light (tone-mapped)",
-    "sky light": "sky-volume irradiance contribution (tone-mapped)",
-    "lpv indirect": "LPV diffuse + glossy contribution (tone-mapped)",
-    "ao": "SSAO (1 = open)",
+    "sky light": "sky-volume light, full resolution, without AO (tone-mapped)",
+    "lpv indirect": "LPV diffuse + glossy light, full resolution, without AO (tone-mapped)",
+    "ao": "SSAO (1 = open; at the indirect light's resolution)",
     "rt mask": "pixels with ray-traced reflection/refraction",
     "lpv cascades": "the frame with the LPV cascades' bounds",
     "reference split": "ours (left) | path-traced reference (right)",
@@ -369,11 +369,11 @@ class Viewer:
             return out["direct"], present.HDR
         if view == "sky light" and r.sky_volume is not None:
             tex = self._scratch_tex()
-            r.sky_pass.render(tex, gbuf, r.sky_gl.bind, r.scene.camera.position, out["ao"])
+            r.sky_pass.render(tex, gbuf, r.sky_gl.bind, r.scene.camera.position)
             return tex, present.HDR
         if view == "lpv indirect" and r.lpv is not None and r.lpv_gl.count:
             tex = self._scratch_tex()
-            r.lpv_pass.render(tex, gbuf, r.lpv_gl.bind, r.scene.camera.position, out["ao"])
+            r.lpv_pass.render(tex, gbuf, r.lpv_gl.bind, r.scene.camera.position)
             return tex, present.HDR
         if view == "ao" and out["ao"] is not None:
             return out["ao"], present.SCALAR

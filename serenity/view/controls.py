@@ -151,7 +151,8 @@ class Settings:
             base, exposure=float(self.exposure), overlap=self.overlap,
             ssao=dataclasses.replace(base.ssao, enabled=bool(self.ssao) and base.ssao.enabled),
             shadow=dataclasses.replace(base.shadow, filter=self.shadow_filter),
-            sky_lighting=bool(self.sky_lighting) and base.sky_lighting, lpv=bool(self.lpv) and base.lpv,
+            sky=dataclasses.replace(base.sky, enabled=bool(self.sky_lighting) and base.sky.enabled),
+            lpv=dataclasses.replace(base.lpv, enabled=bool(self.lpv) and base.lpv.enabled),
             ray_tracing=bool(self.ray_tracing) and base.ray_tracing)
 
     @staticmethod
