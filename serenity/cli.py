@@ -12,6 +12,7 @@ import sys
 import time
 
 from serenity.errors import SerenityError
+from serenity.view.command import register as register_view
 
 DEFAULT_SCENE = "courtyard"
 DEFAULT_SIZE = (640, 360)
@@ -134,6 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--json", default=os.path.join(DEFAULT_OUT_DIR, "bench.json"), help="JSON output path")
     b.add_argument("--chart", default=os.path.join(DEFAULT_OUT_DIR, "timeline.png"), help="timeline PNG path")
     b.set_defaults(func=cmd_bench)
+
+    register_view(sub)
 
     try:
         from serenity.eval.commands import add_subcommands

@@ -66,10 +66,13 @@ class Frame:
     timings: stage name → milliseconds, in pipeline order (the worker's stages included).
     wall_ms: the frame's duration; below ``sum(timings)`` when ray tracing overlapped GL work.
     events: (lane, stage, start_ms, end_ms) from the frame's start — the timeline.
+
+    With ``render(read_back=False)`` nothing leaves the GL context: hdr and ldr are None, aovs is
+    empty, and the images stay in ``Renderer.outputs``.
     """
 
-    hdr: np.ndarray
-    ldr: np.ndarray
+    hdr: np.ndarray | None
+    ldr: np.ndarray | None
     aovs: dict[str, np.ndarray]
     timings: dict[str, float] = field(default_factory=dict)
     exposure: float = 1.0
@@ -295,7 +298,9 @@ class Renderer:
 
     # ------------------------------------------------------------------------------------ frame
 
-    def render(self) -> Frame:
+    def render(self, read_back: bool = True) -> Frame:
+        """Render the scene's current camera and sun. ``read_back=False`` skips the final read-back
+        (for a caller that draws ``self.outputs`` itself, e.g. the viewer's window)."""
         self._timings, self._events = {}, []
         self._gbuffer_images = {}
         self._t_frame = time.perf_counter()
@@ -383,6 +388,23 @@ class Renderer:
                                                      cam.position)
         with self._stage("tone map"):
             self.tonemap_pass.render(out_hdr, cfg.exposure)
+        #: this frame's GL textures: hdr (lit + composited, RGBA32F), ldr (tone-mapped sRGB, RGBA8),
+        #: direct, ao (None without SSAO), the main view's gbuffer, and rcb (the read-back
+        #: RayCastingBuffer, None without ray tracing); valid until the next render()
+        self.outputs = {"hdr": out_hdr, "ldr": self.tonemap_pass.ldr, "direct": lit.direct, "ao": ao,
+                        "gbuffer": gbuf, "rcb": rcb}
+        hdr = ldr = None
+        aovs = {}
+        if read_back:
+            hdr, ldr, aovs = self._read_back(out_hdr, gbuf, lit, ao, rcb, cam)
+        wall = (time.perf_counter() - self._t_frame) * 1e3
+        if "upload" in self._timings:
+            wall += self._timings["upload"]
+        return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=dict(self._timings), exposure=cfg.exposure,
+                     wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
+                     rays=0 if rcb is None else rcb.count)
+
+    def _read_back(self, out_hdr, gbuf, lit, ao, rcb, cam):
         with self._stage("readback"):
             hdr = read_texture(out_hdr, 3)
             ldr = self.tonemap_pass.read()
@@ -391,12 +413,7 @@ class Renderer:
                 aovs["ao"] = self._full_res(read_texture(ao, 1))
             if rcb is not None:
                 aovs["rt_mask"] = rcb.mask()[..., None].astype(np.float32)
-        wall = (time.perf_counter() - self._t_frame) * 1e3
-        if "upload" in self._timings:
-            wall += self._timings["upload"]
-        return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=dict(self._timings), exposure=cfg.exposure,
-                     wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
-                     rays=0 if rcb is None else rcb.count)
+        return hdr, ldr, aovs
 
     def _gbuffer_image(self, gbuf, name: str) -> np.ndarray:
         """A main-view G-buffer target read back to (H, W, 4) float32, once per frame (the LPV's

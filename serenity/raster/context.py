@@ -30,6 +30,18 @@ def get_context():
         return _context
 
 
+def use_context(ctx) -> None:
+    """Make ``ctx`` (a window's moderngl context, current on this thread) the process's context, so
+    that every pass created afterwards draws with it — the viewer's way to render into its window.
+    Must come before anything has called :func:`get_context`."""
+    global _context
+    with _lock:
+        if _context is not None and _context is not ctx:
+            raise SerenityError("an OpenGL context is already in use in this process; "
+                                "install the window's context before creating any pass")
+        _context = ctx
+
+
 def _create_context():
     try:
         import moderngl

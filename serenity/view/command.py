@@ -1,0 +1,57 @@
+"""``serenity view``: the interactive viewer's command line (``register(subparsers)``)."""
+
+from __future__ import annotations
+
+import os
+
+from serenity.errors import SerenityError
+
+DEFAULT_VIEW_SIZE = "640x360"
+
+
+def register(sub) -> None:
+    v = sub.add_parser("view", help="interactive viewer: fly camera, live sun and technique switches, AOVs, "
+                                    "stage timings, reference comparison")
+    v.add_argument("scene", nargs="?", default="courtyard", help="built-in scene name or a scene/mesh file")
+    v.add_argument("--size", default=DEFAULT_VIEW_SIZE, help="render size WxH (default %(default)s); "
+                                                             "the window opens at this size")
+    v.add_argument("--quality", default="high", help="quality preset: low | medium | high (default %(default)s)")
+    v.add_argument("--device", help="cpu | cuda:0 (default: cuda:0 when present, else cpu)")
+    v.add_argument("--exposure", type=float, default=0.02, help="exposure before Reinhard (default %(default)s)")
+    v.add_argument("--script", help="TOML file of timed input steps (see serenity/view/script.py)")
+    v.add_argument("--screenshot", help="write the window as a PNG when the run ends (--exit-after or the "
+                                        "script's end)")
+    v.add_argument("--exit-after", type=int, help="quit after this many frames")
+    v.add_argument("--trace", help="write a JSON log of every frame (camera, sun, stage timings, convergence)")
+    v.add_argument("--no-panel", action="store_true", help="start with the panel hidden (F1 toggles it)")
+    v.add_argument("--out-dir", default=os.path.join("serenity_out", "view"),
+                   help="where F12 writes PNG + EXR + TOML (default %(default)s)")
+    v.add_argument("--spp", type=int, default=64, help="samples per pixel of the reference (R; default %(default)s)")
+    v.set_defaults(func=cmd_view)
+
+
+def cmd_view(args) -> int:
+    from serenity.cli import parse_size
+    from serenity.scene import load
+    from serenity.view.controls import Settings, quality_config
+    from serenity.view.script import load_script
+
+    width, height = parse_size(args.size)
+    quality_config(args.quality)  # an unknown preset fails before a window opens
+    if args.exit_after is not None and args.exit_after < 1:
+        raise SerenityError(f"--exit-after must be at least 1, got {args.exit_after}")
+    if args.spp < 1:
+        raise SerenityError(f"--spp must be at least 1, got {args.spp}")
+    if args.screenshot and not args.screenshot.lower().endswith(".png"):
+        raise SerenityError(f"--screenshot must be a .png path, got {args.screenshot!r}")
+    script = load_script(args.script) if args.script else None
+    scene = load(args.scene)
+    settings = Settings(quality=args.quality, exposure=args.exposure)
+    settings.config()
+
+    from serenity.view.app import Viewer
+
+    viewer = Viewer(scene, width, height, settings, device=args.device, script=script, screenshot=args.screenshot,
+                    exit_after=args.exit_after, trace=args.trace, panel=not args.no_panel, out_dir=args.out_dir,
+                    spp=args.spp)
+    return viewer.run()

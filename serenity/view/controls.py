@@ -1,0 +1,165 @@
+"""The viewer's state without a window: the fly camera, the time of day, the technique switches and
+the quality preset, each turned into what ``Renderer`` reads (``Scene.camera``, ``Scene.sun``,
+``RenderConfig``). Pure Python, so the tests drive it without a display.
+
+Fly camera: yaw (degrees, 0 = looking north along -z, 90 = east along +x) and pitch (degrees, up
+positive, clamped to ±89) from mouse-look; WASD moves along the view direction and its right vector,
+Q/E down/up along world y, at ``speed`` m/s (Shift ×4). ``look(dx, dy)`` turns by
+``sensitivity`` degrees per pixel of mouse motion.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
+from serenity.errors import SerenityError
+
+QUALITY_PRESETS = ("low", "medium", "high")
+#: the techniques the panel switches; "live" ones change per frame, the others rebuild the Renderer
+LIVE_TOGGLES = ("ssao",)
+REBUILD_TOGGLES = ("sky_lighting", "lpv", "ray_tracing")
+SHADOW_FILTERS = ("hard", "pcf", "pcss")
+
+
+def quality_config(name: str, base: RenderConfig | None = None) -> RenderConfig:
+    """The ``RenderConfig`` of a ``--quality`` preset. ``RenderConfig.preset(name)`` when the
+    config has presets; until then "high" is the default config, "medium" halves the shadow maps
+    and SSAO directions, "low" also drops to two cascades, 6 SSAO directions and a 128² RSM."""
+    if name not in QUALITY_PRESETS and not hasattr(RenderConfig, "preset"):
+        raise SerenityError(f"--quality must be one of {', '.join(QUALITY_PRESETS)}, got {name!r}")
+    if hasattr(RenderConfig, "preset"):
+        cfg = RenderConfig.preset(name)
+    elif name == "high":
+        cfg = RenderConfig()
+    elif name == "medium":
+        cfg = RenderConfig(shadow=ShadowConfig(size=1024), ssao=SSAOConfig(directions=6))
+    else:
+        cfg = RenderConfig(shadow=ShadowConfig(size=1024, cascades=2, filter_samples=16, blocker_samples=8),
+                           ssao=SSAOConfig(directions=6, steps=3), rsm_size=128)
+    if base is not None:
+        cfg = dataclasses.replace(cfg, exposure=base.exposure, overlap=base.overlap)
+    return cfg
+
+
+@dataclass
+class FlyCamera:
+    """Position (m) and yaw/pitch (degrees) of a free-flying camera; see the module docstring."""
+
+    position: np.ndarray
+    yaw_deg: float
+    pitch_deg: float
+    speed: float = 3.0
+    """Metres per second."""
+    sensitivity: float = 0.15
+    """Degrees per pixel of mouse motion."""
+
+    @classmethod
+    def from_camera(cls, camera, speed: float = 3.0) -> FlyCamera:
+        f = camera.forward
+        pitch = math.degrees(math.asin(max(-1.0, min(1.0, float(f[1])))))
+        yaw = math.degrees(math.atan2(float(f[0]), float(-f[2])))
+        return cls(np.array(camera.position, np.float64), yaw, max(-89.0, min(89.0, pitch)), speed)
+
+    @property
+    def forward(self) -> np.ndarray:
+        y, p = math.radians(self.yaw_deg), math.radians(self.pitch_deg)
+        return np.array([math.cos(p) * math.sin(y), math.sin(p), -math.cos(p) * math.cos(y)])
+
+    @property
+    def right(self) -> np.ndarray:
+        y = math.radians(self.yaw_deg)
+        return np.array([math.cos(y), 0.0, math.sin(y)])
+
+    def look(self, dx: float, dy: float) -> None:
+        """Mouse-look by (dx, dy) pixels (dy positive = mouse moved down = look down)."""
+        self.yaw_deg = (self.yaw_deg + dx * self.sensitivity) % 360.0
+        self.pitch_deg = max(-89.0, min(89.0, self.pitch_deg - dy * self.sensitivity))
+
+    def move(self, keys: set[str], dt: float, fast: bool = False) -> bool:
+        """Move for ``dt`` seconds with the held ``keys`` (upper-case letters W A S D Q E).
+        Returns whether the camera moved."""
+        d = np.zeros(3)
+        for key, axis, sign in (("W", self.forward, 1), ("S", self.forward, -1), ("D", self.right, 1),
+                                ("A", self.right, -1), ("E", np.array([0.0, 1.0, 0.0]), 1),
+                                ("Q", np.array([0.0, 1.0, 0.0]), -1)):
+            if key in keys:
+                d += sign * axis
+        n = float(np.linalg.norm(d))
+        if n == 0.0 or dt <= 0.0:
+            return False
+        self.position = self.position + d / n * self.speed * (4.0 if fast else 1.0) * dt
+        return True
+
+    def apply(self, camera) -> None:
+        """Write position and direction into a ``serenity.scene.model.Camera`` (in place)."""
+        camera.position = np.array(self.position, np.float64)
+        camera.target = camera.position + self.forward
+        camera.up = np.array([0.0, 1.0, 0.0])
+
+
+@dataclass
+class TimeOfDay:
+    """Date, local hour and place that set the sun (NOAA's solar position, ``serenity.scene.sun``)."""
+
+    date: str = "2024-06-21"
+    hour: float = 16.0
+    """Local hours, 0–24."""
+    latitude: float = 38.72
+    longitude: float = -9.14
+    utc_offset: float = 1.0
+    """Hours from UTC of the local time."""
+
+    def text(self) -> str:
+        minutes = int(round(max(0.0, min(23.999, self.hour)) * 60.0))
+        sign = "+" if self.utc_offset >= 0 else "-"
+        off = int(round(abs(self.utc_offset) * 60))
+        return f"{self.date} {minutes // 60:02d}:{minutes % 60:02d} {sign}{off // 60:02d}:{off % 60:02d}"
+
+    def sun(self, old):
+        """A new ``Sun`` at this time and place, keeping ``old``'s irradiance and disc size."""
+        from serenity.scene.sun import sun_from_time
+
+        new = sun_from_time(self.text(), self.latitude, self.longitude, irradiance=old.irradiance)
+        new.angular_diameter_deg = old.angular_diameter_deg
+        return new
+
+
+@dataclass
+class Settings:
+    """What the panel edits: the quality preset, the technique switches, the shadow filter and the
+    exposure. ``config()`` is the ``RenderConfig`` they give."""
+
+    quality: str = "high"
+    exposure: float = 0.02
+    ssao: bool = True
+    sky_lighting: bool = True
+    lpv: bool = True
+    ray_tracing: bool = True
+    shadow_filter: str = "pcss"
+    overlap: bool = True
+
+    def config(self) -> RenderConfig:
+        base = quality_config(self.quality)
+        if self.shadow_filter not in SHADOW_FILTERS:
+            raise SerenityError(f"shadow filter must be one of {', '.join(SHADOW_FILTERS)}, got {self.shadow_filter!r}")
+        return dataclasses.replace(
+            base, exposure=float(self.exposure), overlap=self.overlap,
+            ssao=dataclasses.replace(base.ssao, enabled=bool(self.ssao) and base.ssao.enabled),
+            shadow=dataclasses.replace(base.shadow, filter=self.shadow_filter),
+            sky=dataclasses.replace(base.sky, enabled=bool(self.sky_lighting) and base.sky.enabled),
+            lpv=dataclasses.replace(base.lpv, enabled=bool(self.lpv) and base.lpv.enabled),
+            ray_tracing=bool(self.ray_tracing) and base.ray_tracing)
+
+    @staticmethod
+    def needs_rebuild(old: RenderConfig, new: RenderConfig) -> bool:
+        """True when ``new`` differs from ``old`` in more than what ``Renderer.render`` reads each
+        frame (exposure, SSAO on/off, the shadow filter): the Renderer must be built again."""
+        live = dict(exposure=new.exposure,
+                    ssao=dataclasses.replace(old.ssao, enabled=new.ssao.enabled),
+                    shadow=dataclasses.replace(old.shadow, filter=new.shadow.filter))
+        return dataclasses.replace(old, **live) != new

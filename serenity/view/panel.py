@@ -1,0 +1,136 @@
+"""The viewer's Dear ImGui panel (imgui-bundle, drawn by moderngl-window's integration): FPS and
+per-stage milliseconds as bars, the sky volume's stale layers and whether the view has converged,
+the camera, the sun (time of day, date, place), the technique switches, quality and exposure, the
+view switch, saving and the reference comparison. Every widget changes state through
+``Viewer.set_value`` — the same path a script's ``set`` takes."""
+
+from __future__ import annotations
+
+from serenity.errors import SerenityError
+from serenity.view.controls import QUALITY_PRESETS, SHADOW_FILTERS
+
+_STALE = (0.95, 0.45, 0.2, 1.0)
+_FRESH = (0.3, 0.8, 0.4, 1.0)
+
+
+def _set(viewer, name, value) -> None:
+    try:
+        viewer.set_value(name, value)
+    except SerenityError as e:
+        viewer.messages.append(str(e))
+
+
+def draw_panel(viewer, real_dt: float) -> None:
+    import moderngl
+    from imgui_bundle import imgui
+
+    from serenity.view.app import VIEWS
+
+    io = imgui.get_io()
+    io.delta_time = max(1e-3, float(real_dt))
+    imgui.new_frame()
+    imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
+    imgui.set_next_window_size(imgui.ImVec2(330, 0), imgui.Cond_.first_use_ever)
+    imgui.set_next_window_bg_alpha(0.82)
+    imgui.begin("Serenity")
+    r = viewer.renderer
+    imgui.text(f"{viewer.fps:5.1f} FPS  {viewer.frame_ms:7.1f} ms/frame  {viewer.width}x{viewer.height}")
+    imgui.text(f"device {r.device}, {viewer.settings.quality} quality")
+
+    if imgui.collapsing_header("Stages (ms)", imgui.TreeNodeFlags_.default_open):
+        top = max([1.0] + list(viewer.ms.values()))
+        for name, ms in viewer.ms.items():
+            imgui.progress_bar(min(1.0, ms / top), imgui.ImVec2(-1, 14), f"{name}  {ms:.1f}")
+        total = sum(v for k, v in viewer.ms.items() if k != "cpu ray tracing")
+        imgui.text(f"main thread sum {total:.1f} ms")
+
+    s = viewer.sky_state()
+    if s is None:
+        imgui.text("sky volume: off")
+    else:
+        stale, layers = s
+        imgui.text(f"sky volume: {stale}/{layers} layers stale")
+        dl = imgui.get_window_draw_list()
+        p = imgui.get_cursor_screen_pos()
+        w = max(2.0, min(14.0, 300.0 / layers))
+        for i in range(layers):
+            col = imgui.get_color_u32(imgui.ImVec4(*(_STALE if i >= layers - stale else _FRESH)))
+            dl.add_rect_filled(imgui.ImVec2(p.x + i * w, p.y), imgui.ImVec2(p.x + (i + 1) * w - 1, p.y + 8), col)
+        imgui.dummy(imgui.ImVec2(layers * w, 10))
+    if viewer.converged:
+        imgui.text_colored(imgui.ImVec4(*_FRESH), f"converged (still for {viewer.still_frames} frames)")
+    elif viewer.still_frames:
+        imgui.text_colored(imgui.ImVec4(*_STALE), f"refining: still for {viewer.still_frames} frames")
+    else:
+        imgui.text("moving")
+
+    if imgui.collapsing_header("Camera"):
+        pos = viewer.scene.camera.position
+        imgui.text(f"at ({pos[0]:.2f}, {pos[1]:.2f}, {pos[2]:.2f}) m, yaw {viewer.fly.yaw_deg:.0f}, "
+                   f"pitch {viewer.fly.pitch_deg:.0f}")
+        ch, v = imgui.slider_float("speed m/s", viewer.fly.speed, 0.1, 50.0, "%.2f", imgui.SliderFlags_.logarithmic)
+        if ch:
+            _set(viewer, "speed", v)
+
+    if imgui.collapsing_header("Sun", imgui.TreeNodeFlags_.default_open):
+        tod = viewer.tod
+        ch, v = imgui.slider_float("local time h", tod.hour, 0.0, 23.99, "%.2f")
+        if ch:
+            _set(viewer, "hour", v)
+        ch, v = imgui.input_text("date", tod.date, imgui.InputTextFlags_.enter_returns_true)
+        if ch:
+            _set(viewer, "date", v)
+        ch, v = imgui.slider_float("latitude", tod.latitude, -89.9, 89.9, "%.2f")
+        if ch:
+            _set(viewer, "latitude", v)
+        sun = viewer.scene.sun
+        imgui.text(f"elevation {sun.elevation_deg:.1f} deg, azimuth {sun.azimuth_deg:.1f} deg")
+
+    if imgui.collapsing_header("Techniques", imgui.TreeNodeFlags_.default_open):
+        st = viewer.settings
+        ch, v = imgui.combo("quality", QUALITY_PRESETS.index(st.quality) if st.quality in QUALITY_PRESETS else 0,
+                            list(QUALITY_PRESETS))
+        if ch:
+            _set(viewer, "quality", QUALITY_PRESETS[v])
+        ch, v = imgui.combo("shadow filter", SHADOW_FILTERS.index(st.shadow_filter), list(SHADOW_FILTERS))
+        if ch:
+            _set(viewer, "shadow_filter", SHADOW_FILTERS[v])
+        for name, label in (("ssao", "SSAO"), ("sky_lighting", "sky volume (rebuild)"),
+                            ("lpv", "LPV diffuse + glossy (rebuild)"),
+                            ("ray_tracing", "ray-traced refl./refr. (rebuild)")):
+            ch, v = imgui.checkbox(label, getattr(st, name))
+            if ch:
+                _set(viewer, name, v)
+        ch, v = imgui.slider_float("exposure", st.exposure, 0.001, 1.0, "%.4f", imgui.SliderFlags_.logarithmic)
+        if ch:
+            _set(viewer, "exposure", v)
+
+    if imgui.collapsing_header("View", imgui.TreeNodeFlags_.default_open):
+        names = list(VIEWS)
+        ch, v = imgui.combo("view (V)", names.index(viewer.view), names)
+        if ch:
+            _set(viewer, "view", names[v])
+        imgui.text_wrapped(VIEWS[viewer.view] + ("" if viewer.view_available() else " — off / nothing to show"))
+        if viewer.view == "reference split":
+            ch, v = imgui.slider_float("split", viewer.split, 0.0, 1.0, "%.2f")
+            if ch:
+                _set(viewer, "split", v)
+        if imgui.button("save (F12)"):
+            viewer._save_requested = True
+        imgui.same_line()
+        if imgui.button("reference (R)"):
+            viewer._reference_requested = True
+        job, c = viewer.job, viewer.comparison
+        if job is not None:
+            imgui.progress_bar(job.progress, imgui.ImVec2(-1, 14), f"reference {job.spp} spp {job.progress * 100:.0f}%")
+        if c is not None:
+            imgui.text(f"vs reference ({c['spp']} spp): FLIP {c['flip']:.4f}  relMSE {c['rel_mse']:.4f}")
+    for msg in viewer.messages[-3:]:
+        imgui.text_wrapped(msg)
+    imgui.end()
+    imgui.render()
+    viewer.wnd.fbo.use()
+    viewer.wnd.fbo.viewport = (0, 0, *viewer.wnd.buffer_size)
+    viewer.gui.render(imgui.get_draw_data())
+    viewer.ctx.enable_only(moderngl.NOTHING)
+    viewer.ctx.scissor = None

@@ -1,0 +1,73 @@
+"""GL passes that put the renderer's textures on the window (``glsl/view_present.glsl``,
+``glsl/view_lines.glsl``) — nothing is read back to draw a frame.
+
+``PresentPass.draw(fbo, viewport, a, mode_a, b=None, mode_b=0, split=2.0, exposure=...)`` draws
+texture ``a`` (and ``b`` right of the ``split`` x in [0, 1]) into ``viewport`` (x, y, w, h, GL
+pixels) of ``fbo`` with nearest-texel sampling: at the render's own size a pixel is copied exactly.
+Modes (see the shader): DISPLAY, HDR (exposure + Reinhard + sRGB, as ``TonemapPass``), SIGNED
+(0.5 + 0.5·v), LINEAR (sRGB-encoded), SCALAR (red channel as grey).
+
+``LinesPass.draw(fbo, viewport, view_proj, boxes)`` draws axis-aligned boxes ((min, max, rgb))
+as world-space wireframes over the image (the LPV cascades' bounds).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from serenity.raster.context import fullscreen_vao, load_program
+
+DISPLAY, HDR, SIGNED, LINEAR, SCALAR = range(5)
+
+_EDGES = [(0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7)]
+
+
+class PresentPass:
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.program = load_program(ctx, "view_present.glsl")
+        self.vao = fullscreen_vao(ctx, self.program)
+
+    def draw(self, fbo, viewport, a, mode_a: int, b=None, mode_b: int = DISPLAY, split: float = 2.0,
+             exposure: float = 0.02) -> None:
+        p = self.program
+        fbo.use()
+        fbo.viewport = tuple(int(v) for v in viewport)
+        a.use(location=0)
+        (b if b is not None else a).use(location=1)
+        p["u_a"].value, p["u_b"].value = 0, 1
+        p["u_mode_a"].value, p["u_mode_b"].value = int(mode_a), int(mode_b)
+        p["u_exposure"].value = float(exposure)
+        p["u_split"].value = float(split) if b is not None else 2.0
+        p["u_line_px"].value = 1.0 / max(1, int(viewport[2]))
+        self.vao.render(vertices=3)
+
+
+def box_segments(lo, hi) -> np.ndarray:
+    """(24, 3) float32 endpoints of the 12 edges of the box [lo, hi]."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    corners = np.array([[(hi if (i >> k) & 1 else lo)[k] for k in range(3)] for i in range(8)])
+    return corners[np.array(_EDGES).reshape(-1)].astype(np.float32)
+
+
+class LinesPass:
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.program = load_program(ctx, "view_lines.glsl")
+        self.vbo = ctx.buffer(reserve=24 * 6 * 4 * 8)
+        self.vao = ctx.vertex_array(self.program, [(self.vbo, "3f 3f", "in_position", "in_color")])
+
+    def draw(self, fbo, viewport, view_proj: np.ndarray, boxes) -> None:
+        if not boxes:
+            return
+        data = np.concatenate([np.hstack([box_segments(lo, hi), np.tile(np.asarray(rgb, np.float32), (24, 1))])
+                               for lo, hi, rgb in boxes]).astype(np.float32)
+        if data.nbytes > self.vbo.size:
+            self.vbo.orphan(data.nbytes)
+        self.vbo.write(data.tobytes())
+        fbo.use()
+        fbo.viewport = tuple(int(v) for v in viewport)
+        self.program["u_view_proj"].write(np.asarray(view_proj).T.astype(np.float32).tobytes())
+        import moderngl
+
+        self.vao.render(moderngl.LINES, vertices=len(data))
