@@ -30,7 +30,7 @@ def read_depth(tex) -> np.ndarray:
     return np.ascontiguousarray(data[::-1])
 
 
-def texture_from_array(ctx, arr: np.ndarray, dtype: str = "f4", mips: list[np.ndarray] | None = None,
+def upload_texture(ctx, arr: np.ndarray, dtype: str = "f4", mips: list[np.ndarray] | None = None,
                        repeat: bool = True, anisotropy: float = 8.0):
     """A 2-D texture from (H, W, C) data (top row first). ``mips`` (level 0 first) are written as
     given, so GL samples exactly the CPU ray tracer's box-filtered chain; with mips, trilinear
@@ -51,7 +51,7 @@ def texture_from_array(ctx, arr: np.ndarray, dtype: str = "f4", mips: list[np.nd
     return tex
 
 
-def texture3d_from_array(ctx, arr: np.ndarray, dtype: str = "f4"):
+def upload_texture3d(ctx, arr: np.ndarray, dtype: str = "f4"):
     """A 3-D texture from (D, H, W, C) data (no flip: volumes are indexed as stored)."""
     import moderngl
 

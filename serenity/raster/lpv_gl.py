@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from serenity.raster.context import fullscreen_vao, load_program
-from serenity.raster.interop import texture3d_from_array
+from serenity.raster.interop import upload_texture3d
 
 MAX_CASCADES = 3
 CHANNELS = ("r", "g", "b")
@@ -26,7 +26,7 @@ class LPVTexturesGL:
     def __init__(self, ctx):
         self.ctx = ctx
         zero = np.zeros((1, 1, 1, 4), np.float32)
-        self._empty = texture3d_from_array(ctx, zero)
+        self._empty = upload_texture3d(ctx, zero)
         self.textures: list[list] = [[self._empty] * 3 for _ in range(MAX_CASCADES)]
         self.count = 0
         self.geom = np.zeros((MAX_CASCADES, 4), np.float32)
@@ -58,7 +58,7 @@ class LPVTexturesGL:
                 else:
                     if tex is not self._empty:
                         tex.release()
-                    self.textures[c][k] = texture3d_from_array(self.ctx, arr)
+                    self.textures[c][k] = upload_texture3d(self.ctx, arr)
         self.lookup_offset = float(cfg.lookup_offset)
         self.leak_guard = bool(cfg.leak_guard)
         self.margin = float(cfg.edge_margin)

@@ -80,7 +80,7 @@ class ShadowMaps:
     tile_size: int
 
 
-def fit_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, count: int,
+def fit_shadow_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, count: int,
                  size: int, lam: float, max_distance: float) -> list[Cascade]:
     sun = np.asarray(sun_direction, np.float64)
     center_scene = bounds.mean(axis=0)
@@ -170,7 +170,7 @@ class ShadowPass:
         self.fbo = ctx.framebuffer(depth_attachment=self.depth)
 
     def render(self, cascades: list[Cascade]) -> ShadowMaps:
-        """Draw the scene's depth into one atlas tile per cascade (from ``fit_cascades`` or
+        """Draw the scene's depth into one atlas tile per cascade (from ``fit_shadow_cascades`` or
         ``fit_overlapped``)."""
         import moderngl
 

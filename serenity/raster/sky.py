@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from serenity.raster.context import fullscreen_vao, load_program
-from serenity.raster.interop import texture3d_from_array
+from serenity.raster.interop import upload_texture3d
 
 VOLUME_TEXTURES = 7
 
@@ -44,7 +44,7 @@ class SkyTexturesGL:
     def __init__(self, ctx):
         self.ctx = ctx
         self.sky_map = _texture2d(ctx, np.zeros((1, 1, 3), np.float32))
-        self.volume = [texture3d_from_array(ctx, np.zeros((1, 1, 1, 4 if t < 6 else 3), np.float32))
+        self.volume = [upload_texture3d(ctx, np.zeros((1, 1, 1, 4 if t < 6 else 3), np.float32))
                        for t in range(VOLUME_TEXTURES)]
         self.origin = np.zeros(3)
         self.cell = np.ones(3)
@@ -77,7 +77,7 @@ class SkyTexturesGL:
                 tex.write(a.tobytes())
             else:
                 tex.release()
-                self.volume[t] = texture3d_from_array(self.ctx, a)
+                self.volume[t] = upload_texture3d(self.ctx, a)
         self.origin = np.asarray(origin, np.float64).reshape(3)
         self.cell = np.broadcast_to(np.asarray(cell_size, np.float64), (3,)).copy()
         self.res = np.asarray(res, np.float64).reshape(3)
