@@ -10,6 +10,7 @@ module never imports a kernel module (DESIGN.md §2). Per active cascade: three 
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import fullscreen_vao, load_program
@@ -132,8 +133,6 @@ class LPVProbeGL:
     def evaluate(self, lpv, points, directions, shininess, width: int = 64) -> tuple[np.ndarray, np.ndarray]:
         """(irradiance (N,3) W/m², glossy radiance (N,3)) at points (N,3) with unit directions (N,3)
         (the normal for irradiance, the reflected direction for glossy) and Phong exponents."""
-        import moderngl
-
         ctx = self.ctx
         p = np.asarray(points, np.float32).reshape(-1, 3)
         n = p.shape[0]

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
 from serenity.gbuffer_layout import GBUFFER_TARGETS, RT_GBUFFER_KEYS
@@ -48,8 +49,6 @@ class RTGBufferUpload:
         self.view: RTView | None = None
 
     def resize(self, width: int, height: int) -> None:
-        import moderngl
-
         if self.size == (width, height):
             return
         if self.view is not None:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program
@@ -162,8 +163,6 @@ class ShadowPass:
         self.vao = scene_gl.vao(self.program, with_attributes=("in_position",))
         tiles = 2 if cascades > 1 else 1
         self.depth = ctx.depth_texture((size * tiles, size * tiles))
-        import moderngl
-
         self.depth.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth.repeat_x = self.depth.repeat_y = False
         self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF/PCSS)
@@ -172,8 +171,6 @@ class ShadowPass:
     def render(self, cascades: list[Cascade]) -> ShadowMaps:
         """Draw the scene's depth into one atlas tile per cascade (from ``fit_shadow_cascades`` or
         ``fit_overlapped``)."""
-        import moderngl
-
         ctx = self.ctx
         with ctx.debug_scope("shadow"):
             self.fbo.use()

@@ -21,6 +21,7 @@ Uploads do not flip rows: sky-map array row i is texture row i (the mapping in s
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import fullscreen_vao, load_program
@@ -30,8 +31,6 @@ VOLUME_TEXTURES = 7
 
 
 def _texture2d(ctx, a: np.ndarray):
-    import moderngl
-
     a = np.ascontiguousarray(a, np.float32)
     h, w, c = a.shape
     tex = ctx.texture((w, h), c, a.tobytes(), dtype="f4")
