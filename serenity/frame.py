@@ -1,4 +1,4 @@
-"""The frame pipeline of DESIGN.md §1 and paper §10 as code: named stages, no maths, each timed.
+"""The frame pipeline of docs/architecture.md ("The frame") and paper §10 as code: named stages, no maths, each timed.
 
     renderer = Renderer(scene, 640, 360)
     frame = renderer.render()          # Frame(hdr, ldr, aovs, timings, events)

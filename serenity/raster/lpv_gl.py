@@ -4,7 +4,7 @@ arbitrary points (tests, debugging).
 
 ``LPVTexturesGL.upload(lpv)`` takes any object shaped like ``serenity.kernels.lpv
 .LightPropagationVolume`` (``grids``, ``textures(c)``, ``config``, ``glossy_step_length()``) — this
-module never imports a kernel module (DESIGN.md §2). Per active cascade: three RGBA32F textures
+module never imports a kernel module (docs/architecture.md, Layers). Per active cascade: three RGBA32F textures
 (R, G, B), RGBA = L1 SH (Y0, x, y, z) of intensity in W/sr, LINEAR, CLAMP_TO_EDGE.
 """
 

@@ -2,7 +2,7 @@
 
 ``SkyTexturesGL(ctx)`` owns them; ``upload_sky_map`` / ``upload_volume`` take the arrays the
 kernels produce (``atmosphere.SkyMapCache.sky_map``, ``SkyVolume.textures()`` and its grid) — this
-module never imports a kernel (DESIGN.md §2), it only takes numpy arrays. ``bind(program,
+module never imports a kernel (docs/architecture.md, Layers), it only takes numpy arrays. ``bind(program,
 first_unit)`` binds the sky map to ``first_unit`` and the volume to the 7 units after it and sets
 the uniforms of ``glsl/sky.glsl`` that the program uses:
 
