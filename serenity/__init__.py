@@ -12,6 +12,8 @@ Public API (re-exported lazily, so ``import serenity`` loads neither Warp nor Op
 
 from __future__ import annotations
 
+import importlib
+
 __version__ = "0.1.0"
 
 _EXPORTS = {
@@ -32,7 +34,5 @@ __all__ = [*_EXPORTS, "__version__"]
 
 def __getattr__(name: str):
     if name in _EXPORTS:
-        import importlib
-
         return getattr(importlib.import_module(_EXPORTS[name]), name)
     raise AttributeError(f"module 'serenity' has no attribute {name!r}")

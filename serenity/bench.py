@@ -20,7 +20,13 @@ import platform
 import time
 
 import numpy as np
+from tqdm import tqdm
 
+from serenity.config import RenderConfig
+from serenity.device import resolve_device
+from serenity.frame import Renderer
+from serenity.optional import pyplot
+from serenity.scene import load
 from serenity.scene.model import Camera, direction_from_angles
 
 #: the paper's Table 1 (ms), for the README comparison: stage → (paper's name, ms)
@@ -67,11 +73,6 @@ def sun_path(base_dir: np.ndarray, t: float, degrees: float = 20.0) -> np.ndarra
 
 def run_frames(scene, width, height, frames, device=None, overlap=True, progress=True):
     """Render ``frames`` frames of the path; returns per-frame records and the last Frame."""
-    from tqdm import tqdm
-
-    from serenity.config import RenderConfig
-    from serenity.frame import Renderer
-
     scene = copy.deepcopy(scene)
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
     renderer = Renderer(scene, width, height, device=device, config=RenderConfig(overlap=overlap))
@@ -104,11 +105,7 @@ def summarise(records: list[dict], skip_first: int = 1) -> dict:
 
 def timeline_chart(frame, path: str, title: str) -> None:
     """Lanes of one frame's stages over time (paper Fig. 21)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot("the timeline chart")
     lanes = []
     for lane, *_ in frame.events:
         if lane not in lanes:
@@ -150,9 +147,6 @@ def format_table(over: dict, serial: dict) -> str:
 
 def bench(scene_name: str, width: int, height: int, frames: int, device=None, json_path=None,
           chart_path=None) -> dict:
-    from serenity.device import resolve_device
-    from serenity.scene import load
-
     scene = load(scene_name)
     device = resolve_device(device)
     t0 = time.perf_counter()

@@ -23,6 +23,20 @@ SKY_MAP_SIZE = 256
 #: cascades the LPV kernels and ``lpv.glsl`` take at most
 LPV_MAX_CASCADES = 3
 
+MAX_IMAGE_SIZE = 8192
+"""Largest image side, pixels (the texture size every OpenGL 4.3 implementation here supports)."""
+DEFAULT_EXPOSURE = 0.02
+"""Multiplier applied to radiance (W·m⁻²·sr⁻¹) before Reinhard; 0.02 maps a white wall in noon
+sun (≈300) to about 0.86 display luminance. The CLI's and the metrics' default too."""
+
+
+def check_image_size(width, height, what: str = "image size") -> tuple[int, int]:
+    """(width, height) as ints, or a ``SerenityError`` naming ``what`` when a side is outside
+    1..``MAX_IMAGE_SIZE``."""
+    if not (1 <= int(width) <= MAX_IMAGE_SIZE and 1 <= int(height) <= MAX_IMAGE_SIZE):
+        raise SerenityError(f"{what} must be within 1..{MAX_IMAGE_SIZE} pixels per side, got {width}x{height}")
+    return int(width), int(height)
+
 
 @dataclass(frozen=True)
 class ShadowConfig:
@@ -262,9 +276,8 @@ class RenderConfig:
     it). Each GI technique is a sub-config with an ``enabled`` flag, e.g.
     ``RenderConfig(lpv=LPVConfig(enabled=False))`` renders without the LPV."""
 
-    exposure: float = 0.02
-    """Multiplier applied to radiance (W·m⁻²·sr⁻¹) before Reinhard; 0.02 maps a white wall in
-    noon sun (≈300) to about 0.86 display luminance."""
+    exposure: float = DEFAULT_EXPOSURE
+    """Multiplier applied to radiance (W·m⁻²·sr⁻¹) before Reinhard (see ``DEFAULT_EXPOSURE``)."""
     ambient: str = "none"
     """Indirect term while the GI techniques are absent: "none", or "constant" (the classic flat
     ambient hack, irradiance π·L_sky on every surface — the baseline the GI must beat)."""

@@ -1,4 +1,4 @@
-"""The frame pipeline of DESIGN.md §1 and paper §10 as code: named stages, no maths, each timed.
+"""The frame pipeline of docs/architecture.md ("The frame") and paper §10 as code: named stages, no maths, each timed.
 
     renderer = Renderer(scene, 640, 360)
     frame = renderer.render()          # Frame(hdr, ldr, aovs, timings, events)
@@ -34,9 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from serenity.config import RenderConfig
+from serenity.config import RenderConfig, check_image_size
 from serenity.device import resolve_device
-from serenity.errors import SerenityError
 from serenity.raster.composite import CompositePass
 from serenity.raster.context import get_context
 from serenity.raster.deferred import DeferredPass, LightingInputs
@@ -45,11 +44,10 @@ from serenity.raster.interop import read_texture
 from serenity.raster.raycast import RayCastingBuffer, RayCastPass
 from serenity.raster.rt_gbuffer import RTGBufferUpload
 from serenity.raster.scene_gl import SceneGL
-from serenity.raster.shadow import ShadowPass, fit_cascades, fit_overlapped
+from serenity.raster.shadow import ShadowPass, fit_overlapped, fit_shadow_cascades
 from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
 
-MAX_SIZE = 8192
 MAIN_LANE = "main (GL + volumes)"
 RT_LANE = "worker (CPU ray tracing)"
 
@@ -92,8 +90,7 @@ class Renderer:
 
     def __init__(self, scene, width: int, height: int, device: str | None = None,
                  config: RenderConfig | None = None):
-        if not (1 <= int(width) <= MAX_SIZE and 1 <= int(height) <= MAX_SIZE):
-            raise SerenityError(f"image size must be within 1..{MAX_SIZE} pixels per side, got {width}x{height}")
+        check_image_size(width, height)
         self.scene = scene
         self.width, self.height = int(width), int(height)
         self.config = config or RenderConfig()
@@ -328,7 +325,7 @@ class Renderer:
         # 2. the GL work of the main view, while the tracer runs
         with self._stage("shadow maps (CSM)"):
             sc = cfg.shadow
-            cascades = fit_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
+            cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
                                     sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
             shadow = self.shadow_pass.render(cascades)
         with self._stage("g-buffer"):

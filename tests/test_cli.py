@@ -100,3 +100,45 @@ def test_console_script_exit_status(tmp_path):
     assert r.returncode == 2
     assert "Traceback" not in r.stderr
     assert "missing.obj" in r.stderr
+
+
+def test_every_command_module_is_registered():
+    """Each module of serenity/commands (but the shared helpers) is in cli.COMMANDS, with register()."""
+    import pkgutil
+
+    import serenity.commands
+    from serenity.cli import COMMANDS
+
+    names = {m.name for m in pkgutil.iter_modules(serenity.commands.__path__)} - {"common"}
+    assert names == {c.__name__.rsplit(".", 1)[1] for c in COMMANDS}
+    assert all(callable(c.register) for c in COMMANDS)
+
+
+def test_help_is_light_and_lists_commands_whose_extras_are_missing():
+    """``serenity --help`` with the eval extra's packages missing still lists reference and compare,
+    and loads neither Warp, OpenGL, trimesh nor numpy (a command imports what it runs when it runs)."""
+    code = ("import sys\n"
+            "for m in ('mitsuba', 'flip_evaluator', 'matplotlib'): sys.modules[m] = None\n"
+            "from serenity.cli import main\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print('LOADED', sorted(m for m in ('warp', 'moderngl', 'trimesh', 'numpy') if m in sys.modules))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    for command in ("render", "scenes", "bench", "reference", "compare"):
+        assert command in r.stdout
+    assert "LOADED []" in r.stdout
+
+
+def test_missing_optional_package_names_the_extra(tmp_path, capsys, monkeypatch):
+    from serenity.io.exr import write_exr
+
+    monkeypatch.setenv("SERENITY_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setitem(sys.modules, "mitsuba", None)  # import mitsuba -> ImportError
+    code, _, err = _run(["reference", "plane", "--size", "8x8", "-q", "-o", str(tmp_path / "ref.exr")], capsys)
+    _one_line_error(code, err, "mitsuba", "pip install 'serenity[eval]'")
+
+    monkeypatch.setitem(sys.modules, "flip_evaluator", None)
+    img = str(tmp_path / "img.exr")
+    write_exr(img, {"beauty": np.ones((4, 4, 3), np.float32)})
+    code, _, err = _run(["compare", img, img], capsys)
+    _one_line_error(code, err, "flip-evaluator", "pip install 'serenity[eval]'")

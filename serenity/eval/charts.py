@@ -1,4 +1,4 @@
-"""Speed-vs-accuracy charts (DESIGN.md §4): x = frame or stage time in milliseconds (log scale),
+"""Speed-vs-accuracy charts (docs/architecture.md, "Accuracy"): x = frame or stage time in milliseconds (log scale),
 y = error against the reference (lower is better), one colour per technique, every point labelled,
 the Pareto front (no other point is both faster and more accurate) drawn as a step line, and the
 paper's settings ringed.
@@ -13,6 +13,7 @@ import math
 import os
 
 from serenity.errors import SerenityError
+from serenity.optional import pyplot
 
 
 def _validate(points: list[dict]) -> list[dict]:
@@ -44,11 +45,7 @@ def pareto_front(points: list[dict]) -> list[int]:
 
 def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: str | None = None):
     """A matplotlib Figure of the chart (Agg backend; the caller saves or closes it)."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
+    plt = pyplot("speed-vs-accuracy charts")
     pts = _validate(points)
     techniques = list(dict.fromkeys(p["technique"] for p in pts))
     cmap = plt.get_cmap("tab10")
@@ -91,8 +88,7 @@ def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: 
 def save_speed_accuracy_chart(points: list[dict], path: str, error_name: str = "error",
                               title: str | None = None) -> str:
     """Write the chart of ``points`` as a PNG to ``path``; returns ``path``."""
-    import matplotlib.pyplot as plt
-
+    plt = pyplot("speed-vs-accuracy charts")
     fig = speed_accuracy_figure(points, error_name, title)
     d = os.path.dirname(os.path.abspath(path))
     os.makedirs(d, exist_ok=True)

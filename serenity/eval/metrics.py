@@ -1,11 +1,11 @@
-"""Image error metrics against a reference (DESIGN.md §4).
+"""Image error metrics against a reference (docs/architecture.md, "Accuracy").
 
 - :func:`rel_mse` — relative MSE on linear HDR radiance: mean over pixels (and channels) of
   (a − b)² / (b² + ε), b the reference, ε = 1e-2 (W·m⁻²·sr⁻¹)² so that black reference pixels do
   not divide by zero. ε is absolute: at the radiances of our scenes (tens to hundreds) it matters only
   for near-black pixels (b ≲ 0.3), where it caps a pixel's error at (a − b)²/ε.
 - :func:`flip` — NVIDIA's FLIP (``flip-evaluator``, LDR mode, 67 pixels per degree) on the
-  tone-mapped images: both go through :func:`serenity.raster.tonemap.reinhard_srgb` (the renderer's
+  tone-mapped images: both go through :func:`serenity.colour.reinhard_srgb` (the renderer's
   own numpy twin of its tone map: exposure, Reinhard, sRGB, 8 bits) with the same exposure, so a FLIP of 0 means
   "looks the same on screen after our tone map". Mean over pixels, in [0, 1].
 
@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from serenity.colour import reinhard_srgb
+from serenity.config import DEFAULT_EXPOSURE
 from serenity.errors import SerenityError
+from serenity.optional import require
 
 REL_MSE_EPS = 1e-2
 """ε of relative MSE, (W·m⁻²·sr⁻¹)²."""
-DEFAULT_EXPOSURE = 0.02
-"""The renderer's default exposure (``RenderConfig.exposure``)."""
 
 
 def _pair(a, b) -> tuple[np.ndarray, np.ndarray]:
@@ -83,17 +84,12 @@ def rel_mse(img, ref, mask=None, eps: float = REL_MSE_EPS, trim: float = 0.0) ->
 def tonemap(hdr, exposure: float = DEFAULT_EXPOSURE) -> np.ndarray:
     """(H, W, 3) float32 display values in [0, 1]: exactly the renderer's 8-bit sRGB output for this HDR
     image (exposure, Reinhard, sRGB, rounding: ``reinhard_srgb``), divided by 255."""
-    from serenity.raster.tonemap import reinhard_srgb
-
     return reinhard_srgb(np.asarray(hdr, np.float32), exposure).astype(np.float32) / np.float32(255.0)
 
 
 def flip_map(img, ref, exposure: float = DEFAULT_EXPOSURE) -> np.ndarray:
     """(H, W) float32 FLIP error per pixel, in [0, 1], of the tone-mapped HDR images."""
-    try:
-        import flip_evaluator
-    except ImportError:
-        raise SerenityError("FLIP needs flip-evaluator: pip install 'serenity[eval]'") from None
+    flip_evaluator = require("flip_evaluator", "the FLIP metric")
     a, b = _pair(img, ref)
     if a.shape[-1] != 3:
         a, b = np.repeat(a[..., :1], 3, -1), np.repeat(b[..., :1], 3, -1)
@@ -112,8 +108,7 @@ def flip(img, ref, mask=None, exposure: float = DEFAULT_EXPOSURE) -> float:
 
 def flip_png(error_map: np.ndarray) -> np.ndarray:
     """(H, W, 3) uint8 of a FLIP error map through matplotlib's magma colour map (0 black, 1 bright)."""
-    from matplotlib import colormaps
-
+    colormaps = require("matplotlib", "the FLIP error map").colormaps
     e = np.clip(np.asarray(error_map, np.float32), 0.0, 1.0)
     return (colormaps["magma"](e)[..., :3] * 255.0 + 0.5).astype(np.uint8)
 

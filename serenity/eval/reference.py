@@ -1,4 +1,4 @@
-"""Reference renders: a ``Scene`` exported to Mitsuba 3 and path traced (DESIGN.md §4).
+"""Reference renders: a ``Scene`` exported to Mitsuba 3 and path traced (docs/architecture.md, "Accuracy").
 
     img = render_reference(scene, 320, 180, spp=64, component="full")   # (H, W, 3) float32
 
@@ -42,9 +42,9 @@ What is exported, and how faithfully:
 - **Sky**: an ``envmap`` (Mitsuba's default orientation: row 0 = zenith, row H-1 = nadir, column
   u ↔ azimuth 2πu from north (-z) towards east (+x) — the scene model's compass). For a sky with
   ``model == "atmosphere"`` it is ``sky_envmap(sun_direction)``; by default that is
-  ``serenity.kernels.atmosphere.equirect_sky(sun_direction, width, height)`` when that function
-  exists (it must use the same orientation), else the constant ``Sky.radiance`` above the horizon
-  and black below, as our deferred shader draws it. ``model == "constant"`` always uses the constant.
+  ``serenity.kernels.atmosphere.equirect_sky(sun_direction, width, height)`` (the same
+  orientation); ``sky_envmap=None`` gives the constant ``Sky.radiance`` above the horizon and black
+  below, as our deferred shader draws it. ``model == "constant"`` always uses the constant.
 - **Camera**: ``perspective`` with ``look_at(position, target, up)``, ``fov_axis="y"``, the full
   vertical fov, a box pixel filter: pixel (i, j) averages rays over [i, i+1]×[j, j+1], whose centre is
   the ray of ``Camera.primary_rays`` (tests/eval checks both the rays and the silhouettes).
@@ -58,14 +58,19 @@ keyed by a SHA-256 of every scene array and field, the sky map, the settings and
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import math
 import os
 from collections.abc import Callable
 
 import numpy as np
+from tqdm import tqdm
 
+from serenity.config import check_image_size
 from serenity.errors import SerenityError
+from serenity.kernels.atmosphere import equirect_sky, scene_sun_irradiance
+from serenity.optional import require
 
 EXPORTER_VERSION = 3
 """Bump when the export changes what an image looks like (invalidates the cache)."""
@@ -88,10 +93,7 @@ def cache_dir() -> str:
 
 def mitsuba():
     """The ``mitsuba`` module with the ``scalar_rgb`` variant set."""
-    try:
-        import mitsuba as mi
-    except ImportError:
-        raise SerenityError("reference renders need Mitsuba 3: pip install 'serenity[eval]'") from None
+    mi = require("mitsuba", "a reference render")
     if mi.variant() != "scalar_rgb":
         mi.set_variant("scalar_rgb")
     return mi
@@ -100,12 +102,8 @@ def mitsuba():
 # ------------------------------------------------------------------------------------------------ sky
 
 
-def default_sky_envmap() -> Callable[[np.ndarray], np.ndarray] | None:
-    """``equirect_sky`` of the atmosphere model at ``SKY_MAP_SIZE`` when that module exists, else None."""
-    try:
-        from serenity.kernels.atmosphere import equirect_sky
-    except ImportError:
-        return None
+def default_sky_envmap() -> Callable[[np.ndarray], np.ndarray]:
+    """``equirect_sky`` of the atmosphere model at ``SKY_MAP_SIZE``."""
     w, h = SKY_MAP_SIZE
     return lambda sun_direction: equirect_sky(sun_direction, w, h)
 
@@ -360,10 +358,6 @@ def with_effective_sun(scene):
     """A shallow copy of ``scene`` whose sun carries the irradiance our renderer uses
     (:func:`serenity.kernels.atmosphere.scene_sun_irradiance`: the atmosphere's sun colour for
     "atmosphere" skies), so both renderers are lit by the same sun."""
-    import copy
-
-    from serenity.kernels.atmosphere import scene_sun_irradiance
-
     out = copy.copy(scene)
     out.sun = copy.copy(scene.sun)
     out.sun.irradiance = scene_sun_irradiance(scene)
@@ -400,8 +394,7 @@ def render_reference(scene, width: int, height: int, spp: int = 64, component: s
         max_depth = COMPONENT_DEPTH[component]
     if not (max_depth == -1 or max_depth >= 1):
         raise SerenityError(f"max depth must be -1 (unlimited) or >= 1, got {max_depth}")
-    if not (1 <= int(width) <= 8192 and 1 <= int(height) <= 8192):
-        raise SerenityError(f"image size must be within 1..8192 pixels per side, got {width}x{height}")
+    check_image_size(width, height)
     if not int(spp) >= 1:
         raise SerenityError(f"spp must be >= 1, got {spp}")
     width, height, spp, chunk_spp = int(width), int(height), int(spp), max(1, int(chunk_spp))
@@ -423,7 +416,6 @@ def render_reference(scene, width: int, height: int, spp: int = 64, component: s
     mscene = load_mitsuba_scene(scene, width, height, max_depth, sky=sky)
     chunks = [chunk_spp] * (spp // chunk_spp) + ([spp % chunk_spp] if spp % chunk_spp else [])
     acc = np.zeros((height, width, 3), np.float64)
-    from tqdm import tqdm
 
     bar = tqdm(total=spp, unit="spp", desc=f"reference {scene.name} {width}x{height} depth {max_depth}",
                disable=not progress, leave=False)

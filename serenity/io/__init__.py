@@ -1,1 +1,2 @@
-"""Image files: multi-layer EXR (:mod:`.exr`, through OpenEXR) and PNG (:mod:`.png`, through Pillow)."""
+"""Image files: multi-layer EXR (:mod:`.exr`, through OpenEXR), PNG (:mod:`.png`, through Pillow) and
+pixel masks (:mod:`.mask`)."""

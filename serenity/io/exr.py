@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import OpenEXR
 
 from serenity.errors import SerenityError
 
@@ -21,8 +22,6 @@ _ORDER = {"R": 0, "G": 1, "B": 2, "A": 3, "Y": 0, "Z": 0}
 
 def write_exr(path: str, layers: dict[str, np.ndarray]) -> None:
     """Write ``layers`` (each (H, W) or (H, W, C), C in 1..4, all the same H, W) as one EXR file."""
-    import OpenEXR
-
     if not layers:
         raise SerenityError(f"{path}: nothing to write (no layers)")
     channels: dict[str, np.ndarray] = {}
@@ -50,8 +49,6 @@ def write_exr(path: str, layers: dict[str, np.ndarray]) -> None:
 
 def read_exr(path: str) -> dict[str, np.ndarray]:
     """Read every layer of an EXR file as float32 (H, W, C) arrays (see the module doc for names)."""
-    import OpenEXR
-
     if not os.path.isfile(path):
         raise SerenityError(f"{path}: no such EXR file")
     try:
@@ -68,3 +65,15 @@ def read_exr(path: str) -> dict[str, np.ndarray]:
         chans.sort(key=lambda c: _ORDER.get(c[0], 9))
         out[layer] = np.stack([c[1] for c in chans], axis=-1)
     return out
+
+
+def read_rgb_layer(path: str, name: str = "beauty") -> np.ndarray:
+    """Layer ``name`` of an EXR file as (H, W, 3) float32 (a one-channel layer repeated as grey); a
+    missing layer is a ``SerenityError`` listing the file's layers."""
+    layers = read_exr(path)
+    if name not in layers:
+        raise SerenityError(f"{path}: no layer {name!r} (layers: {', '.join(layers)})")
+    img = layers[name]
+    if img.shape[-1] == 1:
+        img = np.repeat(img, 3, axis=-1)
+    return img[..., :3]

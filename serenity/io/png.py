@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+from PIL import Image, UnidentifiedImageError
 
 from serenity.errors import SerenityError
 
 
 def write_png(path: str, image: np.ndarray) -> None:
     """Write an (H, W, 3|4) uint8 image (already tone-mapped and sRGB-encoded)."""
-    from PIL import Image
-
     a = np.asarray(image)
     if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] not in (3, 4):
         raise SerenityError(f"{path}: expected an (H, W, 3|4) uint8 image, got {a.dtype} {a.shape}")
@@ -22,8 +21,6 @@ def write_png(path: str, image: np.ndarray) -> None:
 
 def read_png(path: str) -> np.ndarray:
     """Read a PNG as (H, W, 3) uint8 RGB."""
-    from PIL import Image, UnidentifiedImageError
-
     try:
         with Image.open(path) as im:
             return np.asarray(im.convert("RGB"))

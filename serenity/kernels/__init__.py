@@ -1,1 +1,1 @@
-"""Warp kernels: the compute half of Serenity. Never imports moderngl (see DESIGN.md §2)."""
+"""Warp kernels: the compute half of Serenity. Never imports moderngl nor raster/ (docs/architecture.md, Layers)."""

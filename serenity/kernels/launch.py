@@ -2,7 +2,7 @@
 
 Warp runs a CPU launch on a single thread. Warp releases the GIL while a CPU kernel runs, so
 splitting the index range into contiguous chunks and launching each chunk from its own Python
-thread scales with the cores (DESIGN.md §3: 1.9x with 2 threads on the 2-core CI machine).
+thread scales with the cores (1.9x with 2 threads on the 2-core CI machine).
 
 Convention for a splittable kernel: its **last parameter is** ``offset: int`` and it computes its
 index as ``i = wp.tid() + offset``. ``launch`` appends that offset; on CUDA it is 0 and the whole

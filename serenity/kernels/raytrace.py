@@ -52,6 +52,7 @@ import warp as wp
 
 from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
+from serenity.gbuffer_layout import RT_GBUFFER_KEYS
 from serenity.kernels.kdtree import KdBuildConfig, KdTree, KdTreeData, trace_kd
 from serenity.kernels.launch import launch
 
@@ -61,7 +62,6 @@ wp.set_module_options({"enable_backward": False})
 # constants
 # ----------------------------------------------------------------------------------------------
 
-GBUFFER_KEYS = ("albedo", "normal", "position", "material", "ray_dir", "eye")
 RAY_EPSILON_REL = 1e-4  # default tmin: this fraction of the scene's bounding-box diagonal (m)
 MIN_COSINE = 1e-4  # |n·d| floor in the LOD formula (grazing hits get the coarsest mips, not inf)
 
@@ -270,16 +270,7 @@ def trace_gbuffer(
 # ----------------------------------------------------------------------------------------------
 
 
-def scene_needs_ray_tracing(scene) -> bool:
-    """True when some triangle of ``scene`` has a reflective or transparent material."""
-    used = set()
-    for mesh in scene.meshes:
-        if mesh.triangle_count:
-            used.update(np.unique(mesh.face_material).tolist())
-    return any(scene.materials[i].needs_ray_tracing for i in used)
-
-
-def pack_textures(textures: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def pack_mip_chains(textures: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """All mip levels of ``textures`` in one RGBA float32 array.
 
     Returns (first_level (T,), levels (T,), level_offset (L,), level_size (L,2) as (w, h),
@@ -337,7 +328,7 @@ class RayTracer:
                 tex_index[id(t)] = len(textures)
                 textures.append(t)
             mat_tex.append(tex_index[id(t)])
-        first, nlev, offs, sizes, texels = pack_textures(textures)
+        first, nlev, offs, sizes, texels = pack_mip_chains(textures)
         mats = scene.materials
         dev = self.device
         s = SceneData()
@@ -361,7 +352,7 @@ class RayTracer:
 
     def trace(self, origins, directions, cone_width=0.0, cone_spread=0.0, *, tmin: float | None = None,
               tmax: float = np.inf, threads: int | None = None, transmissions: int = 0) -> dict[str, np.ndarray]:
-        """Trace N rays; returns the G-buffer as a dict of (N,4) float32 arrays (``GBUFFER_KEYS``).
+        """Trace N rays; returns the G-buffer as a dict of (N,4) float32 arrays (``RT_GBUFFER_KEYS``).
 
         ``tmin`` (m) defaults to ``ray_epsilon`` (hits closer than that are ignored: rays start on
         the reflecting surface). ``transmissions``: how many transparent interfaces a ray is bent
@@ -374,13 +365,13 @@ class RayTracer:
             raise SerenityError(f"{n} ray origins but {len(d)} directions")
         cw = np.ascontiguousarray(np.broadcast_to(np.asarray(cone_width, np.float32), (n,)))
         cs = np.ascontiguousarray(np.broadcast_to(np.asarray(cone_spread, np.float32), (n,)))
-        outs = [wp.empty(n, dtype=wp.vec4, device=dev) for _ in GBUFFER_KEYS]
+        outs = [wp.empty(n, dtype=wp.vec4, device=dev) for _ in RT_GBUFFER_KEYS]
         if n:
             args = [self.data, wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
                     wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev),
                     float(self.ray_epsilon if tmin is None else tmin), float(tmax), int(max(0, transmissions)), *outs]
             launch(trace_gbuffer, n, args, device=dev, threads=threads)
-        return {k: a.numpy().reshape(n, 4) for k, a in zip(GBUFFER_KEYS, outs, strict=True)}
+        return {k: a.numpy().reshape(n, 4) for k, a in zip(RT_GBUFFER_KEYS, outs, strict=True)}
 
     def trace_casting_buffer(self, buffer, threads: int | None = None,
                              transmissions: int = 0) -> dict[str, dict[str, np.ndarray]]:

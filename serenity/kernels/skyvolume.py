@@ -30,7 +30,7 @@ coefficients**, W·m⁻²). A constant sky is supported (``Sky.model == "constan
 Storage (paper §7: "six RGBA textures and one RGB texture"): 27 float32 per probe, coefficient-
 major, flat index f = 3k + c (k the SH index 0..8, c the RGB channel); texture t < 6 holds
 f = 4t..4t+3 in RGBA, texture 6 holds f = 24..26 in RGB. ``textures()`` returns them as 7 numpy
-arrays (Z, Y, X, 4) ×6 + (Z, Y, X, 3), ready for ``texture3d_from_array`` (width X, height Y,
+arrays (Z, Y, X, 4) ×6 + (Z, Y, X, 3), ready for ``upload_texture3d`` (width X, height Y,
 depth Z).
 
 Lookup (``irradiance``; ``serenity/raster/glsl/sky.glsl``'s ``sky_volume_irradiance`` is the
@@ -228,15 +228,15 @@ def occluded_np(origins, directions, quads) -> np.ndarray:
     return hit
 
 
-def pack_textures(coeffs: np.ndarray, resolution: tuple[int, int, int]) -> list[np.ndarray]:
+def pack_sh_textures(coeffs: np.ndarray, resolution: tuple[int, int, int]) -> list[np.ndarray]:
     """(P, 27) coefficients → 6 × (Z, Y, X, 4) + 1 × (Z, Y, X, 3) float32 (coefficient-major packing)."""
     x, y, z = resolution
     c = np.asarray(coeffs, np.float32).reshape(z, y, x, COEFFS)
     return [np.ascontiguousarray(c[..., 4 * t:4 * t + 4]) for t in range(6)] + [np.ascontiguousarray(c[..., 24:27])]
 
 
-def unpack_textures(textures: list[np.ndarray]) -> np.ndarray:
-    """Inverse of :func:`pack_textures`: (Z, Y, X, 27)."""
+def unpack_sh_textures(textures: list[np.ndarray]) -> np.ndarray:
+    """Inverse of :func:`pack_sh_textures`: (Z, Y, X, 27)."""
     return np.concatenate([np.asarray(t, np.float32) for t in textures], axis=-1)
 
 
@@ -441,7 +441,7 @@ class SkyVolume:
 
     def textures(self) -> list[np.ndarray]:
         """The 7 arrays of the paper's layout: 6 × (Z, Y, X, 4) + (Z, Y, X, 3) float32."""
-        return pack_textures(self.coefficients().reshape(-1, COEFFS), self.resolution)
+        return pack_sh_textures(self.coefficients().reshape(-1, COEFFS), self.resolution)
 
     def irradiance(self, points, normals) -> np.ndarray:
         """(N, 3) float64 W·m⁻² at surface points with unit normals, as the shader evaluates it."""

@@ -1,1 +1,1 @@
-"""moderngl passes: the rasterised half of Serenity. Never imports a kernel module (DESIGN.md §2)."""
+"""moderngl passes: the rasterised half of Serenity. Never imports a kernel module (docs/architecture.md, Layers)."""

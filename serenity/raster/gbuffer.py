@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program
@@ -53,8 +54,6 @@ class GBufferPass:
             width=width,
             height=height,
         )
-        import moderngl
-
         for t in (g.albedo, g.normal, g.position, g.material):
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
             t.repeat_x = t.repeat_y = False
@@ -64,8 +63,6 @@ class GBufferPass:
         self.size = size
 
     def render(self, view_proj: np.ndarray, camera_pos: np.ndarray) -> GBuffer:
-        import moderngl
-
         ctx = self.ctx
         with ctx.debug_scope("gbuffer"):
             self.fbo.use()

@@ -16,6 +16,8 @@ of the pixels carry it; texture detail comes back from the full-resolution albed
 
 from __future__ import annotations
 
+import moderngl
+
 from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_program, low_res_size
 
 TECHNIQUES = {"sky": 1, "lpv": 2}
@@ -44,8 +46,6 @@ class IndirectPass:
     def render(self, target, gbuffer, bind, camera_pos, ao=None, rt_view=None) -> None:
         """Add this technique's light onto ``target``: the lit HDR texture of the same size, or for a
         ``lowres`` pass the :class:`LowResIndirect` whose targets it adds to."""
-        import moderngl
-
         ctx, p = self.ctx, self.program
         with ctx.debug_scope(f"indirect:{self.technique}"):
             if self.lowres:
@@ -106,8 +106,6 @@ class LowResIndirect:
 
     def upsample(self, target, gbuffer, camera_pos, camera_forward) -> None:
         """Add albedo·E + glossy, upsampled, onto ``target`` (the full-resolution lit HDR texture)."""
-        import moderngl
-
         ctx, p = self.ctx, self.program
         with ctx.debug_scope("indirect:upsample"):
             key = target.glo

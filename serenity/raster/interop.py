@@ -9,6 +9,7 @@ GL's row 0 is the bottom of an image; arrays here use row 0 = top, so reads and 
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
 _DTYPES = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
@@ -30,7 +31,7 @@ def read_depth(tex) -> np.ndarray:
     return np.ascontiguousarray(data[::-1])
 
 
-def texture_from_array(ctx, arr: np.ndarray, dtype: str = "f4", mips: list[np.ndarray] | None = None,
+def upload_texture(ctx, arr: np.ndarray, dtype: str = "f4", mips: list[np.ndarray] | None = None,
                        repeat: bool = True, anisotropy: float = 8.0):
     """A 2-D texture from (H, W, C) data (top row first). ``mips`` (level 0 first) are written as
     given, so GL samples exactly the CPU ray tracer's box-filtered chain; with mips, trilinear
@@ -43,18 +44,14 @@ def texture_from_array(ctx, arr: np.ndarray, dtype: str = "f4", mips: list[np.nd
         tex.build_mipmaps(0, len(mips) - 1)
         for level, m in enumerate(mips[1:], start=1):
             tex.write(np.ascontiguousarray(np.asarray(m)[::-1]).astype(np_dtype).tobytes(), level=level)
-        import moderngl
-
         tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         tex.anisotropy = float(anisotropy)
     tex.repeat_x = tex.repeat_y = repeat
     return tex
 
 
-def texture3d_from_array(ctx, arr: np.ndarray, dtype: str = "f4"):
+def upload_texture3d(ctx, arr: np.ndarray, dtype: str = "f4"):
     """A 3-D texture from (D, H, W, C) data (no flip: volumes are indexed as stored)."""
-    import moderngl
-
     a = np.ascontiguousarray(arr, dtype=_DTYPES[dtype])
     d, h, w, c = a.shape
     tex = ctx.texture3d((w, h, d), c, a.tobytes(), dtype=dtype)

@@ -4,17 +4,18 @@ arbitrary points (tests, debugging).
 
 ``LPVTexturesGL.upload(lpv)`` takes any object shaped like ``serenity.kernels.lpv
 .LightPropagationVolume`` (``grids``, ``textures(c)``, ``config``, ``glossy_step_length()``) — this
-module never imports a kernel module (DESIGN.md §2). Per active cascade: three RGBA32F textures
+module never imports a kernel module (docs/architecture.md, Layers). Per active cascade: three RGBA32F textures
 (R, G, B), RGBA = L1 SH (Y0, x, y, z) of intensity in W/sr, LINEAR, CLAMP_TO_EDGE.
 """
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
 from serenity.config import LPV_MAX_CASCADES
 from serenity.raster.context import fullscreen_vao, load_program
-from serenity.raster.interop import texture3d_from_array
+from serenity.raster.interop import upload_texture3d
 
 MAX_CASCADES = LPV_MAX_CASCADES
 CHANNELS = ("r", "g", "b")
@@ -27,7 +28,7 @@ class LPVTexturesGL:
     def __init__(self, ctx):
         self.ctx = ctx
         zero = np.zeros((1, 1, 1, 4), np.float32)
-        self._empty = texture3d_from_array(ctx, zero)
+        self._empty = upload_texture3d(ctx, zero)
         self.textures: list[list] = [[self._empty] * 3 for _ in range(MAX_CASCADES)]
         self.count = 0
         self.geom = np.zeros((MAX_CASCADES, 4), np.float32)
@@ -59,7 +60,7 @@ class LPVTexturesGL:
                 else:
                     if tex is not self._empty:
                         tex.release()
-                    self.textures[c][k] = texture3d_from_array(self.ctx, arr)
+                    self.textures[c][k] = upload_texture3d(self.ctx, arr)
         self.lookup_offset = float(cfg.lookup_offset)
         self.leak_guard = bool(cfg.leak_guard)
         self.margin = float(cfg.edge_margin)
@@ -133,8 +134,6 @@ class LPVProbeGL:
     def evaluate(self, lpv, points, directions, shininess, width: int = 64) -> tuple[np.ndarray, np.ndarray]:
         """(irradiance (N,3) W/m², glossy radiance (N,3)) at points (N,3) with unit directions (N,3)
         (the normal for irradiance, the reflected direction for glossy) and Phong exponents."""
-        import moderngl
-
         ctx = self.ctx
         p = np.asarray(points, np.float32).reshape(-1, 3)
         n = p.shape[0]

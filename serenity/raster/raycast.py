@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program
@@ -71,8 +72,6 @@ class RayCastPass:
         self.any_traced_material = any(m.needs_ray_tracing for m in scene_gl.materials)
 
     def resize(self, width: int, height: int) -> None:
-        import moderngl
-
         if self.size == (width, height):
             return
         if self.size is not None:
@@ -88,8 +87,6 @@ class RayCastPass:
         self.size = (width, height)
 
     def render(self, view_proj: np.ndarray, camera) -> None:
-        import moderngl
-
         ctx, p = self.ctx, self.program
         w, h = self.size
         with ctx.debug_scope("raycast"):

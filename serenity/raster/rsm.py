@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program
@@ -46,8 +47,6 @@ def fit_sun_view(sun_direction, bounds) -> tuple[np.ndarray, float]:
 
 class RSMPass:
     def __init__(self, ctx, scene_gl, size: int = 256):
-        import moderngl
-
         self.ctx = ctx
         self.scene_gl = scene_gl
         self.size = size
@@ -60,8 +59,6 @@ class RSMPass:
         self.fbo = ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
 
     def render(self, sun_direction, sun_irradiance, bounds) -> None:
-        import moderngl
-
         ctx, p = self.ctx, self.program
         vp, radius = fit_sun_view(sun_direction, bounds)
         self.texel_area = (2 * radius / self.size) ** 2

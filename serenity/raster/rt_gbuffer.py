@@ -17,9 +17,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
-_NAMES = ("albedo", "normal", "position", "material", "eye", "ray_dir")
+from serenity.gbuffer_layout import GBUFFER_TARGETS, RT_GBUFFER_KEYS
 
 
 @dataclass
@@ -48,21 +49,19 @@ class RTGBufferUpload:
         self.view: RTView | None = None
 
     def resize(self, width: int, height: int) -> None:
-        import moderngl
-
         if self.size == (width, height):
             return
         if self.view is not None:
-            for n in _NAMES:
+            for n in RT_GBUFFER_KEYS:
                 getattr(self.view, n).release()
         tex = {}
-        for n in _NAMES:
+        for n in RT_GBUFFER_KEYS:
             t = self.ctx.texture((width, 2 * height), 4, dtype="f4")
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
             t.repeat_x = t.repeat_y = False
             tex[n] = t
         self.view = RTView(**tex, width=width, height=height)
-        self._staging = {n: np.zeros((2 * height, width, 4), np.float32) for n in _NAMES}
+        self._staging = {n: np.zeros((2 * height, width, 4), np.float32) for n in RT_GBUFFER_KEYS}
         self.size = (width, height)
 
     def upload(self, rcb, reflection: dict | None, refraction: dict | None) -> RTView:
@@ -71,7 +70,7 @@ class RTGBufferUpload:
         ``rcb``: the frame's :class:`~serenity.raster.raycast.RayCastingBuffer`. ``reflection`` /
         ``refraction``: the ray tracer's outputs for ``rcb.reflection_rays()`` /
         ``rcb.refraction_rays()``, in the order of ``rcb.pixels``, each with (N, 4) arrays under the
-        names of ``_NAMES`` (``eye``/``ray_dir``: the last segment of each ray). Only the
+        names of ``RT_GBUFFER_KEYS`` (``eye``/``ray_dir``: the last segment of each ray). Only the
         bounding rectangle of each half's traced pixels is written (``RTView.rects``); texels
         outside them are stale and nothing reads them (the lighting passes draw the rectangles
         only, the composite reads traced pixels only)."""
@@ -84,16 +83,16 @@ class RTGBufferUpload:
             rows, cols = np.divmod(pix, w)
             rows = rows + half * h
             r0, r1, c0, c1 = int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
-            for n in _NAMES:
+            for n in RT_GBUFFER_KEYS:
                 self._staging[n][r0:r1, c0:c1] = 0.0
-            for n in ("albedo", "normal", "position", "material"):
+            for n in GBUFFER_TARGETS:
                 self._staging[n][rows, cols] = res[n]
             # the viewer and direction of the ray's last segment (after any transmissions)
             self._staging["eye"][rows, cols, :3] = res["eye"][:, :3]
             self._staging["ray_dir"][rows, cols, :3] = res["ray_dir"][:, :3]
             # GL rows run bottom-up: image row r is texture row 2h - 1 - r
             rect = (c0, 2 * h - r1, c1 - c0, r1 - r0)
-            for n in _NAMES:
+            for n in RT_GBUFFER_KEYS:
                 block = np.ascontiguousarray(self._staging[n][r0:r1, c0:c1][::-1])
                 getattr(self.view, n).write(block.tobytes(), viewport=rect)
             rects.append(rect)

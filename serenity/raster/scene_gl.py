@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from serenity.raster.context import anisotropy
-from serenity.raster.interop import texture_from_array
+from serenity.raster.interop import upload_texture
 
 
 @dataclass
@@ -48,7 +48,7 @@ class SceneGL:
             if m.albedo_texture is not None:
                 t = m.albedo_texture
                 self.mean_texture_albedo[i] = t.mips[0][..., :3].reshape(-1, 3).astype(np.float64).mean(axis=0)
-                self.textures[i] = texture_from_array(ctx, t.mips[0][..., :3], dtype="f2",
+                self.textures[i] = upload_texture(ctx, t.mips[0][..., :3], dtype="f2",
                                                       mips=[mm[..., :3] for mm in t.mips], anisotropy=aniso)
         self.triangle_count = len(faces)
 

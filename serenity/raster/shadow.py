@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program
@@ -80,7 +81,7 @@ class ShadowMaps:
     tile_size: int
 
 
-def fit_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, count: int,
+def fit_shadow_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, count: int,
                  size: int, lam: float, max_distance: float) -> list[Cascade]:
     sun = np.asarray(sun_direction, np.float64)
     center_scene = bounds.mean(axis=0)
@@ -162,18 +163,14 @@ class ShadowPass:
         self.vao = scene_gl.vao(self.program, with_attributes=("in_position",))
         tiles = 2 if cascades > 1 else 1
         self.depth = ctx.depth_texture((size * tiles, size * tiles))
-        import moderngl
-
         self.depth.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth.repeat_x = self.depth.repeat_y = False
         self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF/PCSS)
         self.fbo = ctx.framebuffer(depth_attachment=self.depth)
 
     def render(self, cascades: list[Cascade]) -> ShadowMaps:
-        """Draw the scene's depth into one atlas tile per cascade (from ``fit_cascades`` or
+        """Draw the scene's depth into one atlas tile per cascade (from ``fit_shadow_cascades`` or
         ``fit_overlapped``)."""
-        import moderngl
-
         ctx = self.ctx
         with ctx.debug_scope("shadow"):
             self.fbo.use()

@@ -2,7 +2,7 @@
 
 ``SkyTexturesGL(ctx)`` owns them; ``upload_sky_map`` / ``upload_volume`` take the arrays the
 kernels produce (``atmosphere.SkyMapCache.sky_map``, ``SkyVolume.textures()`` and its grid) — this
-module never imports a kernel (DESIGN.md §2), it only takes numpy arrays. ``bind(program,
+module never imports a kernel (docs/architecture.md, Layers), it only takes numpy arrays. ``bind(program,
 first_unit)`` binds the sky map to ``first_unit`` and the volume to the 7 units after it and sets
 the uniforms of ``glsl/sky.glsl`` that the program uses:
 
@@ -21,17 +21,16 @@ Uploads do not flip rows: sky-map array row i is texture row i (the mapping in s
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import fullscreen_vao, load_program
-from serenity.raster.interop import texture3d_from_array
+from serenity.raster.interop import upload_texture3d
 
 VOLUME_TEXTURES = 7
 
 
 def _texture2d(ctx, a: np.ndarray):
-    import moderngl
-
     a = np.ascontiguousarray(a, np.float32)
     h, w, c = a.shape
     tex = ctx.texture((w, h), c, a.tobytes(), dtype="f4")
@@ -44,7 +43,7 @@ class SkyTexturesGL:
     def __init__(self, ctx):
         self.ctx = ctx
         self.sky_map = _texture2d(ctx, np.zeros((1, 1, 3), np.float32))
-        self.volume = [texture3d_from_array(ctx, np.zeros((1, 1, 1, 4 if t < 6 else 3), np.float32))
+        self.volume = [upload_texture3d(ctx, np.zeros((1, 1, 1, 4 if t < 6 else 3), np.float32))
                        for t in range(VOLUME_TEXTURES)]
         self.origin = np.zeros(3)
         self.cell = np.ones(3)
@@ -77,7 +76,7 @@ class SkyTexturesGL:
                 tex.write(a.tobytes())
             else:
                 tex.release()
-                self.volume[t] = texture3d_from_array(self.ctx, a)
+                self.volume[t] = upload_texture3d(self.ctx, a)
         self.origin = np.asarray(origin, np.float64).reshape(3)
         self.cell = np.broadcast_to(np.asarray(cell_size, np.float64), (3,)).copy()
         self.res = np.asarray(res, np.float64).reshape(3)

@@ -10,6 +10,7 @@ multiplies; on a CPU rasteriser the pass costs in proportion to its pixels.
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import fullscreen_vao, load_program, low_res_size
@@ -27,8 +28,6 @@ class SSAOPass:
         self.size = None
 
     def resize(self, width: int, height: int) -> None:
-        import moderngl
-
         if self.size == (width, height):
             return
         if self.size is not None:

@@ -1,4 +1,5 @@
-"""Scenes: the model (:mod:`.model`), loaders (:mod:`.loaders`, :mod:`.toml_scene`), textures
+"""Scenes: the model (:mod:`.model`), loading (:mod:`.loaders`' ``load`` dispatching to
+:mod:`.mesh_io` and :mod:`.toml_scene`), textures
 (:mod:`.texture`), the sun's position (:mod:`.sun`) and the built-in scenes (:mod:`.procedural`).
 
 ``load(name_or_path) -> Scene`` takes a built-in scene name (``scene_names()``) or a
@@ -7,7 +8,8 @@
 
 from __future__ import annotations
 
-from serenity.scene.loaders import export_glb, load
+from serenity.scene.loaders import load
+from serenity.scene.mesh_io import export_glb
 from serenity.scene.model import (
     Camera,
     Material,
@@ -21,7 +23,7 @@ from serenity.scene.model import (
 )
 from serenity.scene.procedural import build_scene, scene_descriptions, scene_names
 from serenity.scene.sun import parse_time, solar_position, sun_from_time
-from serenity.scene.texture import build_mips, linear_to_srgb, load_texture, srgb_to_linear, texture_from_array
+from serenity.scene.texture import build_mips, load_texture, texture_from_array
 from serenity.scene.toml_scene import load_toml, save_toml
 
 __all__ = [
@@ -37,7 +39,6 @@ __all__ = [
     "build_scene",
     "direction_from_angles",
     "export_glb",
-    "linear_to_srgb",
     "load",
     "load_texture",
     "load_toml",
@@ -46,7 +47,6 @@ __all__ = [
     "scene_descriptions",
     "scene_names",
     "solar_position",
-    "srgb_to_linear",
     "sun_from_time",
     "texture_from_array",
 ]

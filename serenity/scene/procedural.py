@@ -34,6 +34,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+import trimesh
 
 from serenity.errors import SceneError
 from serenity.scene.model import (
@@ -48,6 +49,8 @@ from serenity.scene.model import (
     direction_from_angles,
     vertex_normals,
 )
+from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, sun_from_time
+from serenity.scene.texture import texture_from_array
 
 __all__ = ["scene_names", "scene_descriptions", "build_scene", "plane_scene", "tile_texture", "lumpy_mesh"]
 
@@ -140,8 +143,6 @@ class _Builder:
         self.add(mat, cap, np.tile(_Y, (len(cap), 1)), cap[:, [0, 2]] * np.array([1.0, -1.0]), cf)
 
     def sphere(self, mat: str, center, radius: float, subdivisions: int = 3) -> None:
-        import trimesh
-
         s = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
         d = np.asarray(s.vertices, np.float64)
         d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -260,8 +261,6 @@ def tile_texture(size: int = 256, tiles: int = 4, seed: int = 7) -> Texture:
     """A deterministic stone-tile albedo texture: ``tiles`` × ``tiles`` tiles in a two-tone checker with
     per-tile and per-texel variation and dark grout, generated as 8-bit sRGB and decoded to linear
     (so a PNG/GLB export reproduces it exactly)."""
-    from serenity.scene.texture import texture_from_array
-
     rng = np.random.default_rng(seed)
     cell = size // tiles
     yy, xx = np.mgrid[0:size, 0:size]
@@ -281,8 +280,6 @@ def tile_texture(size: int = 256, tiles: int = 4, seed: int = 7) -> Texture:
 
 
 def _default_sun(when: str | None = None) -> tuple[Sun, tuple[float, float]]:
-    from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, sun_from_time
-
     return sun_from_time(when or DEFAULT_TIME, *DEFAULT_LOCATION), DEFAULT_LOCATION
 
 
@@ -370,8 +367,6 @@ def lumpy_mesh(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (V, 3) float32, faces (F, 3) int32) of a displaced icosphere (radius ~1) standing on
     a wavy terrain grid of about as many triangles: an uneven triangle soup of any size for the
     kd-tree's tests and benchmark (not a scene)."""
-    import trimesh
-
     s = trimesh.creation.icosphere(subdivisions=subdivisions)
     v = s.vertices * (1 + 0.1 * np.sin(5 * s.vertices[:, :1]) * np.cos(7 * s.vertices[:, 1:2]))
     n = int(np.sqrt(len(s.faces) / 2)) + 1

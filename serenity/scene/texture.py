@@ -1,7 +1,6 @@
 """Albedo textures: sRGB decoding, the mip chain, and loading images into :class:`Texture`.
 
-- ``srgb_to_linear`` / ``linear_to_srgb``: the exact piecewise transfer functions of
-  IEC 61966-2-1 (sRGB), element-wise on numpy arrays (values outside [0, 1] are clamped).
+- sRGB decoding and encoding use :mod:`serenity.colour` (IEC 61966-2-1).
 - ``build_mips(img)``: level k+1 is the 2×2 box filter of level k, down to 1×1. Level sizes follow
   OpenGL (``max(1, floor(n / 2))`` per axis), so the chain can be uploaded level by level as is.
   Texel (i, j) of level k+1 averages texels (2i..2i+1, 2j..2j+1) of level k with the indices
@@ -19,39 +18,19 @@ from __future__ import annotations
 import os
 
 import numpy as np
+from PIL import Image, UnidentifiedImageError
 
+from serenity.colour import linear_to_srgb, srgb_to_linear
 from serenity.errors import SceneError
 from serenity.scene.model import Texture
 
 __all__ = [
-    "srgb_to_linear",
-    "linear_to_srgb",
     "build_mips",
     "load_texture",
     "texture_from_array",
     "texture_from_image",
     "texture_to_srgb8",
 ]
-
-# IEC 61966-2-1 constants
-_SRGB_DECODE_KNEE = 0.04045  # encoded value where the linear segment ends
-_SRGB_ENCODE_KNEE = 0.0031308  # linear value where the linear segment ends
-_SRGB_SLOPE = 12.92
-_SRGB_A = 0.055
-_SRGB_GAMMA = 2.4
-
-
-def srgb_to_linear(x) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] → linear values in [0, 1] (IEC 61966-2-1)."""
-    v = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-    return np.where(v <= _SRGB_DECODE_KNEE, v / _SRGB_SLOPE, ((v + _SRGB_A) / (1 + _SRGB_A)) ** _SRGB_GAMMA)
-
-
-def linear_to_srgb(x) -> np.ndarray:
-    """Linear values in [0, 1] → sRGB-encoded values in [0, 1] (IEC 61966-2-1)."""
-    v = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-    return np.where(v <= _SRGB_ENCODE_KNEE, v * _SRGB_SLOPE, (1 + _SRGB_A) * v ** (1 / _SRGB_GAMMA) - _SRGB_A)
-
 
 def _box_down(a: np.ndarray) -> np.ndarray:
     """One 2×2 box-filter step (see the module docstring for sizes and clamping)."""
@@ -136,8 +115,6 @@ def load_texture(path, srgb: bool = True) -> Texture:
     ``srgb=True`` (albedo maps) decodes the colour channels from sRGB. A missing file or one that
     does not decode raises :class:`SceneError` naming the file and the problem.
     """
-    from PIL import Image, UnidentifiedImageError
-
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise SceneError(f"{path}: texture file not found")

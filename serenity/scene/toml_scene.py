@@ -3,7 +3,7 @@
 A scene file references one mesh file (glTF/GLB, OBJ, PLY; a path relative to the TOML file) and
 sets the camera, the sun (by date, time and place, or by explicit angles), the sky, occlusion
 quads and per-material overrides. Every table is optional except ``[scene].mesh``; what is not
-given comes from :func:`serenity.scene.loaders.scene_from_meshes` (a camera framing the bounds,
+given comes from :func:`serenity.scene.mesh_io.scene_from_meshes` (a camera framing the bounds,
 the default sun and sky, no quads)::
 
     [scene]
@@ -60,7 +60,10 @@ except ImportError:  # Python 3.10
     import tomli as tomllib
 
 from serenity.errors import SceneError
+from serenity.scene.mesh_io import load_mesh_file, scene_from_meshes
 from serenity.scene.model import Camera, Material, OcclusionQuad, Scene, Sky, Sun, direction_from_angles
+from serenity.scene.sun import parse_time, sun_from_time
+from serenity.scene.texture import load_texture
 
 __all__ = ["load_toml", "save_toml"]
 
@@ -83,10 +86,6 @@ def _check_keys(where: str, table, allowed: set[str]) -> None:
 
 def load_toml(path) -> Scene:
     """Load a TOML scene file (see the module docstring for the format)."""
-    from serenity.scene.loaders import load_mesh_file, scene_from_meshes
-    from serenity.scene.sun import parse_time, sun_from_time
-    from serenity.scene.texture import load_texture
-
     path = os.fspath(path)
     try:
         with open(path, "rb") as f:

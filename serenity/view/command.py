@@ -31,7 +31,7 @@ def register(sub) -> None:
 
 
 def cmd_view(args) -> int:
-    from serenity.cli import parse_size
+    from serenity.commands.common import parse_size
     from serenity.scene import load
     from serenity.view.controls import Settings, quality_config
     from serenity.view.script import load_script

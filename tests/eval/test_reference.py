@@ -1,6 +1,6 @@
 """The Mitsuba 3 reference: units, cameras, sky, components and caching.
 
-The agreement checks (DESIGN.md §4, issue #3): our direct-only render and Mitsuba's direct-only
+The agreement checks (docs/architecture.md, Accuracy; issue #3): our direct-only render and Mitsuba's direct-only
 render (depth 2, black sky) of a diffuse plane under the sun and of the courtyard match within 2% in
 the mean over lit pixels, and their silhouettes (depth discontinuities) align with IoU >= 0.99.
 """

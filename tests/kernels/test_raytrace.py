@@ -9,7 +9,8 @@ import pytest
 import trimesh
 
 from serenity.errors import SerenityError
-from serenity.kernels.raytrace import GBUFFER_KEYS, RayTracer, scene_needs_ray_tracing
+from serenity.gbuffer_layout import GBUFFER_TARGETS, RT_GBUFFER_KEYS
+from serenity.kernels.raytrace import RayTracer
 from serenity.scene.model import Camera, Material, Mesh, Scene, Sky, Sun
 from serenity.scene.texture import texture_from_array
 
@@ -127,7 +128,7 @@ def test_hit_attributes_misses_and_untraced_rays(device):
                  np.float32)
     d = np.array([[0, -2, 0], [0, 1, 0], [0, 0, 0], [np.nan, 0, 0], [1, -1, 0]], np.float32)
     g = rt.trace(o, d, 0.0, 0.0)
-    assert set(g) == set(GBUFFER_KEYS) and all(a.shape == (5, 4) and a.dtype == np.float32 for a in g.values())
+    assert set(g) == set(RT_GBUFFER_KEYS) and all(a.shape == (5, 4) and a.dtype == np.float32 for a in g.values())
     # 0: a hit from above
     assert np.allclose(g["position"][0], [1, 0, -1, 1], atol=1e-6)
     assert np.allclose(g["normal"][0], [0, 1, 0, 0.25], atol=1e-6)
@@ -136,12 +137,12 @@ def test_hit_attributes_misses_and_untraced_rays(device):
     assert np.allclose(g["ray_dir"][0], [0, -1, 0, 1.0], atol=1e-6)  # unit direction, distance in m
     # 4: a miss: the sky direction, nothing else
     assert np.allclose(g["ray_dir"][4, :3], [math.sqrt(0.5), -math.sqrt(0.5), 0], atol=1e-6)
-    for k in ("albedo", "normal", "position", "material"):
+    for k in GBUFFER_TARGETS:
         assert np.all(g[k][4] == 0)
     # 1: from below, the normal faces the ray (two-sided, like the raster G-buffer)
     assert np.allclose(g["normal"][1, :3], [0, -1, 0], atol=1e-6) and g["position"][1, 3] == 1
     # 2, 3: zero and NaN directions are "not traced": all zeros
-    for k in GBUFFER_KEYS:
+    for k in RT_GBUFFER_KEYS:
         assert np.all(g[k][2:4] == 0)
 
 
@@ -176,16 +177,6 @@ def _mixed_scene():
             Material("glass", albedo=(0.75, 0.75, 0.75), transparency=0.75, ior=1.5, specular=0.25)]
     cam = Camera((0.5, 3.0, 6.0), (0.0, 0.5, 0.0), fov_y_deg=50.0)
     return Scene("mixed", [ground, box, sphere], mats, cam, Sun((0.3, 1.0, 0.4)), Sky(model="constant"))
-
-
-def test_scene_needs_ray_tracing():
-    scene = _mixed_scene()
-    assert scene_needs_ray_tracing(scene)
-    for m in scene.materials:
-        m.reflectivity = m.transparency = 0.0
-    assert not scene_needs_ray_tracing(scene)
-    scene.materials.append(Material("unused mirror", reflectivity=1.0))  # used by no triangle
-    assert not scene_needs_ray_tracing(scene)
 
 
 def test_empty_scene_raises():
@@ -239,7 +230,7 @@ def test_gbuffer_matches_raster_gbuffer_for_primary_rays(device):
     gpass = GBufferPass(ctx, scene_gl)
     gpass.resize(w, h)
     gb = gpass.render(cam.projection_matrix(w / h) @ cam.view_matrix(), cam.position)
-    ref = {k: read_texture(getattr(gb, k), 4).reshape(-1, 4) for k in ("albedo", "normal", "position", "material")}
+    ref = {k: read_texture(getattr(gb, k), 4).reshape(-1, 4) for k in GBUFFER_TARGETS}
     check_gl_error(ctx, "gbuffer")
 
     o, d = cam.primary_rays(w, h)
@@ -281,7 +272,7 @@ def test_cpu_and_cuda_gbuffers_are_identical(cuda_devices):
     ref = RayTracer(scene, device="cpu").trace(o, d, 0.0, 1e-3)
     for dev in cuda_devices:
         got = RayTracer(scene, device=dev).trace(o, d, 0.0, 1e-3)
-        for k in GBUFFER_KEYS:
+        for k in RT_GBUFFER_KEYS:
             assert np.allclose(got[k], ref[k], atol=1e-6), k
 
 

@@ -14,8 +14,8 @@ from serenity.kernels.sampling import fibonacci_sphere
 from serenity.kernels.skyvolume import (
     SkyVolume,
     occluded_np,
-    pack_textures,
-    unpack_textures,
+    pack_sh_textures,
+    unpack_sh_textures,
 )
 from serenity.scene.model import OcclusionQuad, Sky, direction_from_angles
 from serenity.scene.procedural import build_scene, plane_scene
@@ -163,9 +163,9 @@ def test_textures_layout(device, courtyard):
     assert [t.shape for t in tex] == [(z, y, x, 4)] * 6 + [(z, y, x, 3)]
     assert all(t.dtype == np.float32 for t in tex)
     c = vol.coefficients()
-    assert np.array_equal(unpack_textures(tex).reshape(z, y, x, 9, 3), c)
+    assert np.array_equal(unpack_sh_textures(tex).reshape(z, y, x, 9, 3), c)
     assert np.array_equal(tex[0][..., 3], c[..., 1, 0])  # f = 3k + c: texture 0 alpha = (k=1, red)
-    assert np.array_equal(pack_textures(c.reshape(-1, 27), vol.resolution)[6], tex[6])
+    assert np.array_equal(pack_sh_textures(c.reshape(-1, 27), vol.resolution)[6], tex[6])
     assert vol.probe_positions().shape == (x * y * z, 3)
 
 

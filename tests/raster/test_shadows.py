@@ -8,7 +8,7 @@ import pytest
 
 from serenity.config import LPVConfig, RenderConfig, ShadowConfig, SSAOConfig
 from serenity.frame import Renderer
-from serenity.raster.shadow import fit_cascades
+from serenity.raster.shadow import fit_shadow_cascades
 from serenity.scene.model import Camera
 
 from .exact import ambient_occlusion, sun_visibility
@@ -34,16 +34,16 @@ def test_cascades_are_texel_snapped_and_rotation_invariant():
     sun = np.array([0.3, 0.8, 0.52])
     sun /= np.linalg.norm(sun)
     cam = Camera(position=(0.0, 2.0, 10.0), target=(0.0, 1.0, 0.0))
-    a = fit_cascades(cam, 16 / 9, sun, bounds, 4, 1024, 0.75, 200.0)
+    a = fit_shadow_cascades(cam, 16 / 9, sun, bounds, 4, 1024, 0.75, 200.0)
     # turning the camera keeps every cascade's size (texel) unchanged
     turned = Camera(position=(0.0, 2.0, 10.0), target=(5.0, 1.5, 0.0))
-    b = fit_cascades(turned, 16 / 9, sun, bounds, 4, 1024, 0.75, 200.0)
+    b = fit_shadow_cascades(turned, 16 / 9, sun, bounds, 4, 1024, 0.75, 200.0)
     for ca, cb in zip(a, b, strict=True):
         assert ca.texel_world == pytest.approx(cb.texel_world, rel=1e-12)
     # moving the camera by less than a texel shifts projections by whole texels only
     texel = a[0].texel_world
     moved = Camera(position=(0.3 * texel, 2.0, 10.0), target=(0.3 * texel, 1.0, 0.0))
-    m = fit_cascades(moved, 16 / 9, sun, bounds, 4, 1024, 0.75, 200.0)
+    m = fit_shadow_cascades(moved, 16 / 9, sun, bounds, 4, 1024, 0.75, 200.0)
     for ca, cm in zip(a, m, strict=True):
         shift_px = (cm.view_proj[:2, 3] - ca.view_proj[:2, 3]) / 2 * 1024
         assert np.allclose(shift_px, np.round(shift_px), atol=1e-6)

@@ -1,7 +1,8 @@
 import numpy as np
 
-from serenity.raster.interop import texture_from_array
-from serenity.raster.tonemap import TonemapPass, linear_to_srgb, reinhard, reinhard_srgb
+from serenity.colour import linear_to_srgb, reinhard, reinhard_srgb
+from serenity.raster.interop import upload_texture
+from serenity.raster.tonemap import TonemapPass
 
 
 def test_reinhard_known_values():
@@ -21,7 +22,7 @@ def test_srgb_encode_known_values():
 def test_gl_tonemap_matches_numpy_twin(gl_ctx):
     rng = np.random.default_rng(1)
     hdr = (rng.random((16, 24, 3)) ** 4 * 2000).astype(np.float32)
-    tex = texture_from_array(gl_ctx, hdr)
+    tex = upload_texture(gl_ctx, hdr)
     tp = TonemapPass(gl_ctx)
     tp.resize(24, 16)
     tp.render(tex, 0.02)

@@ -150,7 +150,7 @@ def test_trimesh_written_file_keeps_triangles_normals_uvs_and_material(ext, tmp_
                                                               np.asarray(mesh.faces)), atol=2e-3)
     mat = scene.materials[fm[0]]
     assert mat.albedo_texture is not None
-    from serenity.scene.texture import srgb_to_linear
+    from serenity.colour import srgb_to_linear
 
     np.testing.assert_allclose(mat.albedo_texture.mips[0][0, 0, :3] * mat.albedo,
                                srgb_to_linear(np.array([200, 120, 40]) / 255), atol=2e-3)

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from serenity.colour import linear_to_srgb, srgb_to_linear
 from serenity.errors import SceneError
-from serenity.scene.texture import build_mips, linear_to_srgb, load_texture, srgb_to_linear, texture_from_array
+from serenity.scene.texture import build_mips, load_texture, texture_from_array
 
 
 def test_srgb_transfer_known_values_and_inverse():

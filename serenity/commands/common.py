@@ -1,0 +1,67 @@
+"""What several ``serenity`` subcommands share: defaults, ``--size`` parsing, placing the sun from
+``--time``/``--lat``/``--lon``, output paths, and the one-line error report."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from serenity.config import check_image_size
+from serenity.errors import SerenityError
+
+DEFAULT_SCENE = "courtyard"
+DEFAULT_SIZE = (640, 360)
+DEFAULT_OUT_DIR = "serenity_out"
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"640x360"`` → (640, 360); a malformed or out-of-range size is a one-line ``SerenityError``."""
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise SerenityError(f"--size must look like 640x360, got {text!r}") from None
+    return check_image_size(w, h, what="--size")
+
+
+def add_time_arguments(parser) -> None:
+    """``--time``, ``--lat``, ``--lon``: the sun of a local time at a place (see :func:`apply_time`)."""
+    parser.add_argument("--time", help='local time "YYYY-MM-DD HH:MM[ +HH:MM]" for the sun position')
+    parser.add_argument("--lat", type=float, help="latitude in degrees (with --time)")
+    parser.add_argument("--lon", type=float, help="longitude in degrees, east positive (with --time)")
+
+
+def apply_time(scene, args) -> None:
+    """Move ``scene``'s sun to ``args.time`` at (``args.lat``, ``args.lon``), each defaulting to the
+    scene's location or :data:`~serenity.scene.sun.DEFAULT_LOCATION`; the sun's angular size is kept.
+    ``--lat``/``--lon`` without ``--time`` is an error."""
+    if not args.time:
+        if args.lat is not None or args.lon is not None:
+            raise SerenityError("--lat/--lon need --time")
+        return
+    from serenity.scene.sun import DEFAULT_LOCATION, parse_time, sun_from_time
+
+    when = parse_time(args.time)
+    lat, lon = getattr(scene, "location", None) or DEFAULT_LOCATION
+    lat = args.lat if args.lat is not None else lat
+    lon = args.lon if args.lon is not None else lon
+    old = scene.sun
+    new = sun_from_time(when, lat, lon)
+    new.angular_diameter_deg = old.angular_diameter_deg
+    scene.sun = new
+
+
+def scene_stem(name: str) -> str:
+    """A file name stem for outputs of scene ``name``: a file's base name without extension, or a
+    built-in scene's name."""
+    return os.path.splitext(os.path.basename(name))[0] if os.path.exists(name) else name
+
+
+def make_parent_dir(path: str) -> None:
+    """Create the folder ``path`` will be written in."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+
+
+def report_error(error: BaseException) -> int:
+    """Print ``error`` as the one line ``serenity: error: ...`` on stderr; the exit status (2)."""
+    print(f"serenity: error: {error}", file=sys.stderr)
+    return 2
