@@ -3,6 +3,7 @@ gives them. Later features add their own config classes here (SkyConfig, LPVConf
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from serenity.errors import SerenityError
@@ -131,3 +132,46 @@ class RenderConfig:
             if not (isinstance(value, kind) or (optional and value is None)):
                 raise SerenityError(f"{name} must be a {kind.__name__}{' or None' if optional else ''}, "
                                     f"got {value!r} (e.g. ssao=SSAOConfig(enabled=False) to turn SSAO off)")
+
+
+#: deepest kd-tree the build makes (the traversal's stack holds one entry per level)
+KD_MAX_DEPTH = 62
+
+
+@dataclass(frozen=True)
+class KdBuildConfig:
+    """The kd-tree's binned SAH build (paper §9; ``serenity/kernels/kdtree_build.py``). Every field is
+    part of the tree's disk-cache key. Costs are relative units (only their ratio matters)."""
+
+    traversal_cost: float = 2.0
+    """C_trav: cost of one inner-node step, relative to ``intersection_cost``."""
+    intersection_cost: float = 1.0
+    """C_isect: cost of one ray–triangle test."""
+    empty_bonus: float = 0.8
+    """Fraction (0..1) of a split's cost removed when one side is empty (empty-space cut-off)."""
+    min_empty_fraction: float = 0.0
+    """The bonus applies only when the empty side is at least this fraction (0..1) of the node's extent."""
+    bins: int = 32
+    """SAH bins per axis per node, 4..64 (a node with fewer triangles gets fewer: the next power of 2)."""
+    max_depth: int | None = None
+    """Depth limit, 0..``KD_MAX_DEPTH``; None = 8 + 1.3·log2(N) for N triangles (pbrt's rule), capped."""
+
+    def __post_init__(self):
+        for name in ("traversal_cost", "intersection_cost"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise SerenityError(f"KdBuildConfig.{name} must be a finite number > 0, got {value!r}")
+        for name in ("empty_bonus", "min_empty_fraction"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and 0.0 <= value < 1.0):
+                raise SerenityError(f"KdBuildConfig.{name} must be in [0, 1), got {value!r}")
+        if not (isinstance(self.bins, int) and 4 <= self.bins <= 64):
+            raise SerenityError(f"KdBuildConfig.bins must be an int in 4..64, got {self.bins!r}")
+        if self.max_depth is not None and not (isinstance(self.max_depth, int) and 0 <= self.max_depth <= KD_MAX_DEPTH):
+            raise SerenityError(f"KdBuildConfig.max_depth must be None or an int in 0..{KD_MAX_DEPTH}, "
+                                f"got {self.max_depth!r}")
+
+    def depth_limit(self, n: int) -> int:
+        """The depth limit for a mesh of ``n`` triangles."""
+        d = self.max_depth if self.max_depth is not None else int(round(8 + 1.3 * math.log2(max(n, 1))))
+        return int(max(0, min(d, KD_MAX_DEPTH)))
