@@ -1,37 +1,16 @@
-"""SAH kd-tree over a triangle mesh: an O(N log N) build in numpy, traversal in Warp kernels (paper §9).
+"""kd-tree traversal in Warp kernels, and the host class that builds, caches and queries a tree (paper §9).
 
 The paper's CPU ray tracer follows Wald's thesis ("Realtime Ray Tracing and Interactive Global
 Illumination", 2004): a kd-tree whose split planes minimise the surface area heuristic (SAH), and
-a front-to-back stack traversal that stops at the first leaf whose hit lies inside it.
+a front-to-back stack traversal that stops at the first leaf whose hit lies inside it. The build
+(binned SAH, disk cache) is :mod:`serenity.kernels.kdtree_build`; its settings are
+:class:`serenity.config.KdBuildConfig`.
 
-Build — *binned SAH, vectorised with numpy one tree level at a time* (not Wald & Havran 2006's
-sorted event sweep). Why: Wald & Havran reach O(N log N) with per-node event lists that are
-swept one node at a time; in Python that is millions of interpreter-level steps for a 1M-triangle
-mesh. Binning evaluates every node of a level at once with a handful of whole-array numpy
-operations (``bincount`` of the triangles' min/max bins, prefix sums, the SAH of every bin plane),
-so each level costs O(R) vectorised work for its R triangle references and there are O(log N)
-levels: O(N log N) with O(depth) Python overhead. The price is that split candidates are the
-``bins - 1`` equally spaced planes over each node's geometry bounds (plus those bounds themselves),
-not every triangle boundary — a slightly worse tree than an exact sweep.
-Details:
-- Cost = C_trav + C_isect·(SA_L·N_L + SA_R·N_R)/SA, with the *empty-space bonus*: a split with an
-  empty side costs (1 − ``empty_bonus``) of that. The node's tight geometry bounds are always
-  candidates, so empty space around geometry is cut off first (Wald thesis §7.3; Havran).
-  A node becomes a leaf when no split is cheaper than C_isect·N or at ``max_depth``.
-- Triangles that straddle a split are *clipped* to each side ("split clipping"): the bounding box
-  of the triangle ∩ half-space, computed in float64 and rounded outwards to float32, intersected
-  with the reference's previous box and the child's cell. Conservative, so no triangle is ever
-  missing from a cell it overlaps.
-- Triangles with a non-finite vertex or zero area (exactly, in float64) are left out: never hit.
-- Built trees are cached on disk (``.npz``, no pickle) keyed by a hash of the vertices, faces and
-  build settings, in ``$SERENITY_CACHE`` or ``~/.cache/serenity`` (``kdtree-<hash>.npz``). Builds of
-  more than ``PROGRESS_MIN_TRIANGLES`` triangles show a tqdm progress bar (one step per level).
-
-Layout (numpy at build; on a device :class:`KdTreeData`, the two node fields interleaved in one
+Layout on a device (:class:`KdTreeData`; the build's ``node_head``/``node_split`` interleaved in one
 8-byte :class:`KdNode` per node):
-    node_head (nodes,) int32: inner = (first child << 2) | axis (children are consecutive: left at
-        first child, right at first child + 1); leaf = (offset into ``prims`` << 2) | 3.
-    node_split (nodes,) float32: the split position of an inner node (world units).
+    nodes (nodes,) KdNode: ``head`` = (first child << 2) | axis for an inner node (children are
+        consecutive: left at first child, right at first child + 1), (offset into ``prims`` << 2) | 3
+        for a leaf; ``split`` = the split position of an inner node (world units).
     prims (P,) int32: per leaf a count then that many triangle indices; ``prims[0] = 0`` is the
         shared empty leaf.
     tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2.
@@ -55,18 +34,27 @@ On the CPU the launches are split over all cores with :func:`serenity.kernels.la
 
 from __future__ import annotations
 
-import hashlib
 import math
-import os
 import time
-from dataclasses import asdict, dataclass
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
+from serenity.config import KD_MAX_DEPTH, KdBuildConfig
 from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
+from serenity.kernels.kdtree_build import (
+    CACHE_MIN_TRIANGLES,
+    PROGRESS_MIN_TRIANGLES,
+    KdStats,
+    build_arrays,
+    cache_dir,
+    geometry_key,
+    load_tree,
+    save_tree,
+    validate_mesh,
+)
 from serenity.kernels.launch import launch
 
 wp.set_module_options({"enable_backward": False})
@@ -75,11 +63,7 @@ wp.set_module_options({"enable_backward": False})
 # constants
 # ----------------------------------------------------------------------------------------------
 
-FORMAT_VERSION = 1  # bump when the build or the cached layout changes
-STACK_SIZE = 64  # traversal stack entries; max_depth is capped below it
-MAX_DEPTH_CAP = STACK_SIZE - 2
-CACHE_MIN_TRIANGLES = 10_000  # cache=None caches builds of at least this many triangles
-PROGRESS_MIN_TRIANGLES = 200_000  # progress=None shows a bar from this many triangles
+STACK_SIZE = KD_MAX_DEPTH + 2  # traversal stack entries: one per level of the deepest tree
 T_TOLERANCE = 1e-6  # relative (to the scene scale) overlap of near/far traversal intervals
 BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest extent
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
@@ -91,29 +75,6 @@ _INF = wp.constant(math.inf)
 _TOL = wp.constant(T_TOLERANCE)
 _TINY = wp.constant(TINY_DIRECTION)
 _STACK = wp.constant(STACK_SIZE)
-
-
-@dataclass(frozen=True)
-class KdBuildConfig:
-    """Settings of the SAH build (they are part of the cache key)."""
-
-    traversal_cost: float = 2.0
-    """C_trav: cost of one inner-node step, relative units (2:1 measured best on the benchmark scene:
-    shallower trees, fewer references, no slower traversal than 1:1.5)."""
-    intersection_cost: float = 1.0
-    """C_isect: cost of one ray–triangle test, same units."""
-    empty_bonus: float = 0.8
-    """Fraction of a split's cost removed when one side is empty (empty-space cut-off)."""
-    min_empty_fraction: float = 0.0
-    """The bonus applies only when the empty side is at least this fraction of the node's extent."""
-    bins: int = 32
-    """SAH bins per axis per node."""
-    max_depth: int | None = None
-    """Depth limit; None = 8 + 1.3·log2(N) (pbrt's rule), capped at ``MAX_DEPTH_CAP``."""
-
-    def depth_limit(self, n: int) -> int:
-        d = self.max_depth if self.max_depth is not None else int(round(8 + 1.3 * math.log2(max(n, 1))))
-        return int(max(0, min(d, MAX_DEPTH_CAP)))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -379,7 +340,7 @@ def occlude_rays(
 
 
 # ----------------------------------------------------------------------------------------------
-# host: build (numpy), cache, traversal
+# host
 # ----------------------------------------------------------------------------------------------
 
 
@@ -396,361 +357,6 @@ class Hits:
     @property
     def hit(self) -> np.ndarray:
         return self.prim >= 0
-
-
-@dataclass
-class KdStats:
-    triangles: int
-    valid_triangles: int
-    nodes: int
-    leaves: int
-    empty_leaves: int
-    references: int
-    depth: int
-    build_seconds: float
-    from_cache: bool = False
-
-
-def cache_dir() -> Path:
-    """Where built trees are cached: ``$SERENITY_CACHE`` or ``~/.cache/serenity``."""
-    env = os.environ.get("SERENITY_CACHE")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "serenity"
-
-
-def geometry_key(vertices: np.ndarray, faces: np.ndarray, config: KdBuildConfig) -> str:
-    """Hash of the geometry and the build settings (the cache key)."""
-    h = hashlib.blake2b(digest_size=20)
-    h.update(f"kdtree-v{FORMAT_VERSION}|{sorted(asdict(config).items())}|{vertices.shape}|{faces.shape}".encode())
-    h.update(np.ascontiguousarray(vertices, np.float32).tobytes())
-    h.update(np.ascontiguousarray(faces, np.int32).tobytes())
-    return h.hexdigest()
-
-
-def _validate_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
-    v = np.asarray(vertices)
-    f = np.asarray(faces)
-    if v.size == 0 or f.size == 0:
-        raise SerenityError(f"cannot build a kd-tree of an empty mesh ({v.size // 3 if v.ndim else 0} vertices, "
-                            f"{f.size // 3 if f.ndim else 0} triangles)")
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise SerenityError(f"kd-tree vertices must be a (V, 3) array, got shape {v.shape}")
-    if f.ndim != 2 or f.shape[1] != 3:
-        raise SerenityError(f"kd-tree faces must be an (F, 3) array, got shape {f.shape}")
-    if not np.issubdtype(f.dtype, np.integer):
-        raise SerenityError(f"kd-tree faces must be integer vertex indices, got {f.dtype}")
-    if f.min() < 0 or f.max() >= len(v):
-        raise SerenityError(f"kd-tree face indices out of range 0..{len(v) - 1}")
-    return np.ascontiguousarray(v, np.float32), np.ascontiguousarray(f, np.int32)
-
-
-def _round_out(lo64: np.ndarray, hi64: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """float32 boxes that contain the float64 boxes."""
-    lo = lo64.astype(np.float32)
-    hi = hi64.astype(np.float32)
-    lo = np.where(lo.astype(np.float64) > lo64, np.nextafter(lo, np.float32(-np.inf)), lo)
-    hi = np.where(hi.astype(np.float64) < hi64, np.nextafter(hi, np.float32(np.inf)), hi)
-    return lo, hi
-
-
-def _clip_to_halfspaces(tri: np.ndarray, axis: np.ndarray, pos: np.ndarray):
-    """Bounding boxes of each triangle ∩ {x_axis ≤ pos} and ∩ {x_axis ≥ pos} (float64, K×3 each;
-    inf/−inf where the part is empty)."""
-    nxt = [1, 2, 0]
-    x = np.take_along_axis(tri, axis[:, None, None], axis=2)[:, :, 0]  # (K, 3) along the split axis
-    dx = x - pos[:, None]
-    dxn = dx[:, nxt]
-    crosses = dx * dxn < 0.0
-    s = np.where(crosses, dx / np.where(crosses, dx - dxn, 1.0), 0.0)
-    q = tri + s[:, :, None] * (tri[:, nxt] - tri)  # edge ∩ plane
-    np.put_along_axis(q, np.broadcast_to(axis[:, None, None], (len(tri), 3, 1)), pos[:, None, None], axis=2)
-    q_lo = np.where(crosses[:, :, None], q, np.inf).min(axis=1)
-    q_hi = np.where(crosses[:, :, None], q, -np.inf).max(axis=1)
-    out = []
-    for side in (dx <= 0.0, dx >= 0.0):
-        m = side[:, :, None]
-        lo = np.minimum(np.where(m, tri, np.inf).min(axis=1), q_lo)
-        hi = np.maximum(np.where(m, tri, -np.inf).max(axis=1), q_hi)
-        out.append((lo, hi))
-    return out
-
-
-def _box_area(ext: np.ndarray) -> np.ndarray:
-    """Half the surface area of boxes with extents ext (..., 3)."""
-    return ext[..., 0] * ext[..., 1] + ext[..., 1] * ext[..., 2] + ext[..., 2] * ext[..., 0]
-
-
-def _best_splits(nb: int, n_lo, n_hi, t_lo, t_hi, counts, r_node, r_box, cfg: KdBuildConfig):
-    """The cheapest SAH split of each of M nodes over ``nb`` bins per axis plus the nodes' tight
-    geometry bounds (empty-space cut-offs). Nodes: cells ``n_lo``/``n_hi`` (M,3) float32, tight
-    bounds ``t_lo``/``t_hi`` (M,3), ``counts`` (M,). References: ``r_node`` (R,) node of each,
-    ``r_box`` (6,R) float32 rows lo x,y,z, hi x,y,z. Returns (cost (M,), axis (M,), position (M,)
-    float32); cost is inf where no plane lies strictly inside the node."""
-    m = len(n_lo)
-    ct, ci, bonus = cfg.traversal_cost, cfg.intersection_cost, cfg.empty_bonus
-    lo64 = n_lo.astype(np.float64)
-    hi64 = n_hi.astype(np.float64)
-    ext = hi64 - lo64
-    area = _box_area(ext)
-    inv_area = 1.0 / np.where(area > 0, area, 1.0)
-    b_lo = np.maximum(lo64, t_lo)
-    b_hi = np.minimum(hi64, t_hi)
-    plane_k = np.arange(1, nb, dtype=np.float64)
-    key = r_node.astype(np.int64) * nb
-    rows = np.arange(m)
-    best_cost = np.full(m, np.inf)
-    best_axis = np.zeros(m, np.int32)
-    best_pos = np.zeros(m, np.float32)
-    zeros = np.zeros((m, 1), np.int64)
-    cnt = counts[:, None].astype(np.int64)
-    for a in range(3):
-        o1, o2 = (a + 1) % 3, (a + 2) % 3
-        e1, e2 = ext[:, o1:o1 + 1], ext[:, o2:o2 + 1]
-        width = b_hi[:, a] - b_lo[:, a]
-        inv_w = np.where(width > 0, nb / np.where(width > 0, width, 1.0), 0.0)
-        base = b_lo[:, a][r_node]
-        scale = inv_w[r_node]
-        b0 = np.clip(((r_box[a] - base) * scale).astype(np.int64), 0, nb - 1)
-        b1 = np.clip(((r_box[a + 3] - base) * scale).astype(np.int64), 0, nb - 1)
-        h_start = np.bincount(key + b0, minlength=m * nb).reshape(m, nb)
-        h_end = np.bincount(key + b1, minlength=m * nb).reshape(m, nb)
-        # candidates: the bin planes, then the tight bounds (nothing below / nothing above)
-        nl = np.concatenate([np.cumsum(h_start, axis=1)[:, :-1], zeros, cnt], axis=1)
-        nr = np.concatenate([cnt - np.cumsum(h_end, axis=1)[:, :-1], cnt, zeros], axis=1)
-        pos32 = np.concatenate([b_lo[:, a:a + 1] + (width / nb)[:, None] * plane_k[None, :],
-                                t_lo[:, a:a + 1], t_hi[:, a:a + 1]], axis=1).astype(np.float32)
-        pos = pos32.astype(np.float64)
-        el = pos - lo64[:, a:a + 1]
-        er = hi64[:, a:a + 1] - pos
-        perim = e1 + e2
-        face = e1 * e2
-        cost = ct + ci * ((el * perim + face) * nl + (er * perim + face) * nr) * inv_area[:, None]
-        span = ext[:, a:a + 1] * cfg.min_empty_fraction
-        empty_cut = ((nl == 0) & (el >= span)) | ((nr == 0) & (er >= span))
-        cost = np.where(empty_cut, cost * (1.0 - bonus), cost)
-        inside = (pos32 > n_lo[:, a:a + 1]) & (pos32 < n_hi[:, a:a + 1])
-        cost = np.where(inside, cost, np.inf)
-        j = np.argmin(cost, axis=1)
-        c = cost[rows, j]
-        better = c < best_cost
-        best_cost = np.where(better, c, best_cost)
-        best_axis = np.where(better, a, best_axis)
-        best_pos = np.where(better, pos32[rows, j], best_pos)
-    return best_cost, best_axis, best_pos
-
-
-def _depth_first_layout(heads: list[np.ndarray], splits: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Reorder the level-by-level (breadth-first) nodes depth-first, children pairs kept adjacent:
-    a node's pair of children is followed by the left child's subtree, then the right child's, so
-    the last levels of a descent touch nearby memory. Returns (node_head, node_split)."""
-    head = np.concatenate(heads).astype(np.int64)
-    split = np.concatenate(splits).astype(np.float32)
-    n = len(head)
-    inner = (head & 3) != 3
-    child = np.where(inner, head >> 2, 0)
-    bounds = np.cumsum([0] + [len(h) for h in heads])
-    desc = np.zeros(n, np.int64)  # number of descendants
-    for k in range(len(heads) - 1, -1, -1):
-        x = np.arange(bounds[k], bounds[k + 1])
-        x = x[inner[x]]
-        desc[x] = 2 + desc[child[x]] + desc[child[x] + 1]
-    pos = np.zeros(n, np.int64)
-    pair = np.zeros(n, np.int64)  # new position of each inner node's children pair
-    pair[0] = 1
-    for k in range(len(heads)):
-        x = np.arange(bounds[k], bounds[k + 1])
-        x = x[inner[x]]
-        left, right = child[x], child[x] + 1
-        pos[left] = pair[x]
-        pos[right] = pair[x] + 1
-        pair[left] = pair[x] + 2
-        pair[right] = pair[x] + 2 + desc[left]
-    new_head = np.empty(n, np.int64)
-    new_head[pos] = np.where(inner, (pair << 2) | (head & 3), head)
-    new_split = np.empty(n, np.float32)
-    new_split[pos] = split
-    return new_head.astype(np.int32), new_split
-
-
-def _clipped_boxes(tri64, r_tri, r_box, bi, ax, p32, n_lo, n_hi, r_node_s):
-    """New (6,K) boxes of the straddling references ``bi`` on the left and on the right of their
-    split, and whether each part is non-empty."""
-    k = len(bi)
-    cols = np.arange(k)
-    bax = ax[bi]
-    bp = p32[bi]
-    nd = r_node_s[bi]
-    old = r_box[:, bi]
-    (ll, lh), (rl, rh) = _clip_to_halfspaces(tri64[r_tri[bi]], bax, bp.astype(np.float64))
-    out = []
-    for c_lo64, c_hi64, left in ((ll, lh, True), (rl, rh, False)):
-        empty = ~np.isfinite(c_lo64).all(axis=1)
-        c_lo, c_hi = _round_out(np.where(empty[:, None], 0.0, c_lo64), np.where(empty[:, None], 0.0, c_hi64))
-        cell_lo = n_lo[nd]
-        cell_hi = n_hi[nd]
-        if left:
-            cell_hi[cols, bax] = bp
-        else:
-            cell_lo[cols, bax] = bp
-        box = np.empty((6, k), np.float32)
-        box[:3] = np.maximum(np.maximum(old[:3], c_lo.T), cell_lo.T)
-        box[3:] = np.minimum(np.minimum(old[3:], c_hi.T), cell_hi.T)
-        ok = ~empty & np.all(box[:3] <= box[3:], axis=0)
-        out.append((box, ok))
-    return out
-
-
-def _build(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, progress: bool) -> dict:
-    """The binned, level-by-level SAH build. Returns the arrays of the layout plus statistics.
-
-    Per level: every node's references are contiguous (sorted by node). References are kept as
-    triangle index ``r_tri`` (R,), node ``r_node`` (R,) and box ``r_box`` (6,R) float32."""
-    tri64 = vertices.astype(np.float64)[faces]  # (F, 3, 3)
-    finite = np.isfinite(tri64).all(axis=(1, 2))
-    cross = np.cross(tri64[:, 1] - tri64[:, 0], tri64[:, 2] - tri64[:, 0])
-    valid = finite & np.any(cross != 0.0, axis=1)
-    ids = np.flatnonzero(valid).astype(np.int32)
-    nvalid = len(ids)
-    heads: list[np.ndarray] = []
-    splits: list[np.ndarray] = []
-    prims: list[np.ndarray] = [np.zeros(1, np.int32)]
-    prim_len = 1
-    if nvalid == 0:
-        return dict(node_head=np.array([3], np.int32), node_split=np.zeros(1, np.float32), prims=prims[0],
-                    box=np.zeros((2, 3), np.float32),
-                    stats=dict(nodes=1, leaves=1, empty_leaves=1, references=0, depth=0, valid_triangles=0))
-    t32 = vertices[faces[ids]]  # (n, 3, 3)
-    r_tri = ids
-    r_box = np.concatenate([t32.min(axis=1).T, t32.max(axis=1).T]).astype(np.float32)
-    r_node = np.zeros(nvalid, np.int32)
-    n_lo = r_box[:3].min(axis=1)[None, :]
-    n_hi = r_box[3:].max(axis=1)[None, :]
-    root_box = np.stack([n_lo[0], n_hi[0]])
-    ci, nb = cfg.intersection_cost, int(cfg.bins)
-    max_depth = cfg.depth_limit(nvalid)
-    n_nodes_total = 0
-    leaves = empty_leaves = refs_total = 0
-    depth_reached = 0
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=max_depth + 1, desc=f"kd-tree ({len(faces):,} triangles)", unit="level", leave=False)
-    depth = 0
-    while True:
-        m = len(n_lo)
-        depth_reached = depth
-        counts = np.bincount(r_node, minlength=m)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        nonempty = counts > 0
-        t_lo = n_lo.astype(np.float64)
-        t_hi = n_hi.astype(np.float64)
-        if len(r_node):
-            t_lo[nonempty] = np.minimum.reduceat(r_box[:3], starts[nonempty], axis=1).T
-            t_hi[nonempty] = np.maximum.reduceat(r_box[3:], starts[nonempty], axis=1).T
-        area = _box_area(n_hi.astype(np.float64) - n_lo.astype(np.float64))
-        leaf_cost = ci * counts
-        best_cost = np.full(m, np.inf)
-        best_axis = np.zeros(m, np.int32)
-        best_pos = np.zeros(m, np.float32)
-        can_split = nonempty & (depth < max_depth) & (area > 0)
-        # bins per node: enough for its references (a few refs need few planes), at most cfg.bins
-        node_bins = np.clip(2 ** np.ceil(np.log2(np.maximum(counts, 1))), 4, nb).astype(np.int64)
-        node_bins[~can_split] = 0
-        for g in np.unique(node_bins[node_bins > 0]):
-            in_g = node_bins == g
-            sel = np.flatnonzero(in_g)
-            ref_idx = np.flatnonzero(in_g[r_node])
-            loc = np.cumsum(in_g) - 1
-            cost, axis, pos = _best_splits(int(g), n_lo[sel], n_hi[sel], t_lo[sel], t_hi[sel], counts[sel],
-                                           loc[r_node[ref_idx]], np.take(r_box, ref_idx, axis=1), cfg)
-            best_cost[sel] = cost
-            best_axis[sel] = axis
-            best_pos[sel] = pos
-        split = can_split & (best_cost < leaf_cost)
-        is_leaf = ~split
-        n_split = int(split.sum())
-        # --- emit this level's nodes
-        head = np.zeros(m, np.int64)
-        base_next = n_nodes_total + m
-        rank = np.cumsum(split) - 1
-        head[split] = ((base_next + 2 * rank[split]) << 2) | best_axis[split]
-        # leaves: blocks [count, prims...] appended to the prim list
-        has = is_leaf & nonempty
-        block = np.where(has, counts + 1, 0)
-        block_start = prim_len + np.concatenate([[0], np.cumsum(block)[:-1]])
-        head[is_leaf] = (np.where(has, block_start, 0)[is_leaf] << 2) | 3
-        total_block = int(block.sum())
-        if total_block:
-            arr = np.empty(total_block, np.int32)
-            arr[(block_start - prim_len)[has]] = counts[has]
-            leaf_refs = np.flatnonzero(is_leaf[r_node])
-            rn = r_node[leaf_refs]
-            arr[block_start[rn] - prim_len + 1 + (leaf_refs - starts[rn])] = r_tri[leaf_refs]
-            prims.append(arr)
-            prim_len += total_block
-        heads.append(head)
-        splits.append(np.where(split, best_pos, 0).astype(np.float32))
-        leaves += int(is_leaf.sum())
-        empty_leaves += int((is_leaf & ~nonempty).sum())
-        refs_total += int(counts[is_leaf].sum())
-        n_nodes_total += m
-        if bar is not None:
-            bar.update(1)
-        if n_split == 0:
-            break
-        # --- distribute the references of split nodes to their children
-        keep = np.flatnonzero(split[r_node])
-        r_tri, r_node_s, r_box = r_tri[keep], r_node[keep], np.take(r_box, keep, axis=1)
-        ax = best_axis[r_node_s]
-        p32 = best_pos[r_node_s]
-        cols = np.arange(len(r_tri))
-        lo_a = r_box[ax, cols]
-        hi_a = r_box[ax + 3, cols]
-        go_r = hi_a > p32
-        go_l = (lo_a < p32) | ~go_r
-        il = np.flatnonzero(go_l)
-        ir = np.flatnonzero(go_r)
-        box_l = np.take(r_box, il, axis=1)
-        box_r = np.take(r_box, ir, axis=1)
-        ok_l = np.ones(len(il), bool)
-        ok_r = np.ones(len(ir), bool)
-        bi = np.flatnonzero(go_l & go_r)
-        if len(bi):
-            # straddling references: clip the triangle to each side (split clipping)
-            (new_l, okl), (new_r, okr) = _clipped_boxes(tri64, r_tri, r_box, bi, ax, p32, n_lo, n_hi, r_node_s)
-            pl = np.searchsorted(il, bi)
-            pr = np.searchsorted(ir, bi)
-            box_l[:, pl] = new_l
-            box_r[:, pr] = new_r
-            ok_l[pl] = okl
-            ok_r[pr] = okr
-        il, box_l = il[ok_l], box_l[:, ok_l]
-        ir, box_r = ir[ok_r], box_r[:, ok_r]
-        new_node = np.concatenate([2 * rank[r_node_s[il]], 2 * rank[r_node_s[ir]] + 1]).astype(np.int32)
-        order = np.argsort(new_node, kind="stable")  # two sorted runs: a linear merge
-        r_node = new_node[order]
-        r_tri = np.concatenate([r_tri[il], r_tri[ir]])[order]
-        r_box = np.take(np.concatenate([box_l, box_r], axis=1), order, axis=1)
-        # children cells
-        sidx = np.flatnonzero(split)
-        c_lo = np.repeat(n_lo[sidx], 2, axis=0)
-        c_hi = np.repeat(n_hi[sidx], 2, axis=0)
-        k = np.arange(len(sidx))
-        c_hi[2 * k, best_axis[sidx]] = best_pos[sidx]
-        c_lo[2 * k + 1, best_axis[sidx]] = best_pos[sidx]
-        n_lo, n_hi = c_lo, c_hi
-        depth += 1
-    if bar is not None:
-        bar.close()
-    head, split_pos = _depth_first_layout(heads, splits)
-    return dict(
-        node_head=head,
-        node_split=split_pos,
-        prims=np.concatenate(prims).astype(np.int32),
-        box=root_box.astype(np.float32),
-        stats=dict(nodes=n_nodes_total, leaves=leaves, empty_leaves=empty_leaves, references=refs_total,
-                   depth=depth_reached, valid_triangles=nvalid),
-    )
 
 
 class KdTree:
@@ -779,55 +385,22 @@ class KdTree:
         (F,3) int32. ``cache=None`` caches meshes of ≥ ``CACHE_MIN_TRIANGLES`` triangles;
         ``progress=None`` shows a bar for ≥ ``PROGRESS_MIN_TRIANGLES``. An empty mesh raises
         :class:`SerenityError`."""
-        v, f = _validate_mesh(vertices, faces)
+        v, f = validate_mesh(vertices, faces)
         cfg = config or KdBuildConfig()
         use_cache = len(f) >= CACHE_MIN_TRIANGLES if cache is None else bool(cache)
         show = len(f) >= PROGRESS_MIN_TRIANGLES if progress is None else bool(progress)
         path = None
         if use_cache:
             path = cache_dir() / f"kdtree-{geometry_key(v, f, cfg)}.npz"
-            tree = cls._load(path, v, f)
-            if tree is not None:
-                return tree
+            cached = load_tree(path, len(f))
+            if cached is not None:
+                return cls(v, f, *cached)
         t_start = time.perf_counter()
-        arrays = _build(v, f, cfg, show)
+        arrays = build_arrays(v, f, cfg, show)
         seconds = time.perf_counter() - t_start
-        s = arrays.pop("stats")
-        stats = KdStats(triangles=len(f), build_seconds=seconds, **s)
-        tree = cls(v, f, arrays, stats)
+        stats = KdStats(triangles=len(f), build_seconds=seconds, **arrays.pop("stats"))
         if path is not None:
-            tree._save(path)
-        return tree
-
-    def _save(self, path: Path) -> None:
-        st = self.stats
-        meta = np.array([FORMAT_VERSION, st.triangles, st.valid_triangles, st.nodes, st.leaves, st.empty_leaves,
-                         st.references, st.depth], np.int64)
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
-            np.savez(tmp, node_head=self.node_head, node_split=self.node_split, prims=self.prims, box=self.box,
-                     meta=meta, build_seconds=np.array([st.build_seconds]))
-            os.replace(tmp, path)
-        except OSError:
-            pass  # an unwritable cache only costs a rebuild next time
-
-    @classmethod
-    def _load(cls, path: Path, v: np.ndarray, f: np.ndarray) -> KdTree | None:
-        if not path.is_file():
-            return None
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: np.array(z[k]) for k in ("node_head", "node_split", "prims", "box")}
-                meta = z["meta"].tolist()
-                secs = float(z["build_seconds"][0])
-        except (OSError, ValueError, KeyError, EOFError):
-            return None
-        if meta[0] != FORMAT_VERSION or meta[1] != len(f) or len(arrays["node_head"]) != len(arrays["node_split"]):
-            return None
-        stats = KdStats(triangles=meta[1], valid_triangles=meta[2], nodes=meta[3], leaves=meta[4],
-                        empty_leaves=meta[5], references=meta[6], depth=meta[7], build_seconds=secs,
-                        from_cache=True)
+            save_tree(path, arrays, stats)
         return cls(v, f, arrays, stats)
 
     # -- device data ----------------------------------------------------------------------------
@@ -895,3 +468,7 @@ class KdTree:
                     wp.array(d, dtype=wp.vec3, device=dev), float(tmin), wp.array(tm, dtype=float, device=dev), out]
             launch(occlude_rays, n, args, device=dev, threads=threads)
         return out.numpy().astype(bool)
+
+
+__all__ = ["CACHE_MIN_TRIANGLES", "PROGRESS_MIN_TRIANGLES", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
+           "KdTreeData", "cache_dir", "intersect_rays", "intersect_triangle", "occlude_rays", "setup_ray", "trace_kd"]

@@ -50,10 +50,11 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from serenity.config import KdBuildConfig
 from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
 from serenity.gbuffer_layout import RT_GBUFFER_KEYS
-from serenity.kernels.kdtree import KdBuildConfig, KdTree, KdTreeData, trace_kd
+from serenity.kernels.kdtree import KdTree, KdTreeData, trace_kd
 from serenity.kernels.launch import launch
 
 wp.set_module_options({"enable_backward": False})
