@@ -10,10 +10,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from serenity.commands import bench, compare, reference, render, scenes
+from serenity.commands import bench, compare, reference, render, scenes, view
 from serenity.commands.common import report_error
 from serenity.errors import SerenityError
-from serenity.view import command as view
 
 COMMANDS = (render, scenes, bench, view, reference, compare)
 """The subcommands in ``--help`` order. Each is a module of ``serenity/commands/`` whose

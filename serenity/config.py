@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from serenity.errors import ConfigError
+from serenity.errors import ConfigError, SerenityError
 
 #: SH windows against ringing (``serenity.kernels.sh.window_weights``)
 SH_WINDOWS = ("none", "hanning", "lanczos", "nonneg")

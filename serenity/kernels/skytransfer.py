@@ -21,7 +21,7 @@ Shapes and units: ``transfer`` (P, 9, B² + 1) float32, sr (SH products integrat
 angle; the last column is G); ``f`` (B² + 1, 3) W·m⁻²·sr⁻¹·sr (the last row is L_g, per sr of
 G); output coefficients (P, 27) W·m⁻², the layout of
 ``skyvolume.integrate_sky_layer``. Probe order, ray directions (the same QMC set and per-probe
-decorrelation) and the occlusion test are those of ``skyvolume``.
+decorrelation) and the occlusion test are those of ``skyvolume`` (the quads: ``occlusion``).
 
 Cost on the 2-core CPU machine (courtyard, 15 000 probes, B = 4): the transfer is built once
 per scene (about the cost of one full per-ray rebuild), then a sky change costs one matrix-vector
@@ -36,6 +36,9 @@ import functools
 import numpy as np
 import warp as wp
 
+from serenity.kernels.atmosphere import sky_map_directions, sky_map_solid_angles
+from serenity.kernels.launch import launch
+from serenity.kernels.occlusion import intersect_quads
 from serenity.kernels.sampling import cp_rotation, hash_u32, sample_sobol_owen, sample_uniform_sphere
 from serenity.kernels.sh import eval_sh9, sh_basis, vec9
 
@@ -94,8 +97,6 @@ def eval_sh25(d: wp.vec3) -> vec25:
 @functools.cache
 def _integrate_transfer_kernel(sequence: int):
     """The transfer integration, specialised on the QMC sequence (0 Hammersley, 1 Owen-Sobol')."""
-    from serenity.kernels.skyvolume import intersect_quads
-
     @wp.kernel(enable_backward=False, module="unique")
     def integrate_transfer(
         # inputs
@@ -201,8 +202,6 @@ def sh_basis25(directions) -> np.ndarray:
 def _sky_map_projection(size: int, functions: int) -> tuple[np.ndarray, np.ndarray]:
     """(texel indices (M,), weights (M, B²)): S_j(ω) + S_j(ω mirrored) times the solid angle of
     each texel of a size² paraboloid map that covers the upper hemisphere."""
-    from serenity.kernels.atmosphere import sky_map_directions, sky_map_solid_angles
-
     d = sky_map_directions(size).reshape(-1, 3)
     w = sky_map_solid_angles(size).reshape(-1)
     keep = np.flatnonzero(w > 0)
@@ -239,8 +238,6 @@ class SkyTransfer:
     def build(self, origin, cell, resolution) -> None:
         """Integrate the visibility of every probe of the grid into its transfer matrix (once per
         scene, or when the grid moved)."""
-        from serenity.kernels.launch import launch
-
         x, y, z = resolution
         probes = x * y * z
         if self.transfer is None or self.transfer.shape[0] != probes:
@@ -254,8 +251,6 @@ class SkyTransfer:
     def apply(self, origin, cell, resolution, sky_sh: np.ndarray, scale, coeffs) -> None:
         """Write every probe's irradiance coefficients (P, 27) for ``project_sky``'s (B² + 1, 3),
         building the transfer first if the grid is new."""
-        from serenity.kernels.launch import launch
-
         grid = (tuple(np.asarray(origin, np.float64)), tuple(np.asarray(cell, np.float64)), tuple(resolution))
         if grid != self.grid:
             self.build(origin, cell, resolution)

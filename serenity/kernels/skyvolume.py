@@ -62,6 +62,7 @@ from serenity.kernels.atmosphere import (
     horizontal_irradiance,
     sample_sky_map,
 )
+from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
 from serenity.kernels.sampling import (
     cp_rotation,
     hammersley_np,
@@ -70,6 +71,7 @@ from serenity.kernels.sampling import (
     sample_uniform_sphere,
 )
 from serenity.kernels.sh import eval_sh9, irradiance_scale, sh_basis, vec9
+from serenity.kernels.skytransfer import SkyTransfer, project_sky
 
 wp.set_module_options({"enable_backward": False})
 
@@ -86,26 +88,6 @@ _PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
 
 # ---------------------------------------------------------------------------------------------
 # funcs
-
-
-@wp.func
-def intersect_quads(o: wp.vec3, d: wp.vec3, centers: wp.array(dtype=wp.vec3), ups: wp.array(dtype=wp.vec3),
-                    rights: wp.array(dtype=wp.vec3), halves: wp.array(dtype=wp.vec2), count: int) -> bool:
-    """Whether the ray o + t·d (t > 0) hits any two-sided occlusion quad."""
-    for q in range(count):
-        up = ups[q]
-        right = rights[q]
-        n = wp.cross(right, up)
-        denom = wp.dot(d, n)
-        if wp.abs(denom) > 1.0e-12:
-            oc = centers[q] - o
-            t = wp.dot(oc, n) / denom
-            if t > 1.0e-5:
-                h = d * t - oc
-                hw = halves[q]
-                if wp.abs(wp.dot(h, up)) <= hw[0] and wp.abs(wp.dot(h, right)) <= hw[1]:
-                    return True
-    return False
 
 
 # ---------------------------------------------------------------------------------------------
@@ -199,35 +181,6 @@ def fit_grid(bounds: np.ndarray, config: SkyConfig) -> tuple[np.ndarray, np.ndar
     return origin, cell, (int(res[0]), int(res[1]), int(res[2]))
 
 
-def quads_arrays(quads) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(centers, ups, rights, halves (Q,2) = (half_up, half_right)) float32 of OcclusionQuads."""
-    if not quads:
-        z = np.zeros((0, 3), np.float32)
-        return z, z, z, np.zeros((0, 2), np.float32)
-    c = np.array([q.center for q in quads], np.float32)
-    u = np.array([q.up for q in quads], np.float32)
-    r = np.array([q.right for q in quads], np.float32)
-    h = np.array([[q.half_up, q.half_right] for q in quads], np.float32)
-    return c, u, r, h
-
-
-def occluded_np(origins, directions, quads) -> np.ndarray:
-    """(N,) bool: rays (N,3)/(N,3) (or one origin (3,)) blocked by any quad (twin of ``intersect_quads``)."""
-    d = np.asarray(directions, np.float64).reshape(-1, 3)
-    o = np.broadcast_to(np.asarray(origins, np.float64), d.shape)
-    hit = np.zeros(len(d), bool)
-    for q in quads:
-        n = np.cross(q.right, q.up)
-        denom = d @ n
-        oc = q.center[None] - o
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (oc @ n) / denom
-        ok = (np.abs(denom) > 1e-12) & (t > 1e-5)
-        h = d * np.where(ok, t, 0.0)[:, None] - oc
-        hit |= ok & (np.abs(h @ q.up) <= q.half_up) & (np.abs(h @ q.right) <= q.half_right)
-    return hit
-
-
 def pack_sh_textures(coeffs: np.ndarray, resolution: tuple[int, int, int]) -> list[np.ndarray]:
     """(P, 27) coefficients → 6 × (Z, Y, X, 4) + 1 × (Z, Y, X, 3) float32 (coefficient-major packing)."""
     x, y, z = resolution
@@ -317,8 +270,6 @@ class SkyVolume:
         self._host: np.ndarray | None = None
         self._transfer = None
         if cfg.method == "transfer":
-            from serenity.kernels.skytransfer import SkyTransfer
-
             self._transfer = SkyTransfer(self._quads_wp, len(quads), self._base, n, SEQUENCES.index(cfg.sequence),
                                          cfg.seed, cfg.transfer_bands, dev)
             self._irr_scale = self._scale
@@ -398,8 +349,6 @@ class SkyVolume:
         return True
 
     def _apply_transfer(self) -> None:
-        from serenity.kernels.skytransfer import project_sky
-
         sky = self.sky_map()
         if self._constant_sky:  # the 2×2 map is too coarse a quadrature for the projection
             sky = np.broadcast_to(sky[:1, :1], (64, 64, 3))
