@@ -71,18 +71,18 @@ def sun_path(base_dir: np.ndarray, t: float, degrees: float = 20.0) -> np.ndarra
     return direction_from_angles(max(-5.0, el - degrees / 2 * t), az + degrees * t)
 
 
-def run_frames(scene, width, height, frames, device=None, overlap=True, progress=True):
+def run_frames(scene, width, height, frames, device=None, overlap=True, progress=True, quality="high"):
     """Render ``frames`` frames of the path; returns per-frame records and the last Frame."""
     scene = copy.deepcopy(scene)
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-    renderer = Renderer(scene, width, height, device=device, config=RenderConfig(overlap=overlap))
+    renderer = Renderer(scene, width, height, device=device, config=RenderConfig.preset(quality, overlap=overlap))
     records, frame, sample = [], None, None
     label = "overlapped" if overlap else "serial"
     for i in tqdm(range(frames), desc=f"bench {scene.name} ({label})", disable=not progress, unit="frame"):
         t = i / max(1, frames - 1)
         scene.camera = camera_path(base_cam, t)
         scene.sun.direction = sun_path(base_sun, t)
-        frame = renderer.render()
+        frame = renderer.render(read_back={"hdr"})
         records.append({"timings": frame.timings, "wall_ms": frame.wall_ms, "rss_mb": rss_mb(),
                         "nan": bool(not np.all(np.isfinite(frame.hdr))), "rays": frame.rays})
         if i == frames // 2:
@@ -146,16 +146,16 @@ def format_table(over: dict, serial: dict) -> str:
 
 
 def bench(scene_name: str, width: int, height: int, frames: int, device=None, json_path=None,
-          chart_path=None) -> dict:
+          chart_path=None, quality: str = "medium") -> dict:
     scene = load(scene_name)
     device = resolve_device(device)
     t0 = time.perf_counter()
-    over_recs, sample = run_frames(scene, width, height, frames, device, overlap=True)
-    serial_recs, _ = run_frames(scene, width, height, frames, device, overlap=False)
+    over_recs, sample = run_frames(scene, width, height, frames, device, overlap=True, quality=quality)
+    serial_recs, _ = run_frames(scene, width, height, frames, device, overlap=False, quality=quality)
     over, serial = summarise(over_recs), summarise(serial_recs)
     rss = [r["rss_mb"] for r in over_recs]
     result = {
-        "scene": scene.name, "size": [width, height], "frames": frames, "device": device,
+        "scene": scene.name, "size": [width, height], "frames": frames, "device": device, "quality": quality,
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version()},
         "overlapped": over, "serial": serial,
         "overlap_ratio": over["frame_ms"] / serial["frame_ms"] if serial["frame_ms"] else None,

@@ -332,6 +332,20 @@ class RenderConfig:
                 raise ConfigError(f"RenderConfig.{name} must be a {kind.__name__}, got {value!r}{hint}")
 
 
+    @classmethod
+    def preset(cls, name: str, **overrides) -> RenderConfig:
+        """The settings of quality preset ``name`` (one of ``QUALITY_PRESETS``; see ``PRESETS`` for
+        what each sets — every field it does not name keeps its default), then ``overrides``
+        (fields of RenderConfig) on top."""
+        if name not in PRESETS:
+            raise ConfigError(f"quality preset must be one of {', '.join(QUALITY_PRESETS)}, got {name!r}")
+        kw: dict = {}
+        for key, value in PRESETS[name].items():
+            sub = SUB_CONFIGS.get(key)
+            kw[key] = sub(**value) if sub is not None else value
+        kw.update(overrides)
+        return cls(**kw)
+
 #: deepest kd-tree the build makes (the traversal's stack holds one entry per level)
 KD_MAX_DEPTH = 62
 
@@ -373,3 +387,35 @@ class KdBuildConfig:
         """The depth limit for a mesh of ``n`` triangles."""
         d = self.max_depth if self.max_depth is not None else int(round(8 + 1.3 * math.log2(max(n, 1))))
         return int(max(0, min(d, KD_MAX_DEPTH)))
+
+
+SUB_CONFIGS = {"shadow": ShadowConfig, "ssao": SSAOConfig, "sky": SkyConfig, "lpv": LPVConfig}
+
+PRESETS: dict[str, dict] = {
+    # the paper's settings (§6–§8): full-resolution passes, one sky layer per frame by ray casting,
+    # 3 LPV cascades of 32³, 4 cascades of 2048² with PCSS, SSAO at full resolution
+    "paper": {"indirect_scale": 1, "sky": {"method": "layers"}, "sky_layers_per_frame": 1,
+              "lpv": {"resolution": 32}},
+    # the defaults: indirect light and SSAO at half resolution, the sky volume by visibility
+    # transfer (every probe current every frame), the 256² sky map
+    "high": {},
+    # what `serenity render` and `serenity bench` use unless told: 1024² shadow cascades, fewer
+    # PCSS and SSAO taps, a 128² sky map baked in 12 steps, a coarser RSM
+    "medium": {"shadow": {"size": 1024, "blocker_samples": 8, "filter_samples": 16},
+               "ssao": {"directions": 8, "steps": 3},
+               "sky": {"sky_map_size": 128, "sky_steps": 12},
+               "rsm_size": 128},
+    # the cheapest: indirect light at quarter resolution, 3 cascades, an 8³ LPV, coarse sky
+    "low": {"indirect_scale": 4,
+            "shadow": {"size": 1024, "cascades": 3, "blocker_samples": 8, "filter_samples": 12},
+            "ssao": {"directions": 6, "steps": 2, "blur_radius": 4},
+            "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_bands": 4},
+            "lpv": {"resolution": 8, "iterations": 16},
+            "rsm_size": 128, "sky_vpl_stride": 8},
+}
+"""Quality presets: field → value, or for a sub-config (shadow, ssao, sky, lpv) its field → value.
+Each is one point of the speed-vs-error charts (``benchmarks/bench_frontier.py``)."""
+
+QUALITY_PRESETS = tuple(PRESETS)
+DEFAULT_QUALITY = "medium"
+"""The preset the command line renders with unless ``--quality`` says otherwise."""

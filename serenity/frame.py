@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -36,6 +36,7 @@ import numpy as np
 
 from serenity.config import RenderConfig, check_image_size
 from serenity.device import resolve_device
+from serenity.errors import SerenityError
 from serenity.raster.composite import CompositePass
 from serenity.raster.context import get_context
 from serenity.raster.deferred import DeferredPass, LightingInputs
@@ -49,6 +50,8 @@ from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
 
 MAIN_LANE = "main (GL + volumes)"
+READ_BACK = ("hdr", "ldr", "aovs")
+"""What ``Renderer.render(read_back=...)`` can bring back to the host."""
 RT_LANE = "worker (CPU ray tracing)"
 
 
@@ -192,8 +195,7 @@ class Renderer:
         if self.sky_volume is None:
             return None
         shape = points.shape[:-1]
-        e = self.sky_volume.irradiance(points.reshape(-1, 3), normals.reshape(-1, 3))
-        return np.asarray(e, np.float32).reshape(*shape, 3)
+        return self.sky_volume.irradiance_wp(points.reshape(-1, 3), normals.reshape(-1, 3)).reshape(*shape, 3)
 
     def _update_sky(self) -> None:
         """Sky map rebaked when the sun moved (SkyMapCache's angle), then the volume: all layers on
@@ -295,9 +297,11 @@ class Renderer:
 
     # ------------------------------------------------------------------------------------ frame
 
-    def render(self, read_back: bool = True) -> Frame:
-        """Render the scene's current camera and sun. ``read_back=False`` skips the final read-back
-        (for a caller that draws ``self.outputs`` itself, e.g. the viewer's window)."""
+    def render(self, read_back: bool | Iterable[str] = True) -> Frame:
+        """Render the scene's current camera and sun. ``read_back`` says what comes back to the host:
+        True = everything (hdr, ldr and the AOVs), False = nothing (for a caller that draws
+        ``self.outputs`` itself, e.g. the viewer's window), or a subset of {"hdr", "ldr", "aovs"}
+        (``serenity bench`` reads only the HDR image: reads stall the GL pipeline)."""
         self._timings, self._events = {}, []
         self._gbuffer_images = {}
         self._t_frame = time.perf_counter()
@@ -390,10 +394,10 @@ class Renderer:
         #: RayCastingBuffer, None without ray tracing); valid until the next render()
         self.outputs = {"hdr": out_hdr, "ldr": self.tonemap_pass.ldr, "direct": lit.direct, "ao": ao,
                         "gbuffer": gbuf, "rcb": rcb}
-        hdr = ldr = None
-        aovs = {}
-        if read_back:
-            hdr, ldr, aovs = self._read_back(out_hdr, gbuf, lit, ao, rcb, cam)
+        wanted = set(READ_BACK) if read_back is True else set(read_back or ())
+        if not wanted <= set(READ_BACK):
+            raise SerenityError(f"read_back must be a bool or a subset of {READ_BACK}, got {read_back!r}")
+        hdr, ldr, aovs = self._read_back(wanted, out_hdr, gbuf, lit, ao, rcb, cam)
         wall = (time.perf_counter() - self._t_frame) * 1e3
         if "upload" in self._timings:
             wall += self._timings["upload"]
@@ -401,15 +405,22 @@ class Renderer:
                      wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
                      rays=0 if rcb is None else rcb.count)
 
-    def _read_back(self, out_hdr, gbuf, lit, ao, rcb, cam):
+    def _read_back(self, wanted: set[str], out_hdr, gbuf, lit, ao, rcb, cam):
+        hdr = ldr = None
+        aovs: dict[str, np.ndarray] = {}
+        if not wanted:
+            return hdr, ldr, aovs
         with self._stage("readback"):
-            hdr = read_texture(out_hdr, 3)
-            ldr = self.tonemap_pass.read()
-            aovs = self._read_aovs(gbuf, lit, cam)
-            if ao is not None:
-                aovs["ao"] = self._full_res(read_texture(ao, 1))
-            if rcb is not None:
-                aovs["rt_mask"] = rcb.mask()[..., None].astype(np.float32)
+            if "hdr" in wanted:
+                hdr = read_texture(out_hdr, 3)
+            if "ldr" in wanted:
+                ldr = self.tonemap_pass.read()
+            if "aovs" in wanted:
+                aovs = self._read_aovs(gbuf, lit, cam)
+                if ao is not None:
+                    aovs["ao"] = self._full_res(read_texture(ao, 1))
+                if rcb is not None:
+                    aovs["rt_mask"] = rcb.mask()[..., None].astype(np.float32)
         return hdr, ldr, aovs
 
     def _gbuffer_image(self, gbuf, name: str) -> np.ndarray:

@@ -45,3 +45,35 @@ def test_config_imports_no_warp_or_gl():
             "print(sorted(m for m in ('warp', 'moderngl') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_presets_change_what_they_name_and_nothing_else():
+    """Each quality preset sets exactly the fields PRESETS lists for it (in RenderConfig and in its
+    sub-configs); every other field keeps RenderConfig()'s default."""
+    import dataclasses
+
+    from serenity.config import PRESETS, QUALITY_PRESETS, SUB_CONFIGS, RenderConfig
+
+    base = RenderConfig()
+    assert set(QUALITY_PRESETS) == {"low", "medium", "high", "paper"}
+    for name in QUALITY_PRESETS:
+        cfg, named = RenderConfig.preset(name), PRESETS[name]
+        for f in dataclasses.fields(RenderConfig):
+            ours, default = getattr(cfg, f.name), getattr(base, f.name)
+            if f.name in SUB_CONFIGS:
+                for g in dataclasses.fields(type(default)):
+                    expect = named.get(f.name, {}).get(g.name, getattr(default, g.name))
+                    assert getattr(ours, g.name) == expect, (name, f.name, g.name)
+            else:
+                assert ours == named.get(f.name, default), (name, f.name)
+    assert RenderConfig.preset("paper").lpv.resolution == 32 and RenderConfig.preset("paper").indirect_scale == 1
+    assert RenderConfig.preset("paper").sky.method == "layers"
+    assert RenderConfig.preset("low", exposure=0.5).exposure == 0.5
+
+
+def test_unknown_preset_names_the_choices():
+    from serenity.config import RenderConfig
+    from serenity.errors import SerenityError
+
+    with pytest.raises(SerenityError, match="quality preset must be one of low, medium, high, paper|paper, high"):
+        RenderConfig.preset("ultra")

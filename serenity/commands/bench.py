@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 
-from serenity.commands.common import DEFAULT_OUT_DIR, DEFAULT_SCENE, DEFAULT_SIZE, parse_size
+from serenity.commands.common import DEFAULT_OUT_DIR, DEFAULT_SCENE, DEFAULT_SIZE, add_quality_argument, parse_size
 from serenity.errors import SerenityError
 
 
@@ -16,6 +16,7 @@ def register(subparsers) -> None:
     b.add_argument("--frames", type=int, default=30, help="frames per schedule (default %(default)s)")
     b.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}", help="WxH (default %(default)s)")
     b.add_argument("--device", help="cpu | cuda:0")
+    add_quality_argument(b)
     b.add_argument("--json", default=os.path.join(DEFAULT_OUT_DIR, "bench.json"), help="JSON output path")
     b.add_argument("--chart", default=os.path.join(DEFAULT_OUT_DIR, "timeline.png"), help="timeline PNG path")
     b.set_defaults(func=run)
@@ -27,5 +28,5 @@ def run(args) -> int:
     width, height = parse_size(args.size)
     if args.frames < 2:
         raise SerenityError("--frames must be at least 2 (the first frame builds and uploads)")
-    bench(args.scene, width, height, args.frames, args.device, args.json, args.chart)
+    bench(args.scene, width, height, args.frames, args.device, args.json, args.chart, quality=args.quality)
     return 0

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import sys
 
-from serenity.config import check_image_size
+from serenity.config import DEFAULT_QUALITY, QUALITY_PRESETS, check_image_size
 from serenity.errors import SerenityError
 
 DEFAULT_SCENE = "courtyard"
@@ -65,3 +65,9 @@ def report_error(error: BaseException) -> int:
     """Print ``error`` as the one line ``serenity: error: ...`` on stderr; the exit status (2)."""
     print(f"serenity: error: {error}", file=sys.stderr)
     return 2
+
+
+def add_quality_argument(parser) -> None:
+    """``--quality`` (a ``RenderConfig.preset`` name)."""
+    parser.add_argument("--quality", choices=QUALITY_PRESETS, default=DEFAULT_QUALITY,
+                        help="quality preset (default %(default)s; 'paper' = the paper's settings)")

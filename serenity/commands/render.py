@@ -9,6 +9,7 @@ from serenity.commands.common import (
     DEFAULT_OUT_DIR,
     DEFAULT_SCENE,
     DEFAULT_SIZE,
+    add_quality_argument,
     add_time_arguments,
     apply_time,
     make_parent_dir,
@@ -25,6 +26,7 @@ def register(subparsers) -> None:
     r.add_argument("--exr", help="EXR path (default: beside the PNG)")
     r.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}", help="WxH (default %(default)s)")
     add_time_arguments(r)
+    add_quality_argument(r)
     r.add_argument("--device", help="cpu | cuda:0 (default: cuda:0 when present, else cpu)")
     r.add_argument("--exposure", type=float, default=DEFAULT_EXPOSURE,
                    help="exposure before Reinhard (default %(default)s)")
@@ -51,7 +53,7 @@ def run(args) -> int:
     load_ms = (time.perf_counter() - t0) * 1e3
     png = args.output or os.path.join(DEFAULT_OUT_DIR, f"{scene_stem(args.scene)}.png")
     exr = args.exr or os.path.splitext(png)[0] + ".exr"
-    config = RenderConfig(exposure=args.exposure, ambient=args.ambient, overlap=not args.serial)
+    config = RenderConfig.preset(args.quality, exposure=args.exposure, ambient=args.ambient, overlap=not args.serial)
     renderer = Renderer(scene, width, height, device=args.device, config=config)
     frame = None
     for _ in range(max(1, args.frames)):
@@ -64,7 +66,7 @@ def run(args) -> int:
     sun = scene.sun
     print(f"scene {scene.name}: {scene.triangle_count} triangles, {width}x{height}, device {renderer.device}, "
           f"sun elevation {sun.elevation_deg:.1f} deg azimuth {sun.azimuth_deg:.1f} deg")
-    print(f"loaded in {load_ms:.0f} ms")
+    print(f"quality {args.quality}; loaded in {load_ms:.0f} ms")
     print(format_timings(frame.timings, frame.wall_ms))
     print(f"wrote {png}")
     print(f"wrote {exr} (layers: {', '.join(layers)})")

@@ -62,6 +62,7 @@ from serenity.kernels.atmosphere import (
     horizontal_irradiance,
     sample_sky_map,
 )
+from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
 from serenity.kernels.sampling import (
     cp_rotation,
@@ -154,6 +155,52 @@ def integrate_sky_layer(
         coeffs[probe, 3 * k + 0] = acc_r[k] * s
         coeffs[probe, 3 * k + 1] = acc_g[k] * s
         coeffs[probe, 3 * k + 2] = acc_b[k] * s
+
+
+@wp.kernel
+def lookup_sky_irradiance(
+    # inputs
+    coeffs: wp.array2d(dtype=float),
+    origin: wp.vec3,
+    cell: wp.vec3,
+    res_x: int,
+    res_y: int,
+    res_z: int,
+    normal_offset: float,
+    points: wp.array(dtype=wp.vec3),
+    normals: wp.array(dtype=wp.vec3),
+    # outputs
+    irradiance: wp.array(dtype=wp.vec3),
+    offset: int,
+):
+    """The volume's irradiance at surface points (``eval_volume_irradiance`` and sky.glsl's
+    arithmetic): trilinear coefficients at p + offset·n, evaluated at n, clamped at 0."""
+    i = wp.tid() + offset
+    n = normals[i]
+    g = wp.cw_div(points[i] + n * normal_offset - origin, cell)
+    g = wp.vec3(wp.clamp(g[0], 0.0, float(res_x - 1)), wp.clamp(g[1], 0.0, float(res_y - 1)),
+                wp.clamp(g[2], 0.0, float(res_z - 1)))
+    x0 = int(wp.floor(g[0]))
+    y0 = int(wp.floor(g[1]))
+    z0 = int(wp.floor(g[2]))
+    ax = g[0] - float(x0)
+    ay = g[1] - float(y0)
+    az = g[2] - float(z0)
+    y = eval_sh9(n)
+    e = wp.vec3()
+    for corner in range(8):
+        dx = corner & 1
+        dy = (corner >> 1) & 1
+        dz = corner >> 2
+        xi = wp.min(x0 + dx, res_x - 1)
+        yi = wp.min(y0 + dy, res_y - 1)
+        zi = wp.min(z0 + dz, res_z - 1)
+        w = wp.where(dx == 1, ax, 1.0 - ax) * wp.where(dy == 1, ay, 1.0 - ay) * wp.where(dz == 1, az, 1.0 - az)
+        probe = (zi * res_y + yi) * res_x + xi
+        for k in range(9):
+            wk = w * y[k]
+            e += wp.vec3(coeffs[probe, 3 * k], coeffs[probe, 3 * k + 1], coeffs[probe, 3 * k + 2]) * wk
+    irradiance[i] = wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -305,7 +352,6 @@ class SkyVolume:
     # -- integration
 
     def _integrate(self, sky_map, first: int, count: int) -> None:
-        from serenity.kernels.launch import launch
 
         x, y, z = self.resolution
         cfg = self.config
@@ -391,6 +437,20 @@ class SkyVolume:
     def textures(self) -> list[np.ndarray]:
         """The 7 arrays of the paper's layout: 6 × (Z, Y, X, 4) + (Z, Y, X, 3) float32."""
         return pack_sh_textures(self.coefficients().reshape(-1, COEFFS), self.resolution)
+
+    def irradiance_wp(self, points, normals) -> np.ndarray:
+        """(N, 3) float32 W·m⁻²: :meth:`irradiance` by a Warp kernel on the volume's device (the
+        frame's sky-light VPLs: tens of thousands of G-buffer points per update)."""
+        p = np.ascontiguousarray(np.asarray(points, np.float32).reshape(-1, 3))
+        n = np.ascontiguousarray(np.asarray(normals, np.float32).reshape(-1, 3))
+        out = wp.empty(len(p), dtype=wp.vec3, device=self.device)
+        x, y, z = self.resolution
+        dev = self.device
+        launch(lookup_sky_irradiance, len(p),
+               [self._coeffs, wp.vec3(*self.grid_origin.astype(np.float32)),
+                wp.vec3(*self.cell_size.astype(np.float32)), x, y, z, float(self.normal_offset_m),
+                wp.array(p, dtype=wp.vec3, device=dev), wp.array(n, dtype=wp.vec3, device=dev), out], device=dev)
+        return out.numpy()
 
     def irradiance(self, points, normals) -> np.ndarray:
         """(N, 3) float64 W·m⁻² at surface points with unit normals, as the shader evaluates it."""

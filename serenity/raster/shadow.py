@@ -167,20 +167,36 @@ class ShadowPass:
         self.depth.repeat_x = self.depth.repeat_y = False
         self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF/PCSS)
         self.fbo = ctx.framebuffer(depth_attachment=self.depth)
+        self._drawn: list[bytes | None] = [None] * cascades
+        #: tiles drawn by the last ``render`` (the others were still valid)
+        self.redrawn = 0
+
+    def invalidate(self) -> None:
+        """Redraw every tile next time (after the scene's geometry changed in place)."""
+        self._drawn = [None] * self.count
 
     def render(self, cascades: list[Cascade]) -> ShadowMaps:
         """Draw the scene's depth into one atlas tile per cascade (from ``fit_shadow_cascades`` or
-        ``fit_overlapped``)."""
+        ``fit_overlapped``). A tile whose cascade is the same as when it was last drawn (same light
+        matrix: the cascades are texel-snapped bounding spheres, so they stay put while the sun
+        does and the camera moves within them) is kept, not redrawn."""
         ctx = self.ctx
+        self.redrawn = 0
         with ctx.debug_scope("shadow"):
             self.fbo.use()
-            self.fbo.clear(depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
             for i, c in enumerate(cascades[: self.count]):
-                self.fbo.viewport = ((i % 2) * self.size, (i // 2) * self.size, self.size, self.size)
+                key = np.asarray(c.view_proj, np.float32).tobytes()
+                if key == self._drawn[i]:
+                    continue
+                tile = ((i % 2) * self.size, (i // 2) * self.size, self.size, self.size)
+                self.fbo.clear(depth=1.0, viewport=tile)
+                self.fbo.viewport = tile
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
                 self.vao.render(moderngl.TRIANGLES)
+                self._drawn[i] = key
+                self.redrawn += 1
             self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)
             ctx.disable(moderngl.DEPTH_TEST)
         return ShadowMaps(self.depth, list(cascades[: self.count]), self.size)

@@ -220,3 +220,14 @@ def test_volume_fits_quads_when_scene_has_none(device):
     s.occlusion_quads = []
     vol = SkyVolume(s, SkyConfig(rays_per_probe=16, cell_size=5.0), device=device)
     assert vol.quad_fit is not None and len(vol.quads) >= 1
+
+
+def test_warp_lookup_matches_host_lookup(device, courtyard):
+    """The frame's Warp lookup of the volume (sky-light VPLs) equals the numpy twin of sky.glsl's."""
+    vol = SkyVolume(courtyard, SkyConfig(rays_per_probe=16, cell_size=6.0), device=device)
+    vol.rebuild()
+    rng = np.random.default_rng(3)
+    lo, hi = courtyard.bounds
+    p = rng.uniform(lo - 2.0, hi + 2.0, size=(500, 3))  # outside the grid too (clamped)
+    n = fibonacci_sphere(500)
+    assert np.allclose(vol.irradiance_wp(p, n), vol.irradiance(p, n), rtol=1e-4, atol=1e-3)
