@@ -385,7 +385,8 @@ class Renderer:
                 with self._stage("rt lpv lighting"):
                     self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt)
             with self._stage("composite"):
-                out_hdr = self.composite_pass.render(out_hdr, rt_lit.hdr, gbuf, self.raycast_pass.targets[2],
+                out_hdr = self.composite_pass.render(out_hdr, rt_lit.hdr, view_rt.index, gbuf,
+                                                     self.raycast_pass.targets[2],
                                                      cam.position)
         with self._stage("tone map"):
             self.tonemap_pass.render(out_hdr, cfg.exposure)

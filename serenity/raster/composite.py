@@ -10,14 +10,14 @@ class CompositePass(FullscreenPass):
     SHADER = "composite.glsl"
     TARGETS = {"hdr": (4, "f4")}
 
-    def render(self, surface, effects, gbuffer, flags, camera_pos):
-        """``effects``: the lit ray-traced views, stacked (W, 2H): reflection on top, refraction
-        below (see :mod:`serenity.raster.rt_gbuffer`). ``flags``: the ray-casting buffer target
-        whose alpha holds the per-pixel flags."""
+    def render(self, surface, effects, index, gbuffer, flags, camera_pos):
+        """``effects``: the lit traced rays, packed, and ``index`` the per-pixel ray index
+        (``RTView.index``; see :mod:`serenity.raster.rt_gbuffer`). ``flags``: the ray-casting
+        buffer target whose alpha holds the per-pixel flags."""
         p = self.program
         with self.ctx.debug_scope("composite"):
             self.fbo.use()
-            for loc, (name, tex) in enumerate((("u_surface", surface), ("u_effects", effects),
+            for loc, (name, tex) in enumerate((("u_surface", surface), ("u_effects", effects), ("u_index", index),
                                                ("g_normal", gbuffer.normal),
                                                ("g_position", gbuffer.position), ("g_material", gbuffer.material),
                                                ("u_flags", flags))):

@@ -2,10 +2,13 @@
 back to their pixels and uploaded as textures with the rasterised G-buffer's layout, so the same
 deferred lighting program lights them.
 
-Reflection and refraction share one stacked target of (W, 2H) texels: the top half of the image
-(GL v ∈ [0.5, 1)) holds the reflection G-buffer, the bottom half (v ∈ [0, 0.5)) the refraction
-G-buffer. One lighting pass per technique then lights both views, and the composite samples the
-two halves (``glsl/composite.glsl``).
+Packed, not per pixel: the traced rays — reflection rays first, then refraction rays, each in the
+order of ``rcb.pixels`` — fill the texels of a (W, 2H) target in order, k → (k mod W, k div W)
+(GL texel coordinates), so the lighting passes draw only the ``ceil(N / W)`` rows the N rays fill
+(``RTView.rects``) instead of the screen rectangles around them: on a CPU rasteriser the cost of a
+pass is its pixels, and a mirror seen at a grazing angle covers a large rectangle with few traced
+pixels. ``RTView.index`` (W, H, RG32F) maps each screen pixel to its reflection and refraction
+texels (−1: none); the composite (``glsl/composite.glsl``) reads the lit rays through it.
 
 Per-pixel layout (as ``glsl/gbuffer.glsl``): albedo.rgb; normal.xyz + specular k_s in w;
 position.xyz + coverage in w (1 = hit, 0 = miss: the deferred pass shows the sky along the ray);
@@ -25,7 +28,7 @@ from serenity.gbuffer_layout import GBUFFER_TARGETS, RT_GBUFFER_KEYS
 
 @dataclass
 class RTView:
-    """Stacked reflection (top) + refraction (bottom) G-buffer textures, (W, 2H) each."""
+    """The packed ray-traced G-buffer textures, (W, 2H) each, and the per-pixel index (W, H)."""
 
     albedo: object
     normal: object
@@ -33,11 +36,14 @@ class RTView:
     material: object
     eye: object
     ray_dir: object
+    index: object
+    """(W, H) RG32F: per screen pixel, the packed texel number k of its reflection ray (r) and of
+    its refraction ray (g), −1 where the pixel has none."""
     width: int
-    height: int  # of ONE half (the view's height); the textures are 2 * height tall
+    height: int  # the view's height; the packed textures are 2 * height tall
     rects: list = None
-    """(x, y, w, h), GL pixels of the stacked target, of each half's traced pixels' bounding box:
-    the only texels written this frame and the only ones the lighting passes draw."""
+    """(x, y, w, h) GL texels of the packed target that hold rays this frame: the only texels
+    written and the only ones the lighting passes draw."""
 
 
 class RTGBufferUpload:
@@ -52,7 +58,7 @@ class RTGBufferUpload:
         if self.size == (width, height):
             return
         if self.view is not None:
-            for n in RT_GBUFFER_KEYS:
+            for n in (*RT_GBUFFER_KEYS, "index"):
                 getattr(self.view, n).release()
         tex = {}
         for n in RT_GBUFFER_KEYS:
@@ -60,41 +66,52 @@ class RTGBufferUpload:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
             t.repeat_x = t.repeat_y = False
             tex[n] = t
-        self.view = RTView(**tex, width=width, height=height)
+        index = self.ctx.texture((width, height), 2, dtype="f4")
+        index.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.view = RTView(**tex, index=index, width=width, height=height)
         self._staging = {n: np.zeros((2 * height, width, 4), np.float32) for n in RT_GBUFFER_KEYS}
+        self._index = np.full((height, width, 2), -1.0, np.float32)
+        self._indexed: list[np.ndarray] = []
         self.size = (width, height)
 
     def upload(self, rcb, reflection: dict | None, refraction: dict | None) -> RTView:
-        """Scatter the tracer's per-ray results back to pixels and upload.
+        """Pack the tracer's per-ray results and upload them with the pixel → ray index.
 
         ``rcb``: the frame's :class:`~serenity.raster.raycast.RayCastingBuffer`. ``reflection`` /
         ``refraction``: the ray tracer's outputs for ``rcb.reflection_rays()`` /
         ``rcb.refraction_rays()``, in the order of ``rcb.pixels``, each with (N, 4) arrays under the
-        names of ``RT_GBUFFER_KEYS`` (``eye``/``ray_dir``: the last segment of each ray). Only the
-        bounding rectangle of each half's traced pixels is written (``RTView.rects``); texels
-        outside them are stale and nothing reads them (the lighting passes draw the rectangles
-        only, the composite reads traced pixels only)."""
+        names of ``RT_GBUFFER_KEYS`` (``eye``/``ray_dir``: the last segment of each ray)."""
         w, h = self.size
-        rects = []
-        for half, res, sel in ((0, reflection, rcb.reflection_rays()), (1, refraction, rcb.refraction_rays())):
+        for rows, cols in self._indexed:  # forget last frame's pixels
+            self._index[rows, cols] = -1.0
+        self._indexed = []
+        count = 0
+        flat = {n: self._staging[n].reshape(-1, 4) for n in RT_GBUFFER_KEYS}
+        for channel, res, sel in ((0, reflection, rcb.reflection_rays()), (1, refraction, rcb.refraction_rays())):
             if res is None or not sel.any():
                 continue
             pix = rcb.pixels[sel]
-            rows, cols = np.divmod(pix, w)
-            rows = rows + half * h
-            r0, r1, c0, c1 = int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
-            for n in RT_GBUFFER_KEYS:
-                self._staging[n][r0:r1, c0:c1] = 0.0
+            k = count + np.arange(len(pix))
             for n in GBUFFER_TARGETS:
-                self._staging[n][rows, cols] = res[n]
+                flat[n][k] = res[n]
             # the viewer and direction of the ray's last segment (after any transmissions)
-            self._staging["eye"][rows, cols, :3] = res["eye"][:, :3]
-            self._staging["ray_dir"][rows, cols, :3] = res["ray_dir"][:, :3]
-            # GL rows run bottom-up: image row r is texture row 2h - 1 - r
-            rect = (c0, 2 * h - r1, c1 - c0, r1 - r0)
+            flat["eye"][k, :3] = res["eye"][:, :3]
+            flat["ray_dir"][k, :3] = res["ray_dir"][:, :3]
+            rows, cols = np.divmod(pix, w)
+            self._index[rows, cols, channel] = k
+            self._indexed.append((rows, cols))
+            count += len(pix)
+        rects = []
+        if count:
+            used = -(-count // w)  # whole rows; the tail of the last one is marked untraced
+            tail = slice(count, used * w)
             for n in RT_GBUFFER_KEYS:
-                block = np.ascontiguousarray(self._staging[n][r0:r1, c0:c1][::-1])
-                getattr(self.view, n).write(block.tobytes(), viewport=rect)
+                flat[n][tail] = 0.0
+            rect = (0, 0, w, used)
+            for n in RT_GBUFFER_KEYS:
+                getattr(self.view, n).write(np.ascontiguousarray(self._staging[n][:used]).tobytes(), viewport=rect)
             rects.append(rect)
+        # GL rows run bottom-up: image row r is texture row h - 1 - r
+        self.view.index.write(np.ascontiguousarray(self._index[::-1]).tobytes())
         self.view.rects = rects
         return self.view

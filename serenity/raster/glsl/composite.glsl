@@ -10,13 +10,20 @@
 
 #if defined FRAGMENT_SHADER
 uniform sampler2D u_surface;      // lit main view (HDR)
-uniform sampler2D u_effects;      // lit ray-traced views (HDR), (W, 2H): reflection top, refraction bottom
+uniform sampler2D u_effects;      // the lit traced rays (HDR), packed: ray k at texel (k mod W, k div W)
+uniform sampler2D u_index;        // per pixel: packed texel of its reflection (r), refraction (g); -1 none
 uniform sampler2D g_normal;
 uniform sampler2D g_position;
 uniform sampler2D g_material;     // shininess, reflectivity, transparency, ior
 uniform sampler2D u_flags;        // ray-casting target whose alpha holds flags: 1 reflect, 2 refract, 4 TIR
 uniform vec3 u_camera_pos;
 out vec4 o_hdr;
+
+vec3 traced(float k) {
+    int w = textureSize(u_effects, 0).x;
+    int i = int(k);
+    return texelFetch(u_effects, ivec2(i % w, i / w), 0).rgb;
+}
 
 float schlick(float f0, float cos_theta) {
     float m = clamp(1.0 - cos_theta, 0.0, 1.0);
@@ -31,12 +38,13 @@ void main() {
     vec4 mat = texture(g_material, v_uv);
     vec3 n = normalize(texture(g_normal, v_uv).xyz);
     float cos_t = abs(dot(n, normalize(u_camera_pos - pos.xyz)));
-    vec3 refl = texture(u_effects, vec2(v_uv.x, 0.5 + 0.5 * v_uv.y)).rgb;
+    vec2 index = texture(u_index, v_uv).rg;
+    vec3 refl = index.r >= 0.0 ? traced(index.r) : vec3(0.0);
     float transparency = mat.z;
     if (transparency > 0.0) {
         float f0 = pow((mat.w - 1.0) / (mat.w + 1.0), 2.0);
         float F = mod(floor(flags / 4.0), 2.0) > 0.5 ? 1.0 : schlick(f0, cos_t);
-        vec3 refr = texture(u_effects, vec2(v_uv.x, 0.5 * v_uv.y)).rgb;
+        vec3 refr = index.g >= 0.0 ? traced(index.g) : vec3(0.0);
         o_hdr = vec4(F * refl + (1.0 - F) * (transparency * refr + (1.0 - transparency) * surface), 1.0);
     } else {
         float F = schlick(mat.y, cos_t);
