@@ -17,8 +17,8 @@ band B−1 is lost — the mirror extension makes the sky continuous across the 
 that residual small. Exact when L̃ lies in the span of the S_j.
 ``tests/kernels/test_skytransfer.py`` bounds the error against the per-ray integration.
 
-Shapes and units: ``transfer`` (P, 9, B² + 1) float32, sr (SH products integrated over solid
-angle; the last column is G); ``f`` (B² + 1, 3) W·m⁻²·sr⁻¹·sr (the last row is L_g, per sr of
+Shapes and units: ``transfer`` (P, B² + 1) of vec9 (over k), sr (SH products integrated over
+solid angle; the last column is G); ``f`` (B² + 1, 3) W·m⁻²·sr⁻¹·sr (the last row is L_g, per sr of
 G); output coefficients (P, 27) W·m⁻², the layout of
 ``skyvolume.integrate_sky_layer``. Probe order, ray directions (the same QMC set and per-probe
 decorrelation) and the occlusion test are those of ``skyvolume`` (the quads: ``occlusion``).
@@ -114,7 +114,7 @@ def _integrate_transfer_kernel(sequence: int):
         salt: wp.uint32,
         functions: int,
         # outputs
-        transfer: wp.array3d(dtype=float),
+        transfer: wp.array2d(dtype=vec9),
         offset: int,
     ):
         probe = wp.tid() + offset
@@ -135,17 +135,14 @@ def _integrate_transfer_kernel(sequence: int):
                 u = sample_sobol_owen(r, seed)
             d = sample_uniform_sphere(u)
             if not intersect_quads(p, d, centers, ups, rights, halves, quad_count):
-                yk = eval_sh9(d)
+                yk = eval_sh9(d) * w
                 if d[1] >= 0.0:
                     # the sky, mirror-extended below the horizon (see project_sky)
                     sj = eval_sh25(d)
-                    for k in range(9):
-                        a = yk[k] * w
-                        for j in range(functions):
-                            transfer[probe, k, j] = transfer[probe, k, j] + a * sj[j]
+                    for j in range(functions):
+                        transfer[probe, j] = transfer[probe, j] + yk * sj[j]
                 else:
-                    for k in range(9):
-                        transfer[probe, k, functions] = transfer[probe, k, functions] + yk[k] * w
+                    transfer[probe, functions] = transfer[probe, functions] + yk
 
     return integrate_transfer
 
@@ -153,28 +150,28 @@ def _integrate_transfer_kernel(sequence: int):
 @wp.kernel
 def apply_transfer(
     # inputs
-    transfer: wp.array3d(dtype=float),
-    sky_sh: wp.array2d(dtype=float),
+    transfer: wp.array2d(dtype=vec9),
+    sky_sh: wp.array(dtype=wp.vec3),
     scale: vec9,
     # outputs
     coeffs: wp.array2d(dtype=float),
     offset: int,
 ):
     probe = wp.tid() + offset
-    functions = sky_sh.shape[0]  # B² sky functions + the ground
+    r = vec9()
+    g = vec9()
+    b = vec9()
+    for j in range(sky_sh.shape[0]):  # B² sky functions, then the ground
+        t = transfer[probe, j]
+        f = sky_sh[j]
+        r += t * f[0]
+        g += t * f[1]
+        b += t * f[2]
     for k in range(9):
-        r = float(0.0)
-        g = float(0.0)
-        b = float(0.0)
-        for j in range(functions):
-            t = transfer[probe, k, j]
-            r += t * sky_sh[j, 0]
-            g += t * sky_sh[j, 1]
-            b += t * sky_sh[j, 2]
         s = scale[k]
-        coeffs[probe, 3 * k + 0] = r * s
-        coeffs[probe, 3 * k + 1] = g * s
-        coeffs[probe, 3 * k + 2] = b * s
+        coeffs[probe, 3 * k + 0] = r[k] * s
+        coeffs[probe, 3 * k + 1] = g[k] * s
+        coeffs[probe, 3 * k + 2] = b[k] * s
 
 
 # ---------------------------------------------------------------------------------------------
@@ -231,7 +228,7 @@ class SkyTransfer:
         self.device = device
         self._args = [*quads_wp, int(quad_count), base, int(rays), wp.uint32(seed & 0xFFFFFFFF), self.functions]
         self._kernel = _integrate_transfer_kernel(int(sequence))
-        self._sky = wp.zeros((self.functions + 1, 3), dtype=float, device=device)
+        self._sky = wp.zeros(self.functions + 1, dtype=wp.vec3, device=device)
         self.transfer = None
         self.grid = None
 
@@ -241,7 +238,7 @@ class SkyTransfer:
         x, y, z = resolution
         probes = x * y * z
         if self.transfer is None or self.transfer.shape[0] != probes:
-            self.transfer = wp.zeros((probes, 9, self.functions + 1), dtype=float, device=self.device)
+            self.transfer = wp.zeros((probes, self.functions + 1), dtype=vec9, device=self.device)
         else:
             self.transfer.zero_()
         launch(self._kernel, probes, [wp.vec3(*np.asarray(origin, np.float32)), wp.vec3(*np.asarray(cell, np.float32)),

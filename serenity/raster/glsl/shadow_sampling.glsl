@@ -92,14 +92,18 @@ float sun_visibility(vec3 p, vec3 n, float ndl, float view_depth) {
     for (int c = 0; c < u_cascade_count; ++c) {
         float far_c = u_cascade_far[c];
         if (view_depth <= far_c || c == u_cascade_count - 1) {
-            float v = cascade_visibility(c, p, n, ndl, size);
+            // in the blend band before the split, the next cascade is chosen with probability w
+            // (dithered by the pixel's noise): the expected value is the linear cross-fade, at the
+            // cost of one cascade lookup (a CPU rasteriser runs both sides of a branch for a whole
+            // block of pixels, so a real cross-fade cost a second PCSS for every block it touched)
             float near_c = c == 0 ? 0.0 : u_cascade_far[c - 1];
             float band = u_cascade_blend * (far_c - near_c);
+            int use = c;
             if (c + 1 < u_cascade_count && view_depth > far_c - band) {
                 float w = (view_depth - (far_c - band)) / max(band, 1e-6);
-                v = mix(v, cascade_visibility(c + 1, p, n, ndl, size), w);
+                if (interleaved_gradient_noise(gl_FragCoord.yx + 7.0) < w) use = c + 1;
             }
-            return v;
+            return cascade_visibility(use, p, n, ndl, size);
         }
     }
     return 1.0;
