@@ -37,6 +37,8 @@ import numpy as np
 from serenity.config import RenderConfig, check_image_size
 from serenity.device import resolve_device
 from serenity.errors import SerenityError
+from serenity.kernels.raytrace import RayTracer
+from serenity.kernels.tracer_process import TracerProcess
 from serenity.raster.composite import CompositePass
 from serenity.raster.context import get_context
 from serenity.raster.deferred import DeferredPass, LightingInputs
@@ -117,6 +119,7 @@ class Renderer:
             # first frame that actually shows such a pixel
             self.traces = cfg.ray_tracing and any(m.needs_ray_tracing for m in scene.materials)
             self.tracer = None
+            self._tracer_proc = None
             if self.traces:
                 self.raycast_pass = RayCastPass(self.ctx, self.scene_gl)
                 self.raycast_pass.resize(self.width, self.height)
@@ -248,28 +251,45 @@ class Renderer:
     # ------------------------------------------------------------------------------ ray tracing
 
     def _ensure_tracer(self):
+        """The in-process tracer (serial schedule, or CUDA), or for the overlapped schedule on the
+        CPU the tracer process (``kernels/tracer_process``: a thread would stall behind the GL
+        calls that hold the GIL); built on the first frame that shows a traced pixel."""
+        if self.config.overlap and str(self.device).startswith("cpu"):
+            if self._tracer_proc is None:
+                self._tracer_proc = TracerProcess(self.scene, self.device)
+            return self._tracer_proc
         if self.tracer is None:
-            from serenity.kernels.raytrace import RayTracer
-
             t0 = time.perf_counter()
             self.tracer = RayTracer(self.scene, device=self.device)
             self._record(MAIN_LANE, "kd-tree build", t0, time.perf_counter())
         return self.tracer
 
+    def _ray_batches(self, rcb: RayCastingBuffer) -> list:
+        """(origins, directions, cone width, cone spread, transmissions) of the reflected and the
+        refracted rays, None where there are none."""
+        out = []
+        for sel, dirs, transmissions in ((rcb.reflection_rays(), rcb.reflect_dirs, 0),
+                                         (rcb.refraction_rays(), rcb.refract_dirs, self.config.transmissions)):
+            out.append((rcb.origins[sel], dirs[sel], rcb.cone_width[sel], rcb.cone_spread[sel], transmissions)
+                       if sel.any() else None)
+        return out
+
     def _trace(self, rcb: RayCastingBuffer) -> tuple[dict | None, dict | None]:
-        """CPU ray tracing of the reflected and refracted rays (the worker's job)."""
+        """CPU ray tracing of the reflected and refracted rays, in this process."""
         t0 = time.perf_counter()
-        refl = refr = None
-        sel = rcb.reflection_rays()
-        if sel.any():
-            refl = self.tracer.trace(rcb.origins[sel], rcb.reflect_dirs[sel], rcb.cone_width[sel],
-                                     rcb.cone_spread[sel])
-        sel = rcb.refraction_rays()
-        if sel.any():
-            refr = self.tracer.trace(rcb.origins[sel], rcb.refract_dirs[sel], rcb.cone_width[sel],
-                                     rcb.cone_spread[sel], transmissions=self.config.transmissions)
+        refl, refr = (None if b is None else self.tracer.trace(*b[:4], transmissions=b[4])
+                      for b in self._ray_batches(rcb))
         self._record(RT_LANE, "cpu ray tracing", t0, time.perf_counter())
         return refl, refr
+
+    def _join_tracer_process(self) -> tuple[dict | None, dict | None]:
+        proc = self._tracer_proc
+        first = not proc._ready
+        results, t0, t1 = proc.result()
+        if first:
+            self._timings["kd-tree build"] = proc.build_seconds * 1e3
+        self._record(RT_LANE, "cpu ray tracing", t0, t1)
+        return results[0], results[1]
 
     # ---------------------------------------------------------------------------------- lighting
 
@@ -320,9 +340,12 @@ class Renderer:
                 self.raycast_pass.render(view_proj, cam)
                 rcb = self.raycast_pass.read()
             if rcb.count:
-                self._ensure_tracer()
-                if cfg.overlap:
-                    job = self._pool.submit(self._trace, rcb)
+                tracer = self._ensure_tracer()
+                if tracer is self._tracer_proc:
+                    tracer.submit(self._ray_batches(rcb))
+                    job = self._join_tracer_process
+                elif cfg.overlap:
+                    job = self._pool.submit(self._trace, rcb).result
                 else:
                     traced = self._trace(rcb)
 
@@ -370,7 +393,7 @@ class Renderer:
         if rcb is not None and rcb.count:
             if job is not None:
                 with self._stage("wait for ray tracing", gl=False):
-                    traced = job.result()
+                    traced = job()
             with self._stage("rt g-buffer upload"):
                 view_rt = self.rt_upload.upload(rcb, *traced)
             with self._stage("shadow maps (OSM)"):
@@ -452,10 +475,20 @@ class Renderer:
         return np.ascontiguousarray(np.repeat(np.repeat(img, s, axis=0), s, axis=1)[:self.height, :self.width])
 
     def close(self) -> None:
-        """Stop the ray-tracing worker (the GL objects go with the process's context)."""
+        """Stop the ray-tracing worker thread or process (the GL objects go with the process's
+        context)."""
         pool = getattr(self, "_pool", None)
         if pool is not None:
             pool.shutdown(wait=True)
+        proc = getattr(self, "_tracer_proc", None)
+        if proc is not None:
+            proc.close()
+            self._tracer_proc = None
+
+    def __del__(self):
+        proc = getattr(self, "_tracer_proc", None)
+        if proc is not None:
+            proc.close()
 
 
 def format_timings(timings: dict[str, float], wall_ms: float | None = None) -> str:

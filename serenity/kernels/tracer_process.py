@@ -1,0 +1,150 @@
+"""The CPU ray tracer in a process of its own, so that it really runs beside the GL work (paper §10).
+
+In a thread, the tracer stalls while the GL thread renders: moderngl holds the GIL during calls that
+wait for Mesa's llvmpipe (``finish()``, texture reads), and the tracer's Python between its Warp
+launches then waits for it (measured: 5 ms of tracing took 130–220 ms beside the GL work). A child
+process has its own interpreter and GIL: the frame hands it the rays at sync 1 and collects the
+hits at sync 2, and nothing in between needs the parent's GIL.
+
+Protocol (private): the child is ``python -m serenity.kernels.tracer_process IN OUT`` with two pipe
+file descriptors; messages are length-prefixed pickles. First message in: (scene, device); the child
+builds its :class:`~serenity.kernels.raytrace.RayTracer` (the kd-tree comes from the disk cache when
+the parent built it before) and answers ("ready", build seconds). Then per frame: a list of ray
+batches ``(origins, directions, cone_width, cone_spread, transmissions)`` in, ("ok", results, t0,
+t1) out, where results are the tracer's dicts (None for an empty batch) and t0/t1 the child's
+``time.perf_counter()`` around the work — the same monotonic clock as the parent's on Linux, so the
+frame's timeline places the child's work exactly. Errors come back as ("error", message). An empty
+message (None) stops the child.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import struct
+import subprocess
+import sys
+import time
+
+from serenity.errors import SerenityError
+from serenity.kernels.raytrace import RayTracer
+
+_HEADER = struct.Struct("<Q")
+
+
+def _write(fd: int, obj) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    view = memoryview(_HEADER.pack(len(data)) + data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+def _read_exact(fd: int, n: int) -> bytes:
+    chunks, left = [], n
+    while left:
+        chunk = os.read(fd, min(left, 1 << 20))
+        if not chunk:
+            raise EOFError("the tracer process closed its pipe")
+        chunks.append(chunk)
+        left -= len(chunk)
+    return b"".join(chunks)
+
+
+def _read(fd: int):
+    (n,) = _HEADER.unpack(_read_exact(fd, _HEADER.size))
+    return pickle.loads(_read_exact(fd, n))
+
+
+class TracerProcess:
+    """A :class:`~serenity.kernels.raytrace.RayTracer` of ``scene`` in a child process.
+
+    ``submit(batches)`` sends one frame's ray batches and returns at once; ``result()`` waits for
+    them and returns (results, t0, t1). One frame in flight at a time."""
+
+    def __init__(self, scene, device: str = "cpu"):
+        to_child_r, to_child_w = os.pipe()
+        from_child_r, from_child_w = os.pipe()
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "serenity.kernels.tracer_process", str(to_child_r), str(from_child_w)],
+            pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self._out, self._in = to_child_w, from_child_r
+        self._pending = False
+        self._ready = False
+        self.build_seconds = None
+        _write(self._out, (scene, device))
+
+    def _wait_ready(self) -> None:
+        if not self._ready:
+            msg = self._receive()
+            self.build_seconds = msg[1]
+            self._ready = True
+
+    def _receive(self):
+        try:
+            msg = _read(self._in)
+        except (EOFError, OSError) as e:
+            raise SerenityError(f"the ray-tracing process stopped ({e}); exit code {self._proc.poll()}") from None
+        if msg[0] == "error":
+            raise SerenityError(f"ray tracing failed in the tracer process: {msg[1]}")
+        return msg
+
+    def submit(self, batches: list) -> None:
+        if self._pending:
+            raise RuntimeError("one frame at a time: call result() first")
+        _write(self._out, batches)
+        self._pending = True
+
+    def result(self):
+        """(list of per-batch results, t0, t1) of the last ``submit``."""
+        self._wait_ready()
+        self._pending = False
+        _, results, t0, t1 = self._receive()
+        return results, t0, t1
+
+    def close(self) -> None:
+        if self._proc.poll() is None:
+            try:
+                _write(self._out, None)
+                self._proc.wait(timeout=10)
+            except (OSError, subprocess.TimeoutExpired):
+                self._proc.kill()
+        for fd in (self._out, self._in):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+def _serve(fd_in: int, fd_out: int) -> None:
+    try:
+        _serve_frames(fd_in, fd_out)
+    except EOFError:  # the parent went away without saying goodbye
+        return
+
+
+def _serve_frames(fd_in: int, fd_out: int) -> None:
+    scene, device = _read(fd_in)
+    t0 = time.perf_counter()
+    try:
+        tracer = RayTracer(scene, device=device)
+    except Exception as e:  # reported to the parent, which raises it as a SerenityError
+        _write(fd_out, ("error", f"{type(e).__name__}: {e}"))
+        return
+    _write(fd_out, ("ready", time.perf_counter() - t0))
+    while True:
+        batches = _read(fd_in)
+        if batches is None:
+            return
+        t0 = time.perf_counter()
+        try:
+            results = [None if b is None else tracer.trace(*b[:4], transmissions=b[4]) for b in batches]
+        except Exception as e:
+            _write(fd_out, ("error", f"{type(e).__name__}: {e}"))
+            continue
+        _write(fd_out, ("ok", results, t0, time.perf_counter()))
+
+
+if __name__ == "__main__":
+    _serve(int(sys.argv[1]), int(sys.argv[2]))
