@@ -37,6 +37,7 @@ import numpy as np
 
 from serenity.config import LPVConfig
 from serenity.device import cpu_threads, resolve_device
+from serenity.frame import LPV_UPDATE_STAGES
 from serenity.kernels.lpv import LightPropagationVolume
 
 BOUNDS = np.array([[-30.0, 0.0, -30.0], [30.0, 20.0, 30.0]])
@@ -171,7 +172,7 @@ def cornell_indirect(grid=CORNELL_GRID, size=CORNELL_SIZE, spp=CORNELL_SPP, reps
         for _ in range(reps):
             r.invalidate_lpv()
             f = r.render()
-            upd.append(f.timings["lpv update"])
+            upd.append(sum(f.timings.get(k, 0.0) for k in LPV_UPDATE_STAGES))
             lit.append(f.timings.get("lpv lighting", 0.0))
         extra = {"resolution": cfg.resolution, "iterations": cfg.iterations,
                  "cascades_active": len(r.lpv.grids), "cell_m": [g.cell_size for g in r.lpv.grids],

@@ -4,12 +4,13 @@
     frame = renderer.render()          # Frame(hdr, ldr, aovs, timings, events)
 
 The schedule (paper §10): the ray-casting buffer is drawn first and read back (sync 1); the CPU
-ray tracing of the reflective/refractive pixels starts in a worker thread; meanwhile the main
-thread issues the GL work (shadow cascades, G-buffer, RSM, SSAO, the lighting passes) and the
-volume kernels (LPV, the sky volume's next layer); then it joins the tracer (sync 2), uploads the
-ray-traced G-buffers, lights them with the overlapped shadow maps and composites them with a
-Fresnel blend; last the tone map. ``RenderConfig.overlap=False`` (``--serial``) runs the ray
-tracing inline before the GL work, for comparison.
+ray tracing of the reflective/refractive pixels starts in the tracer process (on CUDA: a worker
+thread); meanwhile the main thread issues the GL work (shadow cascades, G-buffer, RSM, SSAO, the
+lighting passes) and the volume kernels (LPV, the sky volume); then it joins the tracer (sync 2),
+uploads the ray-traced G-buffers, lights them with the overlapped shadow maps and composites them
+with a Fresnel blend; last the tone map. ``RenderConfig.overlap=False`` (``--serial``) runs the
+ray tracing inline before the GL work, for comparison. ``STAGES`` names every stage in order;
+each stage of ``Renderer.render`` is one short method below.
 
 Stage names follow the paper's Table 1 where it has one. ``Frame.timings`` holds each stage's
 milliseconds (the worker's ``cpu ray tracing`` included); ``Frame.wall_ms`` is the frame's real
@@ -37,21 +38,44 @@ import numpy as np
 from serenity.config import RenderConfig, check_image_size
 from serenity.device import resolve_device
 from serenity.errors import SerenityError
+from serenity.kernels.atmosphere import scene_sun_irradiance
+from serenity.kernels.lpv import LightPropagationVolume, gbuffer_surfels, rsm_surfels, sky_vpls_from_gbuffer
 from serenity.kernels.raytrace import RayTracer
+from serenity.kernels.skyvolume import SkyVolume
 from serenity.kernels.tracer_process import TracerProcess
 from serenity.raster.composite import CompositePass
 from serenity.raster.context import get_context
 from serenity.raster.deferred import DeferredPass, LightingInputs
 from serenity.raster.gbuffer import GBufferPass
+from serenity.raster.indirect import IndirectPass, LowResIndirect
 from serenity.raster.interop import read_texture
+from serenity.raster.lpv_gl import LPVTexturesGL
 from serenity.raster.raycast import RayCastingBuffer, RayCastPass
+from serenity.raster.rsm import RSMPass
 from serenity.raster.rt_gbuffer import RTGBufferUpload
 from serenity.raster.scene_gl import SceneGL
 from serenity.raster.shadow import ShadowPass, fit_overlapped, fit_shadow_cascades
+from serenity.raster.sky import SkyTexturesGL
 from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
 
 MAIN_LANE = "main (GL + volumes)"
+STAGES = (
+    "upload",
+    "ray casting buffer", "kd-tree build", "cpu ray tracing",          # sync 1, the tracer starts
+    "shadow maps (CSM)", "g-buffer", "ssao",                           # the main view
+    "sky volume build", "sky volume update", "sky upload",             # paper §7
+    "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload",  # paper §8
+    "direct lighting", "sky lighting", "lpv lighting", "indirect upsample",
+    "wait for ray tracing", "rt g-buffer upload", "shadow maps (OSM)",  # sync 2, paper §9
+    "rt direct lighting", "rt sky lighting", "rt lpv lighting", "composite",
+    "tone map", "readback",
+)
+"""Every stage a frame can time, in pipeline order (``Frame.timings`` keys are a subsequence)."""
+LPV_UPDATE_STAGES = ("rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload")
+"""The parts of the paper's "Light Propagation Volumes Update" (Table 1)."""
+SKY_UPDATE_STAGES = ("sky volume update", "sky upload")
+"""The sky volume's per-frame update, which the paper's Table 1 leaves out of the frame time."""
 READ_BACK = ("hdr", "ldr", "aovs")
 """What ``Renderer.render(read_back=...)`` can bring back to the host."""
 RT_LANE = "worker (CPU ray tracing)"
@@ -87,6 +111,46 @@ class Frame:
     def total_ms(self) -> float:
         """Sum of the stage timings (the serial cost)."""
         return float(sum(self.timings.values()))
+
+
+class ChangeTracker:
+    """What changed since the previous frame, by named parts (the sun, the sky, the camera): each
+    ``changed(**parts)`` call compares every part's value with the one it saw last time."""
+
+    def __init__(self):
+        self._seen: dict[str, bytes] = {}
+
+    def changed(self, **parts) -> set[str]:
+        out = set()
+        for name, value in parts.items():
+            key = np.asarray(value, np.float64).tobytes()
+            if self._seen.get(name) != key:
+                out.add(name)
+                self._seen[name] = key
+        return out
+
+    def forget(self, *names: str) -> None:
+        for name in names:
+            self._seen.pop(name, None)
+
+
+def lighting_inputs(scene, config: RenderConfig, view_proj: np.ndarray) -> LightingInputs:
+    """The deferred passes' uniforms for ``scene``'s sun, sky and camera (radiometric units)."""
+    sun, sky, cam = scene.sun, scene.sky, scene.camera
+    e_sun = scene_sun_irradiance(scene)
+    return LightingInputs(
+        sun_direction=sun.direction,
+        sun_irradiance=e_sun,
+        sun_radiance=e_sun / sun.solid_angle,
+        sun_cos_radius=sun.cos_angular_radius,
+        sky_radiance=sky.radiance,
+        ambient_irradiance=math.pi * sky.radiance if config.ambient == "constant" else np.zeros(3),
+        camera_position=cam.position,
+        inv_view_proj=np.linalg.inv(view_proj),
+        camera_forward=cam.forward,
+        sun_tan_half=sun.tan_angular_radius,
+        shadow=config.shadow,
+    )
 
 
 class Renderer:
@@ -134,6 +198,7 @@ class Renderer:
             self._init_gi()
         self._upload_ms = self._timings.pop("upload")
         self._first = True
+        self._changes = ChangeTracker()
 
     # ------------------------------------------------------------------------------------ timing
 
@@ -156,16 +221,11 @@ class Renderer:
         cfg, ctx = self.config, self.ctx
         self.lowres = None
         if cfg.indirect_scale > 1 and (cfg.sky.enabled or cfg.lpv.enabled):
-            from serenity.raster.indirect import LowResIndirect
-
             self.lowres = LowResIndirect(ctx, cfg.indirect_scale)
             self.lowres.resize(self.width, self.height)
         self.sky_volume = None
+        self._sky_map_version = -1
         if cfg.sky.enabled:
-            from serenity.kernels.skyvolume import SkyVolume
-            from serenity.raster.indirect import IndirectPass
-            from serenity.raster.sky import SkyTexturesGL
-
             self.sky_volume = SkyVolume(self.scene, cfg.sky, self.device)
             self.sky_gl = SkyTexturesGL(ctx)
             self.sky_pass = IndirectPass(ctx, "sky")
@@ -173,13 +233,7 @@ class Renderer:
             self._sky_built = False
             self._sky_map_version = -1
         self.lpv = None
-        self._lpv_key = None
         if cfg.lpv.enabled:
-            from serenity.kernels.lpv import LightPropagationVolume
-            from serenity.raster.indirect import IndirectPass
-            from serenity.raster.lpv_gl import LPVTexturesGL
-            from serenity.raster.rsm import RSMPass
-
             self.rsm_pass = RSMPass(ctx, self.scene_gl, cfg.rsm_size)
             self.lpv = LightPropagationVolume(cfg.lpv, self.device)
             self.lpv_gl = LPVTexturesGL(ctx)
@@ -189,9 +243,154 @@ class Renderer:
     def invalidate_lpv(self) -> None:
         """Make the next frame re-inject and re-propagate the LPV even if nothing changed (for
         timing the update, or after editing the scene's geometry in place)."""
-        self._lpv_key = None
+        self._changes.forget("lpv")
         if self.lpv is not None:
             self.lpv.invalidate()
+
+    # ------------------------------------------------------------------------------------ frame
+
+    def render(self, read_back: bool | Iterable[str] = True) -> Frame:
+        """Render the scene's current camera and sun: the diagram of docs/architecture.md ("The
+        frame"), one method per box. ``read_back`` says what comes back to the host: True =
+        everything (hdr, ldr and the AOVs), False = nothing (for a caller that draws
+        ``self.outputs`` itself, e.g. the viewer's window), or a subset of {"hdr", "ldr", "aovs"}
+        (``serenity bench`` reads only the HDR image: every read stalls the GL pipeline)."""
+        wanted = set(READ_BACK) if read_back is True else set(read_back or ())
+        if not wanted <= set(READ_BACK):
+            raise SerenityError(f"read_back must be a bool or a subset of {READ_BACK}, got {read_back!r}")
+        self._begin_frame()
+        cam = self.scene.camera
+        view_proj = cam.projection_matrix(self.width / self.height) @ cam.view_matrix()
+        light = lighting_inputs(self.scene, self.config, view_proj)
+        rcb, join = self._start_ray_tracing(view_proj)                  # sync 1
+        shadow, gbuf, ao = self._main_view(view_proj)
+        self._update_volumes(gbuf, light)
+        lit = self._light_main_view(gbuf, shadow, light, ao)
+        out_hdr = self._ray_traced_views(rcb, join, gbuf, lit, light)  # sync 2
+        with self._stage("tone map"):
+            self.tonemap_pass.render(out_hdr, self.config.exposure)
+        #: this frame's GL textures: hdr (lit + composited, RGBA32F), ldr (tone-mapped sRGB, RGBA8),
+        #: direct, ao (None without SSAO; 1/indirect_scale resolution), the main view's gbuffer, and
+        #: rcb (the read-back RayCastingBuffer, None without ray tracing); valid until the next render()
+        self.outputs = {"hdr": out_hdr, "ldr": self.tonemap_pass.ldr, "direct": lit.direct, "ao": ao,
+                        "gbuffer": gbuf, "rcb": rcb}
+        hdr, ldr, aovs = self._read_back(wanted, out_hdr, gbuf, lit, ao, rcb, cam)
+        return self._end_frame(hdr, ldr, aovs, rcb)
+
+    def _begin_frame(self) -> None:
+        self._timings, self._events = {}, []
+        self._gbuffer_images = {}
+        self._t_frame = time.perf_counter()
+        if self._first:
+            self._timings["upload"] = self._upload_ms
+            self._first = False
+
+    def _end_frame(self, hdr, ldr, aovs, rcb) -> Frame:
+        wall = (time.perf_counter() - self._t_frame) * 1e3 + self._timings.get("upload", 0.0)
+        timings = {k: self._timings[k] for k in sorted(self._timings, key=STAGES.index)}  # pipeline order
+        return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=timings, exposure=self.config.exposure,
+                     wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
+                     rays=0 if rcb is None else rcb.count)
+
+    def _start_ray_tracing(self, view_proj):
+        """The ray-casting buffer (which pixels reflect or refract, and their rays), read back; the
+        tracer starts on them at once. Returns (rcb or None, a callable that joins the tracer)."""
+        if not self.traces:
+            return None, None
+        with self._stage("ray casting buffer"):
+            self.raycast_pass.render(view_proj, self.scene.camera)
+            rcb = self.raycast_pass.read()
+        if not rcb.count:
+            return rcb, None
+        tracer = self._ensure_tracer()
+        if tracer is self._tracer_proc:
+            tracer.submit(self._ray_batches(rcb))
+            return rcb, self._join_tracer_process
+        if self.config.overlap:
+            return rcb, self._pool.submit(self._trace, rcb).result
+        traced = self._trace(rcb)
+        return rcb, lambda: traced
+
+    def _main_view(self, view_proj):
+        """Sun shadow cascades (paper §6), the G-buffer, SSAO (paper §3)."""
+        cfg, scene, cam = self.config, self.scene, self.scene.camera
+        with self._stage("shadow maps (CSM)"):
+            sc = cfg.shadow
+            cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
+                                           sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
+            shadow = self.shadow_pass.render(cascades)
+        with self._stage("g-buffer"):
+            gbuf = self.gbuffer_pass.render(view_proj, cam.position)
+        ao = None
+        if cfg.ssao.enabled:
+            with self._stage("ssao"):
+                ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward)
+        return shadow, gbuf, ao
+
+    def _update_volumes(self, gbuf, light: LightingInputs) -> None:
+        """The sky irradiance volume (paper §7) and the light propagation volumes (paper §8), each
+        only as far as the sun, the sky and the camera changed."""
+        if self.sky_volume is not None:
+            self._update_sky()
+        if self.lpv is not None:
+            cam = self.scene.camera
+            changed = self._changes.changed(
+                lpv=np.concatenate([self.scene.sun.direction, light.sun_irradiance, cam.position, cam.target,
+                                    [cam.fov_y_deg, self._sky_map_version]]))
+            if changed:
+                self._update_lpv(gbuf, light.sun_irradiance)
+
+    def _light_main_view(self, gbuf, shadow, light: LightingInputs, ao):
+        """Phong + CSM/PCSS, then the sky volume's and the LPV's light (at 1/indirect_scale
+        resolution, upsampled) added on."""
+        sky_gl = self.sky_gl if self.sky_volume is not None else None
+        cam = self.scene.camera
+        with self._stage("direct lighting"):
+            lit = self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl)
+        lo = self.lowres
+        target = lit.hdr if lo is None else lo
+        if lo is not None:
+            lo.clear()
+        if sky_gl is not None:
+            with self._stage("sky lighting"):
+                (self.sky_pass if lo is None else self.sky_pass_lo).render(target, gbuf, sky_gl.bind, cam.position,
+                                                                           ao)
+        if self.lpv is not None and self.lpv_gl.count:
+            with self._stage("lpv lighting"):
+                (self.lpv_pass if lo is None else self.lpv_pass_lo).render(target, gbuf, self.lpv_gl.bind,
+                                                                           cam.position, ao)
+        if lo is not None:
+            with self._stage("indirect upsample"):
+                lo.upsample(lit.hdr, gbuf, cam.position, cam.forward)
+        return lit
+
+    def _ray_traced_views(self, rcb, join, gbuf, lit, light: LightingInputs):
+        """Join the tracer (sync 2), light the ray-traced G-buffers with the overlapped shadow maps
+        (paper §9) and composite them over the main view with a Fresnel blend."""
+        if join is None:
+            return lit.hdr
+        cfg, scene, cam = self.config, self.scene, self.scene.camera
+        sky_gl = self.sky_gl if self.sky_volume is not None else None
+        with self._stage("wait for ray tracing", gl=False):
+            traced = join()
+        with self._stage("rt g-buffer upload"):
+            view_rt = self.rt_upload.upload(rcb, *traced)
+        with self._stage("shadow maps (OSM)"):
+            osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, scene.bounds, 3,
+                                                      cfg.osm_size))
+        with self._stage("rt direct lighting"):
+            rt_lit = self.rt_deferred.render(view_rt, osm, light, None, rt_view=view_rt, sky=sky_gl)
+        if sky_gl is not None:
+            with self._stage("rt sky lighting"):
+                self.sky_pass.render(rt_lit.hdr, view_rt, sky_gl.bind, cam.position, rt_view=view_rt)
+        if self.lpv is not None and self.lpv_gl.count:
+            with self._stage("rt lpv lighting"):
+                self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt)
+        with self._stage("composite"):
+            return self.composite_pass.render(lit.hdr, rt_lit.hdr, view_rt.index, gbuf,
+                                              self.raycast_pass.targets[2], cam.position)
+
+    # ---------------------------------------------------------------------------------- volumes
 
     def _sky_irradiance_at(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray | None:
         """Sky irradiance (W/m²) at G-buffer points for the sky-light VPLs; None without a sky volume."""
@@ -201,8 +400,9 @@ class Renderer:
         return self.sky_volume.irradiance_wp(points.reshape(-1, 3), normals.reshape(-1, 3)).reshape(*shape, 3)
 
     def _update_sky(self) -> None:
-        """Sky map rebaked when the sun moved (SkyMapCache's angle), then the volume: all layers on
-        the first frame, then ``sky_layers_per_frame`` per frame while stale (paper §7)."""
+        """The sky volume follows the sky (``SkyVolume.update``: the whole volume on the first
+        frame; then by transfer, or ``sky_layers_per_frame`` layers of the paper's sweep); the sky
+        map and the volume's textures are uploaded when they changed."""
         sv = self.sky_volume
         first = not self._sky_built
         with self._stage("sky volume build" if first else "sky volume update", gl=False):
@@ -217,20 +417,30 @@ class Renderer:
                                           sv.normal_offset_m)
 
     def _update_lpv(self, gbuf, sun_irradiance: np.ndarray) -> None:
-        """Re-inject and propagate only when the sun, the sky or the camera changed (the RSM and the
-        G-buffer, the VPLs' sources, change only then)."""
-        from serenity.kernels.lpv import gbuffer_surfels, rsm_surfels, sky_vpls_from_gbuffer
+        """Re-inject and propagate (the sun, the sky or the camera changed): the sun's RSM, then
+        the VPLs and surfels of the RSM and of the sky-lit G-buffer (paper Fig. 11), injected and
+        propagated, then uploaded."""
+        scene, cam = self.scene, self.scene.camera
+        with self._stage("rsm"):
+            self.rsm_pass.render(scene.sun.direction, sun_irradiance, scene.bounds)
+            rsm = self.rsm_pass.read()
+        with self._stage("lpv inputs", gl=False):
+            vpls, surfels = self._lpv_inputs(gbuf, rsm)
+        t0 = time.perf_counter()
+        self.lpv.update(cam, scene.bounds, vpls, surfels, key=t0)  # new inputs: a key never seen before
+        t_inject = (self.lpv.timings.get("inject", 0.0) + self.lpv.timings.get("inject_geometry", 0.0)) / 1e3
+        t1 = time.perf_counter()
+        self._record(MAIN_LANE, "lpv inject", t0, min(t1, t0 + t_inject))
+        self._record(MAIN_LANE, "lpv propagate", min(t1, t0 + t_inject), t1)
+        with self._stage("lpv upload"):
+            self.lpv_gl.upload(self.lpv)
 
-        scene, cam, cfg = self.scene, self.scene.camera, self.config
-        key = b"".join(np.asarray(a, np.float64).tobytes() for a in (
-            scene.sun.direction, sun_irradiance, cam.position, cam.target, [cam.fov_y_deg], self._sky_version()))
-        if key == self._lpv_key:
-            return
-        self.rsm_pass.render(scene.sun.direction, sun_irradiance, scene.bounds)
-        rsm = self.rsm_pass.read()
+    def _lpv_inputs(self, gbuf, rsm):
+        """(VPL sets, surfel sets) of the sun's RSM and of every ``sky_vpl_stride``-th G-buffer
+        pixel (the sky-lit G-buffer as a second RSM, paper Fig. 11)."""
+        scene, cam, s = self.scene, self.scene.camera, max(1, int(self.config.sky_vpl_stride))
         vpls = [(rsm.positions, rsm.normals, rsm.flux)]
         surfels = [rsm_surfels(rsm, scene.sun.direction)]
-        s = max(1, int(cfg.sky_vpl_stride))
         c = s // 2
         pos = self._gbuffer_image(gbuf, "position")[c::s, c::s]
         nrm = self._gbuffer_image(gbuf, "normal")[c::s, c::s, :3]
@@ -241,12 +451,7 @@ class Renderer:
             alb = self._gbuffer_image(gbuf, "albedo")[c::s, c::s, :3]
             vpls.append(sky_vpls_from_gbuffer(pos, nrm, alb, e_sky, cam.position, cam.forward, cam.fov_y_deg,
                                               stride=1, valid=covered))
-        self.lpv.update(cam, scene.bounds, vpls, surfels, key=key)
-        self.lpv_gl.upload(self.lpv)
-        self._lpv_key = key
-
-    def _sky_version(self) -> np.ndarray:
-        return np.array([self._sky_map_version if self.sky_volume is not None else 0.0])
+        return vpls, surfels
 
     # ------------------------------------------------------------------------------ ray tracing
 
@@ -290,144 +495,6 @@ class Renderer:
             self._timings["kd-tree build"] = proc.build_seconds * 1e3
         self._record(RT_LANE, "cpu ray tracing", t0, t1)
         return results[0], results[1]
-
-    # ---------------------------------------------------------------------------------- lighting
-
-    def _lighting_inputs(self, view_proj: np.ndarray) -> LightingInputs:
-        from serenity.kernels.atmosphere import scene_sun_irradiance
-
-        sun, sky, cam = self.scene.sun, self.scene.sky, self.scene.camera
-        ambient = np.zeros(3)
-        if self.config.ambient == "constant":
-            ambient = math.pi * sky.radiance
-        e_sun = scene_sun_irradiance(self.scene)
-        return LightingInputs(
-            sun_direction=sun.direction,
-            sun_irradiance=e_sun,
-            sun_radiance=e_sun / sun.solid_angle,
-            sun_cos_radius=math.cos(math.radians(sun.angular_diameter_deg) / 2),
-            sky_radiance=sky.radiance,
-            ambient_irradiance=ambient,
-            camera_position=cam.position,
-            inv_view_proj=np.linalg.inv(view_proj),
-            camera_forward=cam.forward,
-            sun_tan_half=math.tan(math.radians(sun.angular_diameter_deg) / 2),
-            shadow=self.config.shadow,
-        )
-
-    # ------------------------------------------------------------------------------------ frame
-
-    def render(self, read_back: bool | Iterable[str] = True) -> Frame:
-        """Render the scene's current camera and sun. ``read_back`` says what comes back to the host:
-        True = everything (hdr, ldr and the AOVs), False = nothing (for a caller that draws
-        ``self.outputs`` itself, e.g. the viewer's window), or a subset of {"hdr", "ldr", "aovs"}
-        (``serenity bench`` reads only the HDR image: reads stall the GL pipeline)."""
-        self._timings, self._events = {}, []
-        self._gbuffer_images = {}
-        self._t_frame = time.perf_counter()
-        if self._first:
-            self._timings["upload"] = self._upload_ms
-            self._first = False
-        cfg, scene, cam = self.config, self.scene, self.scene.camera
-        view = cam.view_matrix()
-        view_proj = cam.projection_matrix(self.width / self.height) @ view
-        light = self._lighting_inputs(view_proj)
-
-        # 1. which pixels need rays, read back (sync 1); the tracer starts at once
-        rcb, job, traced = None, None, (None, None)
-        if self.traces:
-            with self._stage("ray casting buffer"):
-                self.raycast_pass.render(view_proj, cam)
-                rcb = self.raycast_pass.read()
-            if rcb.count:
-                tracer = self._ensure_tracer()
-                if tracer is self._tracer_proc:
-                    tracer.submit(self._ray_batches(rcb))
-                    job = self._join_tracer_process
-                elif cfg.overlap:
-                    job = self._pool.submit(self._trace, rcb).result
-                else:
-                    traced = self._trace(rcb)
-
-        # 2. the GL work of the main view, while the tracer runs
-        with self._stage("shadow maps (CSM)"):
-            sc = cfg.shadow
-            cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
-                                    sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
-            shadow = self.shadow_pass.render(cascades)
-        with self._stage("g-buffer"):
-            gbuf = self.gbuffer_pass.render(view_proj, cam.position)
-        ao = None
-        if cfg.ssao.enabled:
-            with self._stage("ssao"):
-                ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward)
-        if self.sky_volume is not None:
-            self._update_sky()
-        if self.lpv is not None:
-            with self._stage("lpv update"):
-                self._update_lpv(gbuf, light.sun_irradiance)
-        sky_gl = self.sky_gl if self.sky_volume is not None else None
-        with self._stage("direct lighting"):
-            lit = self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl)
-        lo = self.lowres
-        if lo is not None:
-            lo.clear()
-        if sky_gl is not None:
-            with self._stage("sky lighting"):
-                if lo is not None:
-                    self.sky_pass_lo.render(lo, gbuf, sky_gl.bind, cam.position, ao)
-                else:
-                    self.sky_pass.render(lit.hdr, gbuf, sky_gl.bind, cam.position, ao)
-        if self.lpv is not None and self.lpv_gl.count:
-            with self._stage("lpv lighting"):
-                if lo is not None:
-                    self.lpv_pass_lo.render(lo, gbuf, self.lpv_gl.bind, cam.position, ao)
-                else:
-                    self.lpv_pass.render(lit.hdr, gbuf, self.lpv_gl.bind, cam.position, ao)
-        if lo is not None:
-            with self._stage("indirect upsample"):
-                lo.upsample(lit.hdr, gbuf, cam.position, cam.forward)
-        out_hdr = lit.hdr
-
-        # 3. join the tracer (sync 2), light the ray-traced views, Fresnel composite
-        if rcb is not None and rcb.count:
-            if job is not None:
-                with self._stage("wait for ray tracing", gl=False):
-                    traced = job()
-            with self._stage("rt g-buffer upload"):
-                view_rt = self.rt_upload.upload(rcb, *traced)
-            with self._stage("shadow maps (OSM)"):
-                osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, scene.bounds, 3,
-                                                          cfg.osm_size))
-            with self._stage("rt direct lighting"):
-                rt_lit = self.rt_deferred.render(view_rt, osm, light, None, rt_view=view_rt, sky=sky_gl)
-            if sky_gl is not None:
-                with self._stage("rt sky lighting"):
-                    self.sky_pass.render(rt_lit.hdr, view_rt, sky_gl.bind, cam.position, rt_view=view_rt)
-            if self.lpv is not None and self.lpv_gl.count:
-                with self._stage("rt lpv lighting"):
-                    self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt)
-            with self._stage("composite"):
-                out_hdr = self.composite_pass.render(out_hdr, rt_lit.hdr, view_rt.index, gbuf,
-                                                     self.raycast_pass.targets[2],
-                                                     cam.position)
-        with self._stage("tone map"):
-            self.tonemap_pass.render(out_hdr, cfg.exposure)
-        #: this frame's GL textures: hdr (lit + composited, RGBA32F), ldr (tone-mapped sRGB, RGBA8),
-        #: direct, ao (None without SSAO), the main view's gbuffer, and rcb (the read-back
-        #: RayCastingBuffer, None without ray tracing); valid until the next render()
-        self.outputs = {"hdr": out_hdr, "ldr": self.tonemap_pass.ldr, "direct": lit.direct, "ao": ao,
-                        "gbuffer": gbuf, "rcb": rcb}
-        wanted = set(READ_BACK) if read_back is True else set(read_back or ())
-        if not wanted <= set(READ_BACK):
-            raise SerenityError(f"read_back must be a bool or a subset of {READ_BACK}, got {read_back!r}")
-        hdr, ldr, aovs = self._read_back(wanted, out_hdr, gbuf, lit, ao, rcb, cam)
-        wall = (time.perf_counter() - self._t_frame) * 1e3
-        if "upload" in self._timings:
-            wall += self._timings["upload"]
-        return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=dict(self._timings), exposure=cfg.exposure,
-                     wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
-                     rays=0 if rcb is None else rcb.count)
 
     def _read_back(self, wanted: set[str], out_hdr, gbuf, lit, ao, rcb, cam):
         hdr = ldr = None

@@ -279,6 +279,16 @@ class Sun:
         return math.degrees(math.atan2(float(self.direction[0]), float(-self.direction[2]))) % 360.0
 
     @property
+    def cos_angular_radius(self) -> float:
+        """cos of the disc's angular radius (a direction within the disc has dot(d, direction) ≥ it)."""
+        return math.cos(math.radians(self.angular_diameter_deg) / 2)
+
+    @property
+    def tan_angular_radius(self) -> float:
+        """tan of the disc's angular radius (a blocker at height h casts a penumbra 2·h·tan wide)."""
+        return math.tan(math.radians(self.angular_diameter_deg) / 2)
+
+    @property
     def solid_angle(self) -> float:
         """Solid angle of the disc, sr."""
         return 2 * math.pi * (1 - math.cos(math.radians(self.angular_diameter_deg) / 2))
