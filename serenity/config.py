@@ -400,12 +400,12 @@ PRESETS: dict[str, dict] = {
     # transfer (every probe current every frame), the 256² sky map
     "high": {},
     # what `serenity render` and `serenity bench` use unless told: 1024² shadow cascades, fewer
-    # PCSS, SSAO and glossy-LPV taps, a 96² sky map baked in 12 steps, a coarser RSM
+    # PCSS, SSAO and glossy-LPV taps, a 96² sky map baked in 12 steps, coarser RSM and sky VPLs
     "medium": {"shadow": {"size": 1024, "blocker_samples": 8, "filter_samples": 16},
                "ssao": {"directions": 8, "steps": 3},
                "sky": {"sky_map_size": 96, "sky_steps": 12},
                "lpv": {"glossy_steps": 4},
-               "rsm_size": 128},
+               "rsm_size": 128, "sky_vpl_stride": 8},
     # the cheapest: indirect light at quarter resolution, 3 cascades, an 8³ LPV, coarse sky
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "cascades": 3, "blocker_samples": 8, "filter_samples": 12},
