@@ -36,7 +36,8 @@ import functools
 import numpy as np
 import warp as wp
 
-from serenity.kernels.atmosphere import sky_map_directions, sky_map_solid_angles
+from serenity.kernels.atmosphere_ref import sky_map_directions, sky_map_solid_angles
+from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads
 from serenity.kernels.sampling import cp_rotation, hash_u32, sample_sobol_owen, sample_uniform_sphere
@@ -94,7 +95,7 @@ def eval_sh25(d: wp.vec3) -> vec25:
 # kernels
 
 
-@functools.cache
+@kernel_factory(sequence=(0, 1))
 def _integrate_transfer_kernel(sequence: int):
     """The transfer integration, specialised on the QMC sequence (0 Hammersley, 1 Owen-Sobol')."""
     @wp.kernel(enable_backward=False, module="unique")

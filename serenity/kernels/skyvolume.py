@@ -66,6 +66,7 @@ from serenity.kernels.atmosphere import (
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
+from serenity.kernels.quadfit import fit_occlusion_quads
 from serenity.kernels.sampling import (
     cp_rotation,
     hammersley_np,
@@ -301,8 +302,6 @@ class SkyVolume:
         quads = list(scene.occlusion_quads)
         self.quad_fit = None
         if not quads and cfg.auto_quads:
-            from serenity.kernels.quadfit import fit_occlusion_quads
-
             self.quad_fit = fit_occlusion_quads(scene)
             quads = self.quad_fit.quads
         self.quads = quads
