@@ -67,13 +67,7 @@ from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
 from serenity.kernels.quadfit import fit_occlusion_quads
-from serenity.kernels.sampling import (
-    cp_rotation,
-    hammersley_np,
-    hash_u32,
-    sample_sobol_owen,
-    sample_uniform_sphere,
-)
+from serenity.kernels.sampling import cp_rotation, hammersley_np, hash_u32, sample_probe_direction
 from serenity.kernels.sh import eval_sh9, irradiance_scale, sh_basis, vec9
 from serenity.kernels.skytransfer import SkyTransfer, project_sky
 
@@ -86,7 +80,6 @@ PAPER_RESOLUTION = (32, 16, 23)
 SEQUENCES = SKY_SEQUENCES
 COEFFS = 27
 _FOUR_PI = wp.constant(4.0 * math.pi)
-_ONE_MINUS_EPS = wp.constant(0.99999994)
 _PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
 
 
@@ -144,14 +137,7 @@ def integrate_sky_layer_kernel(sequence: str):
         acc_g = vec9()
         acc_b = vec9()
         for k in range(rays):
-            u = wp.vec2()
-            if wp.static(hammersley):
-                u = base_points[k] + rot
-                u = wp.vec2(wp.min(u[0] - wp.floor(u[0]), _ONE_MINUS_EPS),
-                            wp.min(u[1] - wp.floor(u[1]), _ONE_MINUS_EPS))
-            else:
-                u = sample_sobol_owen(k, seed)
-            d = sample_uniform_sphere(u)
+            d = sample_probe_direction(k, base_points, rot, seed, wp.static(hammersley))
             if not intersect_quads(p, d, centers, ups, rights, halves, quad_count):
                 radiance = ground
                 if d[1] >= 0.0:
