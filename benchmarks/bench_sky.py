@@ -38,8 +38,9 @@ from serenity.config import SkyConfig
 from serenity.device import cpu_threads, resolve_device
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
+from serenity.kernels.occlusion import occluded_np
 from serenity.kernels.sampling import fibonacci_sphere
-from serenity.kernels.skyvolume import PAPER_RESOLUTION, SkyVolume, occluded_np
+from serenity.kernels.skyvolume import PAPER_RESOLUTION, SkyVolume
 from serenity.scene.model import direction_from_angles
 from serenity.scene.procedural import build_scene
 

@@ -1,22 +1,35 @@
 """Resolve the compute device once and initialise Warp lazily.
 
 A device is a Warp device string: ``"cpu"`` always exists, ``"cuda:N"`` where a CUDA driver and
-GPU are present. ``resolve_device(None)`` picks ``cuda:0`` when available, else ``cpu``. Nothing
-happens at import time: Warp is initialised on the first call (quietly), so importing
-``serenity`` costs nothing and never touches a GPU.
+GPU are present. ``resolve_device(None)`` is ``cpu`` (or ``SERENITY_DEVICE``): the CUDA path (the
+LPV's atomic scatter and staging, the single-launch path of ``kernels/launch.py``) compiles for
+GPUs (``tests/kernels/test_cuda_compile.py``) but has not run on one yet, so it is chosen only
+explicitly (``--device cuda:0``) and says so once, in one line on stderr. A device that does not
+exist raises ``DeviceError`` (a ``SerenityError``: the CLI prints one line). Nothing happens at
+import time: Warp is initialised on the first call (quietly), so importing ``serenity`` costs
+nothing and never touches a GPU.
 """
 
 from __future__ import annotations
 
 import os
+import sys
+import tempfile
 import threading
 from dataclasses import dataclass
 
+from serenity.errors import SerenityError
+
 _lock = threading.Lock()
 _initialised = False
+_cuda_noted = False
+
+#: printed once per process the first time a CUDA device is resolved
+CUDA_UNVERIFIED_NOTICE = ("serenity: note: the CUDA path has not been run on a GPU yet (its kernels compile for "
+                          "sm_75/sm_90); results on {device} are unverified, --device cpu is the tested path")
 
 
-class DeviceError(RuntimeError):
+class DeviceError(SerenityError, RuntimeError):
     """A requested device does not exist on this machine."""
 
 
@@ -39,8 +52,6 @@ def init_warp():
 def _init_quietly(wp) -> None:
     """``wp.init()`` with the native "no CUDA driver" notice filtered out of stderr: on a machine
     without a GPU that is the expected state, not news (other native messages pass through)."""
-    import sys
-    import tempfile
 
     try:
         fd = sys.stderr.fileno()
@@ -70,21 +81,24 @@ def available_devices() -> list[str]:
 
 
 def resolve_device(device: str | None = None) -> str:
-    """Return a valid Warp device string for ``device`` (None → cuda:0 if present, else cpu).
+    """Return a valid Warp device string for ``device`` (None → ``cpu``; CUDA only when asked for).
 
-    ``SERENITY_DEVICE`` in the environment overrides the default (not an explicit argument).
+    ``SERENITY_DEVICE`` in the environment overrides the default (not an explicit argument). The
+    first CUDA device resolved in a process prints ``CUDA_UNVERIFIED_NOTICE`` (one line, stderr).
     """
-    wp = init_warp()
+    global _cuda_noted
+    init_warp()
     if device is None:
-        device = os.environ.get("SERENITY_DEVICE") or None
-    if device is None:
-        return "cuda:0" if wp.is_cuda_available() else "cpu"
+        device = os.environ.get("SERENITY_DEVICE") or "cpu"
     device = str(device)
     if device == "cuda":
         device = "cuda:0"
     names = available_devices()
     if device not in names:
         raise DeviceError(f"device {device!r} is not available here (available: {', '.join(names)})")
+    if device.startswith("cuda") and not _cuda_noted:
+        _cuda_noted = True
+        print(CUDA_UNVERIFIED_NOTICE.format(device=device), file=sys.stderr)
     return device
 
 

@@ -142,3 +142,21 @@ def test_missing_optional_package_names_the_extra(tmp_path, capsys, monkeypatch)
     write_exr(img, {"beauty": np.ones((4, 4, 3), np.float32)})
     code, _, err = _run(["compare", img, img], capsys)
     _one_line_error(code, err, "flip-evaluator", "pip install 'serenity[eval]'")
+
+
+def test_render_on_a_missing_gpu_is_one_line(tmp_path):
+    """`serenity render --device cuda:0` where there is no such device (a real process, so Warp's native
+    output counts too): status 2 and exactly one line on stderr, naming the device and what exists."""
+    from serenity.device import available_devices
+
+    if "cuda:0" in available_devices():
+        pytest.skip("this machine has cuda:0")
+    env = {k: v for k, v in os.environ.items() if k != "SERENITY_DEVICE"}
+    r = subprocess.run([sys.executable, "-m", "serenity", "render", "plane", "--device", "cuda:0", "--size", "16x16",
+                        "-o", str(tmp_path / "x.png")], capture_output=True, text=True, timeout=120,
+                       env={**env, "PYTHONUNBUFFERED": "1"})
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2, r.stderr
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith("serenity: error:") and "cuda:0" in lines[0] and "cpu" in lines[0]
+    assert not (tmp_path / "x.png").exists()

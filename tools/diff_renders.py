@@ -1,7 +1,7 @@
 """Compare two ``serenity render`` outputs (PNG + multi-layer EXR) value by value, for refactors that
 must not change the image.
 
-    python tools/diff_renders.py BEFORE.png AFTER.png [--json FILE]
+    python tools/diff_renders.py BEFORE.png AFTER.png [--json FILE] [--note TEXT]
 
 The EXR beside each PNG (same stem) is compared layer by layer. Per layer: identical (bit for
 bit, NaN == NaN), the number of differing values and the largest absolute difference among the
@@ -36,8 +36,10 @@ def main(argv=None) -> int:
     p.add_argument("before")
     p.add_argument("after")
     p.add_argument("--json", help="write the comparison here")
+    p.add_argument("--note", help="provenance recorded in the JSON (e.g. which commits rendered BEFORE and AFTER)")
     args = p.parse_args(argv)
-    out = {"before": args.before, "after": args.after, "png": diff(read_png(args.before), read_png(args.after))}
+    out = {"note": args.note, "before": args.before, "after": args.after,
+           "png": diff(read_png(args.before), read_png(args.after))}
     ea, eb = (read_exr(os.path.splitext(x)[0] + ".exr") for x in (args.before, args.after))
     out["exr"] = {k: diff(ea[k], eb[k]) if k in eb else {"identical": False, "missing": True} for k in ea}
     out["identical"] = out["png"]["identical"] and all(v["identical"] for v in out["exr"].values())

@@ -16,7 +16,7 @@ def register(sub) -> None:
     v.add_argument("--size", default=DEFAULT_VIEW_SIZE, help="render size WxH (default %(default)s); "
                                                              "the window opens at this size")
     v.add_argument("--quality", default="high", help="quality preset: low | medium | high (default %(default)s)")
-    v.add_argument("--device", help="cpu | cuda:0 (default: cuda:0 when present, else cpu)")
+    v.add_argument("--device", help="cpu (default) | cuda:0 (compiles, not yet run on a GPU: unverified)")
     v.add_argument("--exposure", type=float, default=0.02, help="exposure before Reinhard (default %(default)s)")
     v.add_argument("--script", help="TOML file of timed input steps (see serenity/view/script.py)")
     v.add_argument("--screenshot", help="write the window as a PNG when the run ends (--exit-after or the "

@@ -148,6 +148,22 @@ def sample_uniform_sphere(u: wp.vec2) -> wp.vec3:
 
 
 @wp.func
+def sample_probe_direction(k: int, base_points: wp.array(dtype=wp.vec2), rot: wp.vec2, seed: wp.uint32,
+                           hammersley: bool) -> wp.vec3:
+    """Direction ``k`` of a probe's QMC set on the sphere (uniform, pdf 1/4π): the precomputed point
+    ``base_points[k]`` Cranley–Patterson rotated by ``rot`` (``hammersley``), else Owen-scrambled
+    Sobol' point k with ``seed``. ``hammersley`` is a compile-time constant (``wp.static``) at every
+    call, so each specialised kernel keeps one branch."""
+    u = wp.vec2()
+    if hammersley:
+        u = base_points[k] + rot
+        u = wp.vec2(wp.min(u[0] - wp.floor(u[0]), ONE_MINUS_EPS), wp.min(u[1] - wp.floor(u[1]), ONE_MINUS_EPS))
+    else:
+        u = sample_sobol_owen(k, seed)
+    return sample_uniform_sphere(u)
+
+
+@wp.func
 def sample_cosine_hemisphere(u: wp.vec2) -> wp.vec3:
     r = wp.sqrt(u[0])
     phi = TWO_PI * u[1]

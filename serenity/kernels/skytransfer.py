@@ -36,10 +36,11 @@ import functools
 import numpy as np
 import warp as wp
 
-from serenity.kernels.atmosphere import sky_map_directions, sky_map_solid_angles
+from serenity.kernels.atmosphere_ref import sky_map_directions, sky_map_solid_angles
+from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads
-from serenity.kernels.sampling import cp_rotation, hash_u32, sample_sobol_owen, sample_uniform_sphere
+from serenity.kernels.sampling import cp_rotation, hash_u32, sample_probe_direction
 from serenity.kernels.sh import eval_sh9, sh_basis, vec9
 
 wp.set_module_options({"enable_backward": False})
@@ -48,7 +49,6 @@ wp.set_module_options({"enable_backward": False})
 # constants
 
 MAX_BANDS = 5
-_ONE_MINUS_EPS = wp.constant(0.99999994)
 _PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
 
 vec25 = wp.types.vector(length=25, dtype=wp.float32)
@@ -94,7 +94,7 @@ def eval_sh25(d: wp.vec3) -> vec25:
 # kernels
 
 
-@functools.cache
+@kernel_factory(sequence=(0, 1))
 def _integrate_transfer_kernel(sequence: int):
     """The transfer integration, specialised on the QMC sequence (0 Hammersley, 1 Owen-Sobol')."""
     @wp.kernel(enable_backward=False, module="unique")
@@ -126,14 +126,7 @@ def _integrate_transfer_kernel(sequence: int):
         rot = cp_rotation(seed)
         w = 4.0 * wp.pi / float(rays)
         for r in range(rays):
-            u = wp.vec2()
-            if wp.static(sequence == 0):
-                u = base_points[r] + rot
-                u = wp.vec2(wp.min(u[0] - wp.floor(u[0]), _ONE_MINUS_EPS),
-                            wp.min(u[1] - wp.floor(u[1]), _ONE_MINUS_EPS))
-            else:
-                u = sample_sobol_owen(r, seed)
-            d = sample_uniform_sphere(u)
+            d = sample_probe_direction(r, base_points, rot, seed, wp.static(sequence == 0))
             if not intersect_quads(p, d, centers, ups, rights, halves, quad_count):
                 yk = eval_sh9(d) * w
                 if d[1] >= 0.0:

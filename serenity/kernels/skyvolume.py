@@ -8,12 +8,12 @@ bounds hold about ``target_probes`` = 32·16·23 probes (the paper's reference v
 ``resolution=(X, Y, Z)`` instead fits exactly that many probes to the bounds (per-axis cells).
 A **layer** is one y slice (X·Z probes; the paper's 32×16×23 volume has 16 layers).
 
-Per probe (``integrate_sky_layer``): ``rays_per_probe`` directions ωᵢ over the sphere, a QMC set
-(:mod:`serenity.kernels.sampling`) — Hammersley with a per-probe Cranley–Patterson rotation
-(default) or Owen-scrambled Sobol' with a per-probe seed — mapped equal-area to the sphere (pdf
-1/4π), decorrelated between probes by hashing the probe's index. Each ray from the probe is
-tested against every occlusion quad (two-sided rectangle, ``model.OcclusionQuad``, paper Fig. 6);
-an unoccluded ray gets
+Per probe (``integrate_sky_layer_kernel(sequence)``, the sequence compiled in): ``rays_per_probe``
+directions ωᵢ over the sphere, a QMC set (:mod:`serenity.kernels.sampling`) — Hammersley with a
+per-probe Cranley–Patterson rotation (default) or Owen-scrambled Sobol' with a per-probe seed —
+mapped equal-area to the sphere (pdf 1/4π), decorrelated between probes by hashing the probe's
+index. Each ray from the probe is tested against every occlusion quad (two-sided rectangle,
+``model.OcclusionQuad``, paper Fig. 6); an unoccluded ray gets
 
     ω.y ≥ 0: the sky map, bilinear in the paraboloid map (``atmosphere.sample_sky_map``);
     ω.y < 0: the ground, a Lambertian plane of albedo ``ground_albedo`` lit by the sky only:
@@ -57,20 +57,17 @@ import numpy as np
 import warp as wp
 
 from serenity.config import SKY_SEQUENCES, SkyConfig
+from serenity.device import resolve_device
 from serenity.kernels.atmosphere import (
     SkyMapCache,
     horizontal_irradiance,
     sample_sky_map,
 )
+from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
-from serenity.kernels.sampling import (
-    cp_rotation,
-    hammersley_np,
-    hash_u32,
-    sample_sobol_owen,
-    sample_uniform_sphere,
-)
+from serenity.kernels.quadfit import fit_occlusion_quads
+from serenity.kernels.sampling import cp_rotation, hammersley_np, hash_u32, sample_probe_direction
 from serenity.kernels.sh import eval_sh9, irradiance_scale, sh_basis, vec9
 from serenity.kernels.skytransfer import SkyTransfer, project_sky
 
@@ -83,7 +80,6 @@ PAPER_RESOLUTION = (32, 16, 23)
 SEQUENCES = SKY_SEQUENCES
 COEFFS = 27
 _FOUR_PI = wp.constant(4.0 * math.pi)
-_ONE_MINUS_EPS = wp.constant(0.99999994)
 _PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
 
 
@@ -95,66 +91,69 @@ _PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
 # kernels
 
 
-@wp.kernel
-def integrate_sky_layer(
-    # inputs
-    origin: wp.vec3,
-    cell: wp.vec3,
-    res_x: int,
-    res_y: int,
-    res_z: int,
-    first_layer: int,
-    centers: wp.array(dtype=wp.vec3),
-    ups: wp.array(dtype=wp.vec3),
-    rights: wp.array(dtype=wp.vec3),
-    halves: wp.array(dtype=wp.vec2),
-    quad_count: int,
-    sky_map: wp.array2d(dtype=wp.vec3),
-    ground: wp.vec3,
-    base_points: wp.array(dtype=wp.vec2),
-    rays: int,
-    sequence: int,
-    salt: wp.uint32,
-    scale: vec9,
-    # outputs
-    coeffs: wp.array2d(dtype=float),
-    offset: int,
-):
-    t = wp.tid() + offset
-    slab = res_x * res_z
-    y = first_layer + t // slab
-    rem = t - (t // slab) * slab
-    z = rem // res_x
-    x = rem - z * res_x
-    probe = (z * res_y + y) * res_x + x
-    p = origin + wp.vec3(float(x) * cell[0], float(y) * cell[1], float(z) * cell[2])
-    seed = hash_u32(wp.uint32(probe) ^ salt)
-    rot = cp_rotation(seed)
-    acc_r = vec9()
-    acc_g = vec9()
-    acc_b = vec9()
-    for k in range(rays):
-        u = wp.vec2()
-        if sequence == 0:
-            u = base_points[k] + rot
-            u = wp.vec2(wp.min(u[0] - wp.floor(u[0]), _ONE_MINUS_EPS), wp.min(u[1] - wp.floor(u[1]), _ONE_MINUS_EPS))
-        else:
-            u = sample_sobol_owen(k, seed)
-        d = sample_uniform_sphere(u)
-        if not intersect_quads(p, d, centers, ups, rights, halves, quad_count):
-            radiance = ground
-            if d[1] >= 0.0:
-                radiance = sample_sky_map(sky_map, d)
-            b = eval_sh9(d)
-            acc_r += b * radiance[0]
-            acc_g += b * radiance[1]
-            acc_b += b * radiance[2]
-    w = _FOUR_PI / float(rays)
-    for k in range(9):
-        s = scale[k] * w
-        coeffs[probe, 3 * k + 0] = acc_r[k] * s
-        coeffs[probe, 3 * k + 1] = acc_g[k] * s
-        coeffs[probe, 3 * k + 2] = acc_b[k] * s
+@kernel_factory(sequence=SKY_SEQUENCES)
+def integrate_sky_layer_kernel(sequence: str):
+    """The probe-integration kernel for one direction ``sequence`` (``SkyConfig.sequence``), compiled
+    in: Hammersley points Cranley–Patterson rotated per probe, or Owen-scrambled Sobol' per probe."""
+    if sequence not in SEQUENCES:
+        raise ValueError(f"sequence must be one of {SEQUENCES}, got {sequence!r}")
+    hammersley = sequence == "hammersley"
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def integrate_sky_layer(
+        # inputs
+        origin: wp.vec3,
+        cell: wp.vec3,
+        res_x: int,
+        res_y: int,
+        res_z: int,
+        first_layer: int,
+        centers: wp.array(dtype=wp.vec3),
+        ups: wp.array(dtype=wp.vec3),
+        rights: wp.array(dtype=wp.vec3),
+        halves: wp.array(dtype=wp.vec2),
+        quad_count: int,
+        sky_map: wp.array2d(dtype=wp.vec3),
+        ground: wp.vec3,
+        base_points: wp.array(dtype=wp.vec2),
+        rays: int,
+        salt: wp.uint32,
+        scale: vec9,
+        # outputs
+        coeffs: wp.array2d(dtype=float),
+        offset: int,
+    ):
+        t = wp.tid() + offset
+        slab = res_x * res_z
+        y = first_layer + t // slab
+        rem = t - (t // slab) * slab
+        z = rem // res_x
+        x = rem - z * res_x
+        probe = (z * res_y + y) * res_x + x
+        p = origin + wp.vec3(float(x) * cell[0], float(y) * cell[1], float(z) * cell[2])
+        seed = hash_u32(wp.uint32(probe) ^ salt)
+        rot = cp_rotation(seed)
+        acc_r = vec9()
+        acc_g = vec9()
+        acc_b = vec9()
+        for k in range(rays):
+            d = sample_probe_direction(k, base_points, rot, seed, wp.static(hammersley))
+            if not intersect_quads(p, d, centers, ups, rights, halves, quad_count):
+                radiance = ground
+                if d[1] >= 0.0:
+                    radiance = sample_sky_map(sky_map, d)
+                b = eval_sh9(d)
+                acc_r += b * radiance[0]
+                acc_g += b * radiance[1]
+                acc_b += b * radiance[2]
+        w = _FOUR_PI / float(rays)
+        for k in range(9):
+            s = scale[k] * w
+            coeffs[probe, 3 * k + 0] = acc_r[k] * s
+            coeffs[probe, 3 * k + 1] = acc_g[k] * s
+            coeffs[probe, 3 * k + 2] = acc_b[k] * s
+
+    return integrate_sky_layer
 
 
 @wp.kernel
@@ -281,8 +280,6 @@ class SkyVolume:
     """
 
     def __init__(self, scene, config: SkyConfig | None = None, device: str | None = None):
-        from serenity.device import resolve_device
-
         self.scene = scene
         self.config = cfg = config or SkyConfig()
         self.device = resolve_device(device)
@@ -291,8 +288,6 @@ class SkyVolume:
         quads = list(scene.occlusion_quads)
         self.quad_fit = None
         if not quads and cfg.auto_quads:
-            from serenity.kernels.quadfit import fit_occlusion_quads
-
             self.quad_fit = fit_occlusion_quads(scene)
             quads = self.quad_fit.quads
         self.quads = quads
@@ -352,15 +347,14 @@ class SkyVolume:
     # -- integration
 
     def _integrate(self, sky_map, first: int, count: int) -> None:
-
         x, y, z = self.resolution
         cfg = self.config
         c, u, r, h = self._quads_wp
-        launch(integrate_sky_layer, count * x * z,
+        launch(integrate_sky_layer_kernel(cfg.sequence), count * x * z,
                [wp.vec3(*self.grid_origin.astype(np.float32)), wp.vec3(*self.cell_size.astype(np.float32)),
                 x, y, z, int(first), c, u, r, h, len(self.quads), sky_map,
                 wp.vec3(*self.ground_radiance.astype(np.float32)), self._base, int(cfg.rays_per_probe),
-                SEQUENCES.index(cfg.sequence), wp.uint32(cfg.seed & 0xFFFFFFFF), self._scale, self._coeffs],
+                wp.uint32(cfg.seed & 0xFFFFFFFF), self._scale, self._coeffs],
                device=self.device)
         self._host = None
 

@@ -1,4 +1,4 @@
-"""Light propagation volumes (serenity/kernels/lpv.py): transfer, energy, occlusion, lookups,
+"""Light propagation volumes (serenity/kernels/lpv/): transfer, energy, occlusion, lookups,
 cascades, early stop and re-injection logic. Numbers quoted in comments were measured on the
 2-core CPU; the tests assert bounds, never timings."""
 

@@ -9,11 +9,11 @@ import pytest
 from serenity.config import SkyConfig
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
+from serenity.kernels.occlusion import occluded_np
 from serenity.kernels.quadfit import fit_occlusion_quads
 from serenity.kernels.sampling import fibonacci_sphere
 from serenity.kernels.skyvolume import (
     SkyVolume,
-    occluded_np,
     pack_sh_textures,
     unpack_sh_textures,
 )

@@ -1,4 +1,4 @@
-"""lpv.glsl against the Warp lookups (serenity/kernels/lpv.py): same volume, same points, the GLSL
+"""lpv.glsl against the Warp lookups (serenity/kernels/lpv/): same volume, same points, the GLSL
 functions in a fullscreen probe pass must give the Warp reference within 1e-3 relative."""
 
 from __future__ import annotations

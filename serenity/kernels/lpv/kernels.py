@@ -11,10 +11,9 @@ first, with origin and cell size). Every kernel is 1-D with a trailing ``offset`
 
 from __future__ import annotations
 
-from functools import cache
-
 import warp as wp
 
+from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import slot_base
 from serenity.kernels.lpv.basis import C0, C1, E0, E1, G0, G1, K0, K1, T_AX_AX, T_AX_DC, T_DC_AX, T_DC_DC, T_PERP
 
@@ -373,7 +372,7 @@ def eval_face_transmittance(
     trans_neg[i] = tn
 
 
-@cache
+@kernel_factory(geometry_volume=(False, True))
 def propagate_kernel(geometry_volume: bool):
     """The propagation kernel (one launch covers every cascade), geometry volume compiled in or out."""
 
@@ -497,7 +496,7 @@ def hand_over_far(
     accum[j + 2 * n3] = accum[j + 2 * n3] + add_b
 
 
-@cache
+@kernel_factory(leak_guard=(False, True))
 def lookup_irradiance_kernel(leak_guard: bool):
     """Irradiance lookups (W/m², RGB) at points with unit normals, cascades blended finest first; the
     leak guard (package doc) compiled in or out."""

@@ -1,5 +1,5 @@
 // Light propagation volume lookups (paper §8, Fig. 10): the GLSL twin of lookup_irradiance and
-// lookup_glossy in serenity/kernels/lpv.py, whose module docstring states the SH convention and
+// lookup_glossy in serenity/kernels/lpv/kernels.py; serenity/kernels/lpv/__init__.py states the SH convention and
 // units. Mirror any change there. Include it in a fragment shader and call
 //   vec3 lpv_irradiance(vec3 p, vec3 n)           // W m^-2, >= 0: diffuse irradiance at p, normal n
 //   vec3 lpv_glossy(vec3 p, vec3 r, float m)      // W m^-2 sr^-1: radiance from around direction r,
@@ -26,7 +26,7 @@ uniform vec4 u_lpv_geom[3];           // xyz: grid min corner (m), w: cell size 
 uniform int u_lpv_res[3];             // cells per axis
 uniform int u_lpv_count;              // active cascades, 0..3 (0: the LPV adds nothing)
 uniform float u_lpv_lookup_offset;    // cells along the normal (irradiance)
-uniform bool u_lpv_leak_guard;        // irradiance: drop cells behind the surface (lpv.py's leak guard)
+uniform bool u_lpv_leak_guard;        // irradiance: drop cells behind the surface (LPVConfig.leak_guard)
 uniform float u_lpv_margin;           // cells at a non-last cascade's border with zero weight
 uniform float u_lpv_band;             // cells of the blend band (0: hard switch)
 uniform int u_lpv_glossy_steps;       // samples along the reflected direction
