@@ -18,12 +18,27 @@ import numpy as np
 
 from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
 from serenity.errors import SerenityError
+from serenity.scene.sun import sun_from_time
 
 QUALITY_PRESETS = ("low", "medium", "high")
 #: the techniques the panel switches; "live" ones change per frame, the others rebuild the Renderer
 LIVE_TOGGLES = ("ssao",)
 REBUILD_TOGGLES = ("sky_lighting", "lpv", "ray_tracing")
 SHADOW_FILTERS = ("hard", "pcf", "pcss")
+#: view name -> what it shows (the panel's combo, ``set = { view = ... }``, V cycles)
+VIEWS = {
+    "final": "the tone-mapped frame",
+    "albedo": "G-buffer albedo",
+    "normal": "G-buffer world normal (0.5 + 0.5 n)",
+    "direct": "direct sun light (tone-mapped)",
+    "sky light": "sky-volume light, full resolution, without AO (tone-mapped)",
+    "lpv indirect": "LPV diffuse + glossy light, full resolution, without AO (tone-mapped)",
+    "ao": "SSAO (1 = open; at the indirect light's resolution)",
+    "rt mask": "pixels with ray-traced reflection/refraction",
+    "lpv cascades": "the frame with the LPV cascades' bounds",
+    "reference split": "ours (left) | path-traced reference (right)",
+    "flip error": "FLIP error map against the reference",
+}
 
 
 def quality_config(name: str, base: RenderConfig | None = None) -> RenderConfig:
@@ -122,8 +137,6 @@ class TimeOfDay:
 
     def sun(self, old):
         """A new ``Sun`` at this time and place, keeping ``old``'s irradiance and disc size."""
-        from serenity.scene.sun import sun_from_time
-
         new = sun_from_time(self.text(), self.latitude, self.longitude, irradiance=old.irradiance)
         new.angular_diameter_deg = old.angular_diameter_deg
         return new

@@ -13,6 +13,7 @@ as world-space wireframes over the image (the LPV cascades' bounds).
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import fullscreen_vao, load_program
@@ -68,6 +69,4 @@ class LinesPass:
         fbo.use()
         fbo.viewport = tuple(int(v) for v in viewport)
         self.program["u_view_proj"].write(np.asarray(view_proj).T.astype(np.float32).tobytes())
-        import moderngl
-
         self.vao.render(moderngl.LINES, vertices=len(data))
