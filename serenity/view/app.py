@@ -25,6 +25,7 @@ from serenity.io.exr import write_exr
 from serenity.io.png import write_png
 from serenity.raster.interop import read_texture, upload_texture
 from serenity.scene.mesh_io import export_glb
+from serenity.scene.sun import DEFAULT_LOCATION
 from serenity.scene.toml_scene import save_toml
 from serenity.view import present
 from serenity.view.controls import VIEWS, FlyCamera, Settings, TimeOfDay
@@ -48,7 +49,7 @@ class Viewer:
         self.wnd = open_window(self.width, self.height, f"Serenity — {scene.name}", visible=visible)
         self.ctx = self.wnd.ctx
         self.fly = FlyCamera.from_camera(scene.camera)
-        lat, lon = getattr(scene, "location", None) or (38.72, -9.14)
+        lat, lon = getattr(scene, "location", None) or DEFAULT_LOCATION
         self.tod = TimeOfDay(latitude=float(lat), longitude=float(lon), utc_offset=float(round(lon / 15.0)))
         if getattr(scene, "location", None) is not None:
             self.tod.utc_offset = 1.0  # the built-in scenes' DEFAULT_TIME is given at +01:00

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
+from serenity.config import DEFAULT_EXPOSURE, RenderConfig, ShadowConfig, SSAOConfig
 from serenity.errors import SerenityError
-from serenity.scene.sun import sun_from_time
+from serenity.scene.sun import DEFAULT_LOCATION, sun_from_time
 
 QUALITY_PRESETS = ("low", "medium", "high")
 #: the techniques the panel switches; "live" ones change per frame, the others rebuild the Renderer
@@ -124,8 +124,8 @@ class TimeOfDay:
     date: str = "2024-06-21"
     hour: float = 16.0
     """Local hours, 0–24."""
-    latitude: float = 38.72
-    longitude: float = -9.14
+    latitude: float = DEFAULT_LOCATION[0]
+    longitude: float = DEFAULT_LOCATION[1]
     utc_offset: float = 1.0
     """Hours from UTC of the local time."""
 
@@ -148,7 +148,7 @@ class Settings:
     exposure. ``config()`` is the ``RenderConfig`` they give."""
 
     quality: str = "high"
-    exposure: float = 0.02
+    exposure: float = DEFAULT_EXPOSURE
     ssao: bool = True
     sky_lighting: bool = True
     lpv: bool = True
