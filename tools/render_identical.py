@@ -2,8 +2,11 @@
 revision and with the working tree, and compare the PNG files byte for byte and every EXR layer
 value for value.
 
-    python tools/render_identical.py --base main --json benchmarks/results/render_identical.json \
-        courtyard:320x180 glass:320x180 courtyard:640x360
+    python tools/render_identical.py --base $(git merge-base main HEAD) \
+        --json benchmarks/results/render_identical.json courtyard:320x180 glass:320x180 courtyard:640x360
+
+Compare against the branch's merge base, not a moving ``main``: commits that landed on main since
+the branch forked would show up as differences.
 
 The base revision is exported with ``git archive`` into a temporary folder and run from there
 (``PYTHONPATH`` first), so neither checkout is touched. Exit status 0 when every output is
