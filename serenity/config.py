@@ -25,7 +25,7 @@ SKY_MAP_SIZE = 256
 LPV_MAX_CASCADES = 3
 
 MAX_IMAGE_SIZE = 8192
-"""Largest image side, pixels (the texture size every OpenGL 4.3 implementation here supports)."""
+"""Largest image or shadow-map side, pixels (the texture size every OpenGL 4.3 implementation here supports)."""
 DEFAULT_EXPOSURE = 0.02
 """Multiplier applied to radiance (W·m⁻²·sr⁻¹) before Reinhard; 0.02 maps a white wall in noon
 sun (≈300) to about 0.86 display luminance. The CLI's and the metrics' default too."""
@@ -69,8 +69,8 @@ class ShadowConfig:
     """Normal offset of the lookup point, in texels, scaled by the slope tan θ (clamped 1–4)."""
 
     def __post_init__(self):
-        if not 16 <= self.size <= 8192:
-            raise ConfigError(f"ShadowConfig.size must be in 16..8192, got {self.size}")
+        if not 16 <= self.size <= MAX_IMAGE_SIZE:
+            raise ConfigError(f"ShadowConfig.size must be in 16..{MAX_IMAGE_SIZE}, got {self.size}")
         if not 1 <= self.cascades <= 4:
             raise ConfigError(f"ShadowConfig.cascades must be 1..4, got {self.cascades}")
         if self.filter not in ("hard", "pcf", "pcss"):
@@ -319,8 +319,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.exposure must be positive, got {self.exposure}")
         if not (isinstance(self.transmissions, int) and 0 <= self.transmissions <= 16):
             raise ConfigError(f"RenderConfig.transmissions must be an int in 0..16, got {self.transmissions!r}")
-        if not (16 <= self.osm_size <= 8192):
-            raise ConfigError(f"RenderConfig.osm_size must be in 16..8192, got {self.osm_size}")
+        if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):
+            raise ConfigError(f"RenderConfig.osm_size must be in 16..{MAX_IMAGE_SIZE}, got {self.osm_size}")
         if not (isinstance(self.indirect_scale, int) and 1 <= self.indirect_scale <= 8):
             raise ConfigError(f"RenderConfig.indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
         if self.ambient not in ("none", "constant"):

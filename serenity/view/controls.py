@@ -16,14 +16,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
+from serenity.config import DEFAULT_EXPOSURE, RenderConfig, ShadowConfig, SSAOConfig
 from serenity.errors import SerenityError
+from serenity.scene.sun import DEFAULT_LOCATION, sun_from_time
 
 QUALITY_PRESETS = ("low", "medium", "high")
 #: the techniques the panel switches; "live" ones change per frame, the others rebuild the Renderer
 LIVE_TOGGLES = ("ssao",)
 REBUILD_TOGGLES = ("sky_lighting", "lpv", "ray_tracing")
 SHADOW_FILTERS = ("hard", "pcf", "pcss")
+#: view name -> what it shows (the panel's combo, ``set = { view = ... }``, V cycles)
+VIEWS = {
+    "final": "the tone-mapped frame",
+    "albedo": "G-buffer albedo",
+    "normal": "G-buffer world normal (0.5 + 0.5 n)",
+    "direct": "direct sun light (tone-mapped)",
+    "sky light": "sky-volume light, full resolution, without AO (tone-mapped)",
+    "lpv indirect": "LPV diffuse + glossy light, full resolution, without AO (tone-mapped)",
+    "ao": "SSAO (1 = open; at the indirect light's resolution)",
+    "rt mask": "pixels with ray-traced reflection/refraction",
+    "lpv cascades": "the frame with the LPV cascades' bounds",
+    "reference split": "ours (left) | path-traced reference (right)",
+    "flip error": "FLIP error map against the reference",
+}
 
 
 def quality_config(name: str, base: RenderConfig | None = None) -> RenderConfig:
@@ -109,8 +124,8 @@ class TimeOfDay:
     date: str = "2024-06-21"
     hour: float = 16.0
     """Local hours, 0–24."""
-    latitude: float = 38.72
-    longitude: float = -9.14
+    latitude: float = DEFAULT_LOCATION[0]
+    longitude: float = DEFAULT_LOCATION[1]
     utc_offset: float = 1.0
     """Hours from UTC of the local time."""
 
@@ -122,8 +137,6 @@ class TimeOfDay:
 
     def sun(self, old):
         """A new ``Sun`` at this time and place, keeping ``old``'s irradiance and disc size."""
-        from serenity.scene.sun import sun_from_time
-
         new = sun_from_time(self.text(), self.latitude, self.longitude, irradiance=old.irradiance)
         new.angular_diameter_deg = old.angular_diameter_deg
         return new
@@ -135,7 +148,7 @@ class Settings:
     exposure. ``config()`` is the ``RenderConfig`` they give."""
 
     quality: str = "high"
-    exposure: float = 0.02
+    exposure: float = DEFAULT_EXPOSURE
     ssao: bool = True
     sky_lighting: bool = True
     lpv: bool = True

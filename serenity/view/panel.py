@@ -6,8 +6,10 @@ view switch, saving and the reference comparison. Every widget changes state thr
 
 from __future__ import annotations
 
+import moderngl
+
 from serenity.errors import SerenityError
-from serenity.view.controls import QUALITY_PRESETS, SHADOW_FILTERS
+from serenity.view.controls import QUALITY_PRESETS, SHADOW_FILTERS, VIEWS
 
 _STALE = (0.95, 0.45, 0.2, 1.0)
 _FRESH = (0.3, 0.8, 0.4, 1.0)
@@ -21,10 +23,7 @@ def _set(viewer, name, value) -> None:
 
 
 def draw_panel(viewer, real_dt: float) -> None:
-    import moderngl
     from imgui_bundle import imgui
-
-    from serenity.view.app import VIEWS
 
     io = imgui.get_io()
     io.delta_time = max(1e-3, float(real_dt))

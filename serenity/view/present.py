@@ -13,8 +13,10 @@ as world-space wireframes over the image (the LPV cascades' bounds).
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
+from serenity.config import DEFAULT_EXPOSURE
 from serenity.raster.context import fullscreen_vao, load_program
 
 DISPLAY, HDR, SIGNED, LINEAR, SCALAR = range(5)
@@ -29,7 +31,7 @@ class PresentPass:
         self.vao = fullscreen_vao(ctx, self.program)
 
     def draw(self, fbo, viewport, a, mode_a: int, b=None, mode_b: int = DISPLAY, split: float = 2.0,
-             exposure: float = 0.02) -> None:
+             exposure: float = DEFAULT_EXPOSURE) -> None:
         p = self.program
         fbo.use()
         fbo.viewport = tuple(int(v) for v in viewport)
@@ -68,6 +70,4 @@ class LinesPass:
         fbo.use()
         fbo.viewport = tuple(int(v) for v in viewport)
         self.program["u_view_proj"].write(np.asarray(view_proj).T.astype(np.float32).tobytes())
-        import moderngl
-
         self.vao.render(moderngl.LINES, vertices=len(data))

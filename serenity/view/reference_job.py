@@ -15,14 +15,15 @@ from __future__ import annotations
 import copy
 import multiprocessing as mp
 import queue
+import time
 
 import numpy as np
+
+from serenity.eval.reference import render_reference
 
 
 def _worker(scene, width: int, height: int, spp: int, chunks: int, out) -> None:
     try:
-        from serenity.eval.reference import render_reference
-
         per = [spp // chunks + (1 if i < spp % chunks else 0) for i in range(chunks)]
         acc = np.zeros((height, width, 3), np.float64)
         done = 0
@@ -76,8 +77,6 @@ class ReferenceJob:
 
     def wait(self, timeout: float | None = None) -> None:
         """Block until the job ends (scripted mode and tests)."""
-        import time
-
         t_end = None if timeout is None else time.monotonic() + timeout
         while self.running and (t_end is None or time.monotonic() < t_end):
             self.poll()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 
 from serenity.errors import SerenityError
+from serenity.raster.context import use_context
 
 _NEEDS = "serenity view needs moderngl-window, glfw and imgui-bundle: pip install -e '.[view]'"
 
@@ -34,7 +35,5 @@ def open_window(width: int, height: int, title: str, visible: bool = True):
                      vsync=False, visible=visible)
     except Exception as e:
         raise SerenityError(f"cannot open a window with OpenGL 4.3 on display {display!r}: {_first_line(e)}") from None
-    from serenity.raster.context import use_context
-
     use_context(wnd.ctx)
     return wnd
