@@ -6,14 +6,17 @@ a front-to-back stack traversal that stops at the first leaf whose hit lies insi
 (binned SAH, disk cache) is :mod:`serenity.kernels.kdtree_build`; its settings are
 :class:`serenity.config.KdBuildConfig`.
 
-Layout on a device (:class:`KdTreeData`; the build's ``node_head``/``node_split`` interleaved in one
-8-byte :class:`KdNode` per node):
-    nodes (nodes,) KdNode: ``head`` = (first child << 2) | axis for an inner node (children are
-        consecutive: left at first child, right at first child + 1), (offset into ``prims`` << 2) | 3
-        for a leaf; ``split`` = the split position of an inner node (world units).
-    prims (P,) int32: per leaf a count then that many triangle indices; ``prims[0] = 0`` is the
-        shared empty leaf.
-    tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2.
+Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`KdTree.device_data`):
+    nodes (nodes,) KdNode, 8 bytes: inner node: ``head`` = (first child << 2) | axis (children are
+        consecutive: left at first child, right at first child + 1), ``split`` = the split position
+        (world units); leaf: ``head`` = (first reference << 2) | 3, ``split`` = its triangle count
+        (a small integer, exact in float32), so a leaf costs no extra load before its triangles.
+    prims (P,) int32: the build's leaf blocks (a count, then that many triangle indices); a leaf's
+        references are the slots after its count: reference r is triangle ``prims[r]``.
+    ref_verts (3P,) vec3: reference r's three vertices at 3r, 3r+1, 3r+2 — a leaf's triangles lie
+        next to each other in memory (the traversal's time goes mostly into cache misses on nodes
+        and triangles: a copy per reference trades memory for one miss per leaf, not per triangle).
+    tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2 (for shading a hit).
 
 Traversal (Warp, ``trace_kd``): rays with origin ``o`` (N,3) and direction ``d`` (N,3) float32,
 t in units of |d| (directions need not be unit). Hits are 0 ≤ tmin < t < tmax. Front-to-back with
@@ -84,8 +87,8 @@ _STACK = wp.constant(STACK_SIZE)
 
 @wp.struct
 class KdNode:
-    """One node, 8 bytes: ``head`` = (first child << 2) | axis, or (prims offset << 2) | 3 for a
-    leaf; ``split`` = the split position of an inner node."""
+    """One node, 8 bytes: ``head`` = (first child << 2) | axis, or (first reference << 2) | 3 for a
+    leaf; ``split`` = the split position of an inner node, the triangle count of a leaf."""
 
     head: wp.int32
     split: wp.float32
@@ -97,6 +100,7 @@ class KdTreeData:
 
     nodes: wp.array(dtype=KdNode)
     prims: wp.array(dtype=wp.int32)
+    ref_verts: wp.array(dtype=wp.vec3)
     tri_verts: wp.array(dtype=wp.vec3)
     box_lo: wp.vec3  # padded root box
     box_hi: wp.vec3
@@ -260,15 +264,18 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                     node = first
                     t1 = wp.min(t1, ts + teps)
         else:
-            off = head >> 2
-            n = tree.prims[off]
+            first_ref = head >> 2
+            n = int(nd.split)
             for j in range(n):
-                f = tree.prims[off + 1 + j]
+                ref = first_ref + j
                 hit, t, u, v = intersect_triangle(
                     o, kx, ky, kz, sx, sy, sz,
-                    tree.tri_verts[3 * f], tree.tri_verts[3 * f + 1], tree.tri_verts[3 * f + 2],
+                    tree.ref_verts[3 * ref], tree.ref_verts[3 * ref + 1], tree.ref_verts[3 * ref + 2],
                     tlo, best_t,
                 )
+                f = int(-1)
+                if hit:
+                    f = tree.prims[ref]
                 if hit and (t < best_t or f < prim):
                     best_t = t
                     prim = f
@@ -411,13 +418,25 @@ class KdTree:
         if data is None:
             wp_ = init_warp()
             data = KdTreeData()
-            nodes = np.zeros(len(self.node_head), dtype=KdNode.numpy_dtype())
-            nodes["head"] = self.node_head
-            nodes["split"] = self.node_split
+            head = self.node_head
+            leaf = (head & 3) == 3
+            off = head >> 2
+            count = np.where(leaf, self.prims[np.where(leaf, off, 0)], 0)  # the empty leaf's block: prims[0] = 0
+            nodes = np.zeros(len(head), dtype=KdNode.numpy_dtype())
+            nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, head)
+            nodes["split"] = np.where(leaf, count, self.node_split).astype(np.float32)
             data.nodes = wp_.array(nodes, dtype=KdNode, device=device)
             data.prims = wp_.array(self.prims, dtype=wp.int32, device=device)
-            tv = np.ascontiguousarray(self.vertices[self.faces].reshape(-1, 3), np.float32)
-            data.tri_verts = wp_.array(tv, dtype=wp.vec3, device=device)
+            tri = np.ascontiguousarray(self.vertices[self.faces], np.float32)  # (F, 3, 3)
+            slots = np.zeros(len(self.prims), bool)  # the slots that hold a triangle index (not a count)
+            blocks = off[leaf & (count > 0)]
+            counts = self.prims[blocks]
+            idx = np.repeat(blocks + 1 - np.cumsum(np.concatenate([[0], counts[:-1]])), counts) + np.arange(counts.sum())
+            slots[idx] = True
+            ref = np.zeros((len(self.prims), 3, 3), np.float32)
+            ref[slots] = tri[self.prims[slots]]
+            data.ref_verts = wp_.array(ref.reshape(-1, 3), dtype=wp.vec3, device=device)
+            data.tri_verts = wp_.array(tri.reshape(-1, 3), dtype=wp.vec3, device=device)
             lo = self.box[0].astype(np.float64)
             hi = self.box[1].astype(np.float64)
             pad = BOX_PADDING * float(np.max(hi - lo)) + 1e-30
