@@ -70,6 +70,10 @@ STACK_SIZE = KD_MAX_DEPTH + 2  # traversal stack entries: one per level of the d
 T_TOLERANCE = 1e-6  # relative (to the scene scale) overlap of near/far traversal intervals
 BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest extent
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
+#: CPU launches of rays are cut into this many chunks per thread, handed out as threads free up:
+#: rays differ a lot in cost (sky vs geometry), and one contiguous chunk per thread left 2 threads
+#: at 1.4-1.5x one on the benchmark's rays (``serenity.kernels.launch``)
+CHUNKS_PER_THREAD = 16
 
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 _stack_f = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
@@ -366,6 +370,14 @@ class Hits:
         return self.prim >= 0
 
 
+def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float) -> list:
+    """The kernels' ray inputs (origins, directions, tmin, tmax): views of the numpy arrays on the CPU
+    (no copy: serial work before the threads start), copies on a GPU."""
+    copy = not dev.startswith("cpu")
+    return [wp.array(o, dtype=wp.vec3, device=dev, copy=copy), wp.array(d, dtype=wp.vec3, device=dev, copy=copy),
+            float(tmin), wp.array(tm, dtype=float, device=dev, copy=copy)]
+
+
 class KdTree:
     """An SAH kd-tree over a static triangle mesh, traversed by Warp kernels.
 
@@ -431,8 +443,8 @@ class KdTree:
             slots = np.zeros(len(self.prims), bool)  # the slots that hold a triangle index (not a count)
             blocks = off[leaf & (count > 0)]
             counts = self.prims[blocks]
-            idx = np.repeat(blocks + 1 - np.cumsum(np.concatenate([[0], counts[:-1]])), counts) + np.arange(counts.sum())
-            slots[idx] = True
+            first = blocks + 1 - np.cumsum(np.concatenate([[0], counts[:-1]]))
+            slots[np.repeat(first, counts) + np.arange(counts.sum())] = True
             ref = np.zeros((len(self.prims), 3, 3), np.float32)
             ref[slots] = tri[self.prims[slots]]
             data.ref_verts = wp_.array(ref.reshape(-1, 3), dtype=wp.vec3, device=device)
@@ -469,10 +481,8 @@ class KdTree:
         out_u = wp.empty(n, dtype=float, device=dev)
         out_v = wp.empty(n, dtype=float, device=dev)
         if n:
-            args = [self.device_data(dev), wp.array(o, dtype=wp.vec3, device=dev),
-                    wp.array(d, dtype=wp.vec3, device=dev), float(tmin), wp.array(tm, dtype=float, device=dev),
-                    out_t, out_p, out_u, out_v]
-            launch(intersect_rays, n, args, device=dev, threads=threads)
+            args = [self.device_data(dev), *_ray_arrays(o, d, tm, dev, tmin), out_t, out_p, out_u, out_v]
+            launch(intersect_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
@@ -483,9 +493,8 @@ class KdTree:
         n = len(o)
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
-            args = [self.device_data(dev), wp.array(o, dtype=wp.vec3, device=dev),
-                    wp.array(d, dtype=wp.vec3, device=dev), float(tmin), wp.array(tm, dtype=float, device=dev), out]
-            launch(occlude_rays, n, args, device=dev, threads=threads)
+            args = [self.device_data(dev), *_ray_arrays(o, d, tm, dev, tmin), out]
+            launch(occlude_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return out.numpy().astype(bool)
 
 
