@@ -192,13 +192,10 @@ def intersect_triangle(
 
 
 @wp.func
-def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float, any_hit: bool):
-    """Front-to-back kd-tree traversal. Returns (prim, t, u, v); prim = −1 and t = inf on a miss.
-    ``any_hit`` stops at the first hit in (tmin, tmax) (occlusion); otherwise the closest hit."""
-    prim = int(-1)
-    best_t = tmax
-    hit_u = float(0.0)
-    hit_v = float(0.0)
+def start_ray(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float):
+    """A ray's traversal set-up: Woop's (kx, ky, kz, sx, sy, sz), the inverse direction ``inv`` (0 on
+    an axis the ray is parallel to), its segment (t0, t1) in the padded root box, the interval
+    overlap ``teps``, the lower bound ``tlo`` of hits, and whether there is nothing to trace."""
     kx, ky, kz, sx, sy, sz = setup_ray(d)
     tlo = wp.max(tmin, 0.0)
     t0 = tlo
@@ -226,6 +223,18 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
     ao = wp.max(wp.max(wp.abs(o[0]), wp.abs(o[1])), wp.abs(o[2]))
     teps = _TOL * (tree.scale + ao) * wp.abs(sz)
     done = not valid or t0 > t1 + teps
+    return kx, ky, kz, sx, sy, sz, inv, t0, t1, teps, tlo, done
+
+
+@wp.func
+def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float, any_hit: bool):
+    """Front-to-back kd-tree traversal. Returns (prim, t, u, v); prim = −1 and t = inf on a miss.
+    ``any_hit`` stops at the first hit in (tmin, tmax) (occlusion); otherwise the closest hit."""
+    prim = int(-1)
+    best_t = tmax
+    hit_u = float(0.0)
+    hit_v = float(0.0)
+    kx, ky, kz, sx, sy, sz, inv, t0, t1, teps, tlo, done = start_ray(tree, o, d, tmin, tmax)
     node = int(0)
     sp = int(0)
     st_node = _stack_i()
