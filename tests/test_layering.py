@@ -41,7 +41,7 @@ LAZY_IMPORT_PACKAGES = ("serenity.commands",)
 
 PENDING_LOCAL_IMPORTS = {
     "serenity.frame", "serenity.device", "serenity.raster.context",
-    "serenity.kernels.atmosphere", "serenity.kernels.kdtree", "serenity.kernels.lpv",
+    "serenity.kernels.atmosphere", "serenity.kernels.lpv",
     "serenity.kernels.quadfit", "serenity.kernels.sampling", "serenity.kernels.skyvolume",
 }
 """Modules still importing required packages or serenity modules inside functions, because they

@@ -53,6 +53,7 @@ from pathlib import Path
 
 import numpy as np
 import warp as wp
+from tqdm import tqdm
 
 from serenity.config import KdBuildConfig
 from serenity.device import init_warp
@@ -527,8 +528,6 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
     n_nodes_total = leaves = empty_leaves = refs_total = 0
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=max_depth + 1, desc=f"kd-tree ({nf:,} triangles)", unit="level", leave=False)
     depth = 0
     while True:
