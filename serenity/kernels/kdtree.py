@@ -7,10 +7,13 @@ a front-to-back stack traversal that stops at the first leaf whose hit lies insi
 :class:`serenity.config.KdBuildConfig`.
 
 Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`KdTree.device_data`):
-    nodes (nodes,) KdNode, 8 bytes: inner node: ``head`` = (first child << 2) | axis (children are
-        consecutive: left at first child, right at first child + 1), ``split`` = the split position
-        (world units); leaf: ``head`` = (first reference << 2) | 3, ``split`` = its triangle count
-        (a small integer, exact in float32), so a leaf costs no extra load before its triangles.
+    nodes (nodes,) KdNode, 8 bytes: inner node: ``head`` = (first child << 4) | (right child is an
+        empty leaf) << 3 | (left child is an empty leaf) << 2 | axis (children are consecutive: left
+        at first child, right at first child + 1), ``split`` = the split position (world units);
+        leaf: ``head`` = (first reference << 2) | 3, ``split`` = its triangle count (a small
+        integer, exact in float32), so a leaf costs no extra load before its triangles. The empty
+        flags let the traversal skip empty leaves (most leaves a ray meets: 6 of 7 on the
+        benchmark's camera rays) without loading them or pushing them on the stack.
     prims (P,) int32: the build's leaf blocks (a count, then that many triangle indices); a leaf's
         references are the slots after its count: reference r is triangle ``prims[r]``.
     ref_verts (3P,) vec3: reference r's three vertices at 3r, 3r+1, 3r+2 — a leaf's triangles lie
@@ -91,8 +94,9 @@ _STACK = wp.constant(STACK_SIZE)
 
 @wp.struct
 class KdNode:
-    """One node, 8 bytes: ``head`` = (first child << 2) | axis, or (first reference << 2) | 3 for a
-    leaf; ``split`` = the split position of an inner node, the triangle count of a leaf."""
+    """One node, 8 bytes: ``head`` = (first child << 4) | empty-children flags << 2 | axis, or
+    (first reference << 2) | 3 for a leaf; ``split`` = the split position of an inner node, the
+    triangle count of a leaf (module docstring)."""
 
     head: wp.int32
     split: wp.float32
@@ -244,38 +248,47 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
         nd = tree.nodes[node]
         head = nd.head
         axis = head & 3
+        leaf_end = False  # a leaf is done (or an empty one skipped): stop or pop
         if axis != 3:
             split = nd.split
-            child = head >> 2
+            child = head >> 4
             oa = o[axis]
             first = child
             second = child + 1
+            empty_first = (head >> 2) & 1  # the flags of the empty leaves among the children
+            empty_second = (head >> 3) & 1
             if oa > split or (oa == split and d[axis] > 0.0):
                 first = child + 1
                 second = child
+                empty_first = (head >> 3) & 1
+                empty_second = (head >> 2) & 1
             ia = inv[axis]
             if ia == 0.0:
                 # parallel to the plane: only the side of the origin, both when on the plane
-                if oa == split and sp < _STACK:
+                if oa == split and sp < _STACK and empty_second == 0:
                     st_node[sp] = second
                     st_t0[sp] = t0
                     st_t1[sp] = t1
                     sp += 1
                 node = first
+                leaf_end = empty_first != 0
             else:
                 ts = (split - oa) * ia
                 if ts <= 0.0 or ts > t1 + teps:
                     node = first
+                    leaf_end = empty_first != 0
                 elif ts < t0 - teps:
                     node = second
+                    leaf_end = empty_second != 0
                 else:
-                    if sp < _STACK:
+                    if sp < _STACK and empty_second == 0:
                         st_node[sp] = second
                         st_t0[sp] = wp.max(t0, ts - teps)
                         st_t1[sp] = t1
                         sp += 1
                     node = first
                     t1 = wp.min(t1, ts + teps)
+                    leaf_end = empty_first != 0
         else:
             first_ref = head >> 2
             n = int(nd.split)
@@ -296,6 +309,8 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                     hit_v = v
                     if any_hit:
                         break
+            leaf_end = True
+        if leaf_end:
             if prim >= 0 and (any_hit or best_t <= t1):
                 done = True
             else:
@@ -444,7 +459,13 @@ class KdTree:
             off = head >> 2
             count = np.where(leaf, self.prims[np.where(leaf, off, 0)], 0)  # the empty leaf's block: prims[0] = 0
             nodes = np.zeros(len(head), dtype=KdNode.numpy_dtype())
-            nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, head)
+            child = np.where(leaf, 0, off)
+            empty = leaf & (count == 0)
+            if len(head) >= 1 << 27:
+                raise SerenityError(f"kd-tree of {len(head):,} nodes: at most 2^27 fit the 8-byte node")
+            right = np.minimum(child + 1, len(head) - 1)
+            flags = (empty[child].astype(np.int64) << 2) | (empty[right].astype(np.int64) << 3)
+            nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, (child << 4) | flags | (head & 3))
             nodes["split"] = np.where(leaf, count, self.node_split).astype(np.float32)
             data.nodes = wp_.array(nodes, dtype=KdNode, device=device)
             data.prims = wp_.array(self.prims, dtype=wp.int32, device=device)
