@@ -35,7 +35,15 @@ within a leaf. Any-hit (``occluded``): (N,) bool, a hit with tmin < t < tmax.
 Degenerate rays — a zero, NaN or infinite direction (or a direction whose largest component is
 below ~1e-30), a NaN origin, tmax ≤ tmin or NaN — are misses.
 
-On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`.
+On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
+``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
+
+Where the time goes (``perf record -e cpu-clock`` on the Warp-generated CPU code, incoherent rays,
+samples mapped onto the disassembly of the cached object file): about a quarter on the node load
+of each step, a quarter on the triangles' vertex loads and 7 % on a leaf's count — cache misses,
+not arithmetic. Hence the count in the node, the leaf-contiguous ``ref_verts`` and the empty-leaf
+flags. Tried without a measurable gain: two rays per thread with interleaved steps (to overlap
+their misses), -O3 instead of Warp's CPU -O2, other SAH cost ratios.
 """
 
 from __future__ import annotations
