@@ -536,5 +536,6 @@ class KdTree:
         return out.numpy().astype(bool)
 
 
-__all__ = ["CACHE_MIN_TRIANGLES", "PROGRESS_MIN_TRIANGLES", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
-           "KdTreeData", "cache_dir", "intersect_rays", "intersect_triangle", "occlude_rays", "setup_ray", "trace_kd"]
+__all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "PROGRESS_MIN_TRIANGLES", "Hits", "KdBuildConfig", "KdNode",
+           "KdStats", "KdTree", "KdTreeData", "cache_dir", "intersect_rays", "intersect_triangle", "occlude_rays",
+           "setup_ray", "start_ray", "trace_kd"]
