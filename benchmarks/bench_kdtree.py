@@ -1,7 +1,7 @@
 """kd-tree speed against Embree and Warp's own ``wp.Mesh`` BVH, measured in the same run (paper §9).
 
     python benchmarks/bench_kdtree.py --json FILE [--size 1280x720] [--subdivisions 6] [--repeats 5]
-                                      [--build-sizes 10000,40000,160000,640000]
+                                      [--build-sizes 10000,40000,160000,640000,1000000] [--charts PREFIX]
 
 Scene: a displaced icosphere on a wavy terrain grid (``--subdivisions 6``: 164k triangles, 7: 655k).
 Rays (the same arrays for every tracer):
@@ -9,16 +9,27 @@ Rays (the same arrays for every tracer):
 - incoherent: from the camera rays' hit points (nudged back 1 mm), uniformly random directions
   (secondary rays as a reflection pass would cast them, without any coherence).
 Tracers: ours (:class:`serenity.kernels.kdtree.KdTree`, closest hit), Embree (``embreex``, closest
-hit, one ``run`` call over all rays) and Warp's BVH (``wp.mesh_query_ray``, SAH constructor), each on
-1 thread and on all threads (ours and Warp's through ``serenity.kernels.launch``; Embree's calls split
-over Python threads — embreex holds the GIL, so that is shown only as it measures).
-Times are medians of ``--repeats`` runs after a warm-up (compilation, first-touch) outside the timed
-region. Figures that are claims are ratios to the anchors of this run: ``ratio_vs_embree_1t`` (ours
-1 thread / Embree 1 thread), ``ratio_vs_embree_all_threads`` (ours all threads / Embree's single
-call), ``speedup_vs_warp_bvh_1t`` (ours 1 thread / Warp BVH 1 thread), on incoherent rays (the
-coherent figures carry a ``_coherent`` suffix). Build: median seconds of our build (no cache), its
-O(N log N) fit over ``--build-sizes``, and the agreement with Embree's hits.
-Prints a table and writes JSON (machine, device, scene, settings, figures).
+hit, one ``run`` call over all rays) and Warp's BVH (``wp.mesh_query_ray``, SAH constructor). Ours
+and Warp's run on 1, 2, ... all threads (through ``serenity.kernels.launch``); Embree on 1 thread,
+and its calls split over all threads as Python threads (embreex holds the GIL, so that is shown
+only as it measures). Times are medians of ``--repeats`` runs after a warm-up (compilation, first
+touch) outside the timed region.
+
+Figures (ratios of this run's own measurements; incoherent rays unless ``_coherent``):
+- ``ratio_vs_embree_1t``: ours / Embree, 1 thread each; ``ratio_vs_embree_all_threads``: ours on
+  all threads / Embree's best;
+- ``speedup_vs_warp_bvh_1t``: ours / Warp's BVH, 1 thread each;
+- ``thread_scaling``: ours on 2 threads / ours on 1, the worse of coherent and incoherent. Wall
+  time: on a machine shared with other busy sessions (Linux groups each session's threads and
+  shares the CPUs equally between groups: ``sched_autogroup``) a second thread gets no more CPU, so
+  this reads ~1 there; ``machine.load_average`` says how busy the machine was.
+  ``thread_scaling_cpu_bound``: the same split's Σ thread CPU-s / the busiest thread's CPU-s — the
+  speed-up 2 threads give when each has a core to itself (imbalance and overheads, not the load);
+- ``build_1m_s``: wall seconds of one build of 1 M triangles (no cache), measured;
+  ``build_1m_cpu_s`` its CPU seconds (all threads). The sweep over ``--build-sizes`` builds random
+  subsets (seeded) of the subdivision-8 scene (2.6 M triangles), with an N log N least-squares fit.
+Charts: ``PREFIX_threads.png`` (Mrays/s vs threads) and ``PREFIX_build.png`` (build seconds vs
+triangles); PREFIX defaults to the JSON path without ``.json``. Prints progress, a table, and the JSON.
 """
 
 from __future__ import annotations
@@ -29,7 +40,9 @@ import math
 import os
 import platform
 import statistics
+import threading
 import time
+from collections import defaultdict
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -38,6 +51,12 @@ from serenity.device import cpu_threads, init_warp
 from serenity.kernels.kdtree import KdTree
 from serenity.kernels.launch import launch
 from serenity.scene.procedural import lumpy_mesh
+
+_T0 = time.perf_counter()
+
+
+def say(msg: str) -> None:
+    print(f"[bench_kdtree {time.perf_counter() - _T0:7.1f} s] {msg}", flush=True)
 
 
 def camera_rays(width: int, height: int, position=(0.0, 0.6, 3.5), target=(0.0, -0.3, 0.0), fov_deg=60.0):
@@ -66,6 +85,30 @@ def median_time(fn, repeats: int) -> float:
     return statistics.median(times)
 
 
+def thread_cpu_split(wp, fn) -> float:
+    """Run ``fn`` once, recording each thread's CPU time inside ``wp.launch``; return Σ / max: the
+    speed-up of that split when every thread has a core of its own."""
+    per_thread: dict[int, float] = defaultdict(float)
+    lock = threading.Lock()
+    original = wp.launch
+
+    def timed(*args, **kwargs):
+        t0 = time.thread_time()
+        out = original(*args, **kwargs)
+        dt = time.thread_time() - t0
+        with lock:
+            per_thread[threading.get_ident()] += dt
+        return out
+
+    wp.launch = timed
+    try:
+        fn()
+    finally:
+        wp.launch = original
+    cpu = list(per_thread.values())
+    return sum(cpu) / max(cpu) if cpu and max(cpu) > 0 else 1.0
+
+
 def _warp_bvh_kernel(wp):
     @wp.kernel(enable_backward=False)
     def query_rays(mesh: wp.uint64, origins: wp.array(dtype=wp.vec3), directions: wp.array(dtype=wp.vec3),
@@ -82,19 +125,96 @@ def _warp_bvh_kernel(wp):
     return query_rays
 
 
-def measure_rates(wp, tree, embree, query_rays, mesh, o, d, threads: int, repeats: int) -> dict:
-    """Mrays/s of ours, Embree and Warp's BVH on the rays (o, d), on 1 and on ``threads`` threads."""
+def measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts: list[int], repeats: int) -> dict:
+    """Mrays/s of ours and Warp's BVH on each thread count, Embree on 1 and on all."""
     n = len(o)
     wo, wd = wp.array(o, dtype=wp.vec3, device="cpu"), wp.array(d, dtype=wp.vec3, device="cpu")
     wt, wpr = wp.empty(n, dtype=float, device="cpu"), wp.empty(n, dtype=wp.int32, device="cpu")
     rates = {}
-    for nt in (1, threads):
+    for nt in thread_counts:
+        say(f"  {n:,} rays, {nt} thread(s): ours, Warp BVH")
         rates[f"ours_{nt}t"] = n / median_time(lambda nt=nt: tree.intersect(o, d, device="cpu", threads=nt),
                                                repeats) / 1e6
-        rates[f"embree_{nt}t"] = n / median_time(lambda nt=nt: embree(o, d, nt), repeats) / 1e6
         rates[f"warp_bvh_{nt}t"] = n / median_time(
-            lambda nt=nt: launch(query_rays, n, [mesh.id, wo, wd, wt, wpr], device="cpu", threads=nt), repeats) / 1e6
+            lambda nt=nt: launch(query_rays, n, [mesh.id, wo, wd, wt, wpr], device="cpu", threads=nt,
+                                 chunks_per_thread=16), repeats) / 1e6
+    top = max(thread_counts)
+    say(f"  {n:,} rays: Embree on 1 and {top} thread(s)")
+    rates["embree_1t"] = n / median_time(lambda: embree(o, d, 1), repeats) / 1e6
+    if top > 1:
+        rates[f"embree_{top}t"] = n / median_time(lambda: embree(o, d, top), repeats) / 1e6
     return rates
+
+
+def build_sweep(sizes: list[int], repeats: int) -> list[dict]:
+    """Build time (wall and CPU, no cache) of random subsets of the subdivision-8 scene."""
+    if not sizes:
+        return []
+    say("build sweep: making the subdivision-8 scene (2.6 M triangles)")
+    v, f = lumpy_mesh(8)
+    rng = np.random.default_rng(1)
+    out = []
+    for n in sizes:
+        sub = f[np.sort(rng.choice(len(f), min(n, len(f)), replace=False))]
+        walls, cpus = [], []
+        for _ in range(max(1, min(3, repeats)) if n <= 200_000 else 1):
+            c0, t0 = time.process_time(), time.perf_counter()
+            tree = KdTree.build(v, sub, cache=False, progress=False)
+            walls.append(time.perf_counter() - t0)
+            cpus.append(time.process_time() - c0)
+        st = tree.stats
+        out.append({"triangles": len(sub), "seconds": statistics.median(walls), "cpu_seconds": statistics.median(cpus),
+                    "nodes": st.nodes, "references": st.references, "depth": st.depth})
+        say(f"  build {len(sub):>9,} triangles: {out[-1]['seconds']:6.2f} s wall, {out[-1]['cpu_seconds']:6.2f} CPU-s")
+    nlogn = np.array([s["triangles"] * math.log2(s["triangles"]) for s in out])
+    secs = np.array([s["seconds"] for s in out])
+    k = float(np.sum(nlogn * secs) / np.sum(nlogn * nlogn))  # least squares: seconds = k * N log2 N
+    for s, pred in zip(out, k * nlogn, strict=True):
+        s["n_log_n_fit_seconds"] = float(pred)
+    return out
+
+
+def save_charts(prefix: str, figures: dict, sweep: list[dict], thread_counts: list[int]) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=False)
+    for ax, name in zip(axes, ("coherent", "incoherent"), strict=True):
+        r = figures[name]["mrays_per_s"]
+        ax.plot(thread_counts, [r[f"ours_{t}t"] for t in thread_counts], "o-", label="ours (kd-tree)")
+        ax.plot(thread_counts, [r[f"warp_bvh_{t}t"] for t in thread_counts], "s-", label="Warp wp.Mesh BVH")
+        ax.axhline(r["embree_1t"], color="k", ls="--", lw=1, label="Embree, 1 thread")
+        ax.set_title(f"{name} rays ({figures[name]['rays']:,})")
+        ax.set_xlabel("threads")
+        ax.set_xticks(thread_counts)
+        ax.set_ylabel("Mrays/s")
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    paths.append(f"{prefix}_threads.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+    if sweep:
+        fig, ax = plt.subplots(figsize=(5.5, 4))
+        n = np.array([s["triangles"] for s in sweep])
+        ax.loglog(n, [s["seconds"] for s in sweep], "o-", label="build, wall s")
+        ax.loglog(n, [s["cpu_seconds"] for s in sweep], "^:", label="build, CPU s (all threads)")
+        ax.loglog(n, [s["n_log_n_fit_seconds"] for s in sweep], "k--", lw=1, label="k·N log N fit (wall)")
+        ax.axhline(5.0, color="r", lw=0.8, ls=":", label="5 s")
+        ax.set_xlabel("triangles")
+        ax.set_ylabel("seconds")
+        ax.set_title("SAH kd-tree build (no cache)")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        paths.append(f"{prefix}_build.png")
+        fig.savefig(paths[-1], dpi=110)
+        plt.close(fig)
+    return paths
 
 
 def main(argv=None) -> dict:
@@ -103,13 +223,17 @@ def main(argv=None) -> dict:
     ap.add_argument("--size", default="1280x720", help="camera rays WxH (default 1280x720)")
     ap.add_argument("--subdivisions", type=int, default=6, help="icosphere subdivisions (6: 164k tris, 7: 655k)")
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--build-sizes", default="10000,40000,160000",
-                    help="triangle counts for the build-time sweep (nearest lumpy scene), '' = none")
+    ap.add_argument("--build-sizes", default="10000,40000,160000,640000,1000000",
+                    help="triangle counts of the build sweep ('' = none; 1000000 gives build_1m_s)")
+    ap.add_argument("--charts", default=None, help="chart path prefix (default: the JSON path without .json)")
     args = ap.parse_args(argv)
     width, height = (int(x) for x in args.size.lower().split("x"))
     wp = init_warp()
     threads = cpu_threads()
+    thread_counts = sorted({1, 2, threads})
+    load_before = os.getloadavg()
 
+    say(f"scene: lumpy mesh, subdivisions {args.subdivisions}")
     v, f = lumpy_mesh(args.subdivisions)
     build_times = []
     for _ in range(max(1, min(3, args.repeats))):
@@ -117,6 +241,7 @@ def main(argv=None) -> dict:
         tree = KdTree.build(v, f, cache=False, progress=False)
         build_times.append(time.perf_counter() - t0)
     build_s = statistics.median(build_times)
+    say(f"built the tree of {len(f):,} triangles: {build_s:.2f} s")
 
     # rays
     oc, dc = camera_rays(width, height)
@@ -147,9 +272,12 @@ def main(argv=None) -> dict:
         return list(pool.map(lambda c: escene.run(o[c[0]:c[-1] + 1], d[c[0]:c[-1] + 1]), chunks))
 
     figures, table = {}, []
+    scaling, scaling_cpu = [], []
     for name, (o, d) in ray_sets.items():
+        say(f"{name} rays")
         n = len(o)
-        rates = measure_rates(wp, tree, embree, query_rays, mesh, o, d, threads, args.repeats)
+        rates = measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts, args.repeats)
+        cpu_bound = thread_cpu_split(wp, lambda o=o, d=d: tree.intersect(o, d, device="cpu", threads=2))
         ours = tree.intersect(o, d, device="cpu")
         res = escene.run(o, d, output=1)
         e_prim = res["primID"]
@@ -159,66 +287,75 @@ def main(argv=None) -> dict:
         close[both] = np.abs(ours.t[both] - e_t[both]) <= 1e-5 * e_t[both]
         agree = float(np.mean(((e_prim == ours.prim) & ((e_prim < 0) | close)) | close))
         suffix = "" if name == "incoherent" else "_coherent"
+        embree_best = max(rates["embree_1t"], rates.get(f"embree_{threads}t", 0.0))
         figures[name] = {"rays": n, "hit_fraction": float(ours.hit.mean()), "mrays_per_s": rates,
-                         "agreement_with_embree": agree}
+                         "agreement_with_embree": agree, "thread_scaling_cpu_bound": cpu_bound}
         figures[f"ratio_vs_embree_1t{suffix}"] = rates["ours_1t"] / rates["embree_1t"]
-        figures[f"ratio_vs_embree_all_threads{suffix}"] = rates[f"ours_{threads}t"] / rates["embree_1t"]
+        figures[f"ratio_vs_embree_all_threads{suffix}"] = rates[f"ours_{threads}t"] / embree_best
         figures[f"speedup_vs_warp_bvh_1t{suffix}"] = rates["ours_1t"] / rates["warp_bvh_1t"]
         figures[f"speedup_vs_warp_bvh_all_threads{suffix}"] = rates[f"ours_{threads}t"] / rates[f"warp_bvh_{threads}t"]
+        scaling.append(rates["ours_2t"] / rates["ours_1t"])
+        scaling_cpu.append(cpu_bound)
         for k, r in rates.items():
             table.append((name, k, r))
     pool.shutdown()
+    figures["thread_scaling"] = min(scaling)
+    figures["thread_scaling_cpu_bound"] = min(scaling_cpu)
 
-    sweep = []
-    for target in [int(x) for x in args.build_sizes.split(",") if x.strip()]:
-        sub = max(1, min(8, int(round(math.log(max(target, 80) / 40, 4)))))
-        vs, fs = lumpy_mesh(sub)
-        t0 = time.perf_counter()
-        KdTree.build(vs, fs, cache=False, progress=False)
-        sweep.append({"triangles": len(fs), "seconds": time.perf_counter() - t0})
+    sweep = build_sweep([int(x) for x in args.build_sizes.split(",") if x.strip()], args.repeats)
+    one_m = [s for s in sweep if s["triangles"] == 1_000_000]
+    if one_m:
+        figures["build_1m_s"] = one_m[0]["seconds"]
+        figures["build_1m_cpu_s"] = one_m[0]["cpu_seconds"]
     if sweep:
-        nlogn = np.array([s["triangles"] * math.log2(s["triangles"]) for s in sweep])
-        secs = np.array([s["seconds"] for s in sweep])
-        k = float(np.sum(nlogn * secs) / np.sum(nlogn * nlogn))  # least squares seconds = k * N log2 N
-        for s, pred in zip(sweep, k * nlogn, strict=True):
-            s["n_log_n_fit_seconds"] = float(pred)
-        figures["build_seconds_per_n_log2_n"] = k
-        figures["build_1m_s_extrapolated"] = k * 1e6 * math.log2(1e6)
+        figures["build_seconds_per_n_log2_n"] = sweep[0]["n_log_n_fit_seconds"] / (
+            sweep[0]["triangles"] * math.log2(sweep[0]["triangles"]))
 
     st = tree.stats
     out = {
         "benchmark": "kdtree",
         "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
                     "cpus": os.cpu_count(), "threads": threads, "python": platform.python_version(),
-                    "warp": wp.__version__},
+                    "warp": wp.__version__,
+                    "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
+                    "sched_autogroup": _read("/proc/sys/kernel/sched_autogroup_enabled")},
         "device": "cpu",
         "scene": {"name": f"lumpy icosphere + terrain (subdivisions {args.subdivisions})", "triangles": len(f)},
-        "settings": {"size": [width, height], "repeats": args.repeats},
+        "settings": {"size": [width, height], "repeats": args.repeats, "thread_counts": thread_counts},
         "build": {"seconds": build_s, "nodes": st.nodes, "leaves": st.leaves, "empty_leaves": st.empty_leaves,
                   "references": st.references, "depth": st.depth, "sweep": sweep},
         "figures": figures,
     }
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
     with open(args.json, "w") as fh:
         json.dump(out, fh, indent=2)
+    prefix = args.charts or (args.json[:-5] if args.json.endswith(".json") else args.json)
+    charts = save_charts(prefix, figures, sweep, thread_counts)
 
-    print(f"kd-tree: {len(f):,} triangles, build {build_s:.2f} s ({st.nodes:,} nodes, "
-          f"{st.references / len(f):.2f} refs/triangle, depth {st.depth}); {threads} threads")
+    print(f"\n{len(f):,} triangles; build {build_s:.2f} s ({st.nodes:,} nodes, {st.references:,} refs, "
+          f"depth {st.depth}); {threads} threads; load average {load_before[0]:.1f} -> {os.getloadavg()[0]:.1f}")
     print(f"{'rays':<11} {'tracer':<16} {'Mrays/s':>8}")
     for name, k, r in table:
         print(f"{name:<11} {k:<16} {r:8.2f}")
     for k in ("ratio_vs_embree_1t", "ratio_vs_embree_all_threads", "speedup_vs_warp_bvh_1t",
               "speedup_vs_warp_bvh_all_threads"):
         print(f"{k:<34} incoherent {figures[k]:5.2f}   coherent {figures[k + '_coherent']:5.2f}")
+    print(f"thread_scaling (2 threads / 1, worse of the two) {figures['thread_scaling']:.2f}; "
+          f"CPU-bound (Σ thread CPU / busiest thread) {figures['thread_scaling_cpu_bound']:.2f}")
     print(f"agreement with Embree: coherent {figures['coherent']['agreement_with_embree']:.6f}, "
           f"incoherent {figures['incoherent']['agreement_with_embree']:.6f}")
-    for s in sweep:
-        print(f"build {s['triangles']:>9,} triangles: {s['seconds']:6.2f} s "
-              f"(N log N fit {s['n_log_n_fit_seconds']:.2f} s)")
-    if sweep:
-        print(f"build of 1M triangles, extrapolated from the N log N fit: {figures['build_1m_s_extrapolated']:.1f} s")
-    print(f"wrote {args.json}")
+    if one_m:
+        print(f"build of 1M triangles (measured): {figures['build_1m_s']:.2f} s wall, "
+              f"{figures['build_1m_cpu_s']:.2f} CPU-s")
+    print(f"wrote {args.json}, {', '.join(charts)}")
     return out
+
+
+def _read(path: str) -> str | None:
+    try:
+        with open(path) as fh:
+            return fh.read().strip()
+    except OSError:
+        return None
 
 
 if __name__ == "__main__":

@@ -6,14 +6,20 @@ a front-to-back stack traversal that stops at the first leaf whose hit lies insi
 (binned SAH, disk cache) is :mod:`serenity.kernels.kdtree_build`; its settings are
 :class:`serenity.config.KdBuildConfig`.
 
-Layout on a device (:class:`KdTreeData`; the build's ``node_head``/``node_split`` interleaved in one
-8-byte :class:`KdNode` per node):
-    nodes (nodes,) KdNode: ``head`` = (first child << 2) | axis for an inner node (children are
-        consecutive: left at first child, right at first child + 1), (offset into ``prims`` << 2) | 3
-        for a leaf; ``split`` = the split position of an inner node (world units).
-    prims (P,) int32: per leaf a count then that many triangle indices; ``prims[0] = 0`` is the
-        shared empty leaf.
-    tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2.
+Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`KdTree.device_data`):
+    nodes (nodes,) KdNode, 8 bytes: inner node: ``head`` = (first child << 4) | (right child is an
+        empty leaf) << 3 | (left child is an empty leaf) << 2 | axis (children are consecutive: left
+        at first child, right at first child + 1), ``split`` = the split position (world units);
+        leaf: ``head`` = (first reference << 2) | 3, ``split`` = its triangle count (a small
+        integer, exact in float32), so a leaf costs no extra load before its triangles. The empty
+        flags let the traversal skip empty leaves (most leaves a ray meets: 6 of 7 on the
+        benchmark's camera rays) without loading them or pushing them on the stack.
+    prims (P,) int32: the build's leaf blocks (a count, then that many triangle indices); a leaf's
+        references are the slots after its count: reference r is triangle ``prims[r]``.
+    ref_verts (3P,) vec3: reference r's three vertices at 3r, 3r+1, 3r+2 — a leaf's triangles lie
+        next to each other in memory (the traversal's time goes mostly into cache misses on nodes
+        and triangles: a copy per reference trades memory for one miss per leaf, not per triangle).
+    tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2 (for shading a hit).
 
 Traversal (Warp, ``trace_kd``): rays with origin ``o`` (N,3) and direction ``d`` (N,3) float32,
 t in units of |d| (directions need not be unit). Hits are 0 ≤ tmin < t < tmax. Front-to-back with
@@ -29,7 +35,15 @@ within a leaf. Any-hit (``occluded``): (N,) bool, a hit with tmin < t < tmax.
 Degenerate rays — a zero, NaN or infinite direction (or a direction whose largest component is
 below ~1e-30), a NaN origin, tmax ≤ tmin or NaN — are misses.
 
-On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`.
+On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
+``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
+
+Where the time goes (``perf record -e cpu-clock`` on the Warp-generated CPU code, incoherent rays,
+samples mapped onto the disassembly of the cached object file): about a quarter on the node load
+of each step, a quarter on the triangles' vertex loads and 7 % on a leaf's count — cache misses,
+not arithmetic. Hence the count in the node, the leaf-contiguous ``ref_verts`` and the empty-leaf
+flags. Tried without a measurable gain: two rays per thread with interleaved steps (to overlap
+their misses), -O3 instead of Warp's CPU -O2, other SAH cost ratios.
 """
 
 from __future__ import annotations
@@ -67,6 +81,10 @@ STACK_SIZE = KD_MAX_DEPTH + 2  # traversal stack entries: one per level of the d
 T_TOLERANCE = 1e-6  # relative (to the scene scale) overlap of near/far traversal intervals
 BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest extent
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
+#: CPU launches of rays are cut into this many chunks per thread, handed out as threads free up:
+#: rays differ a lot in cost (sky vs geometry), and one contiguous chunk per thread left 2 threads
+#: at 1.4-1.5x one on the benchmark's rays (``serenity.kernels.launch``)
+CHUNKS_PER_THREAD = 16
 
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 _stack_f = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
@@ -84,8 +102,9 @@ _STACK = wp.constant(STACK_SIZE)
 
 @wp.struct
 class KdNode:
-    """One node, 8 bytes: ``head`` = (first child << 2) | axis, or (prims offset << 2) | 3 for a
-    leaf; ``split`` = the split position of an inner node."""
+    """One node, 8 bytes: ``head`` = (first child << 4) | empty-children flags << 2 | axis, or
+    (first reference << 2) | 3 for a leaf; ``split`` = the split position of an inner node, the
+    triangle count of a leaf (module docstring)."""
 
     head: wp.int32
     split: wp.float32
@@ -97,6 +116,7 @@ class KdTreeData:
 
     nodes: wp.array(dtype=KdNode)
     prims: wp.array(dtype=wp.int32)
+    ref_verts: wp.array(dtype=wp.vec3)
     tri_verts: wp.array(dtype=wp.vec3)
     box_lo: wp.vec3  # padded root box
     box_hi: wp.vec3
@@ -184,13 +204,10 @@ def intersect_triangle(
 
 
 @wp.func
-def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float, any_hit: bool):
-    """Front-to-back kd-tree traversal. Returns (prim, t, u, v); prim = −1 and t = inf on a miss.
-    ``any_hit`` stops at the first hit in (tmin, tmax) (occlusion); otherwise the closest hit."""
-    prim = int(-1)
-    best_t = tmax
-    hit_u = float(0.0)
-    hit_v = float(0.0)
+def start_ray(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float):
+    """A ray's traversal set-up: Woop's (kx, ky, kz, sx, sy, sz), the inverse direction ``inv`` (0 on
+    an axis the ray is parallel to), its segment (t0, t1) in the padded root box, the interval
+    overlap ``teps``, the lower bound ``tlo`` of hits, and whether there is nothing to trace."""
     kx, ky, kz, sx, sy, sz = setup_ray(d)
     tlo = wp.max(tmin, 0.0)
     t0 = tlo
@@ -218,6 +235,18 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
     ao = wp.max(wp.max(wp.abs(o[0]), wp.abs(o[1])), wp.abs(o[2]))
     teps = _TOL * (tree.scale + ao) * wp.abs(sz)
     done = not valid or t0 > t1 + teps
+    return kx, ky, kz, sx, sy, sz, inv, t0, t1, teps, tlo, done
+
+
+@wp.func
+def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float, any_hit: bool):
+    """Front-to-back kd-tree traversal. Returns (prim, t, u, v); prim = −1 and t = inf on a miss.
+    ``any_hit`` stops at the first hit in (tmin, tmax) (occlusion); otherwise the closest hit."""
+    prim = int(-1)
+    best_t = tmax
+    hit_u = float(0.0)
+    hit_v = float(0.0)
+    kx, ky, kz, sx, sy, sz, inv, t0, t1, teps, tlo, done = start_ray(tree, o, d, tmin, tmax)
     node = int(0)
     sp = int(0)
     st_node = _stack_i()
@@ -227,48 +256,60 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
         nd = tree.nodes[node]
         head = nd.head
         axis = head & 3
+        leaf_end = False  # a leaf is done (or an empty one skipped): stop or pop
         if axis != 3:
             split = nd.split
-            child = head >> 2
+            child = head >> 4
             oa = o[axis]
             first = child
             second = child + 1
+            empty_first = (head >> 2) & 1  # the flags of the empty leaves among the children
+            empty_second = (head >> 3) & 1
             if oa > split or (oa == split and d[axis] > 0.0):
                 first = child + 1
                 second = child
+                empty_first = (head >> 3) & 1
+                empty_second = (head >> 2) & 1
             ia = inv[axis]
             if ia == 0.0:
                 # parallel to the plane: only the side of the origin, both when on the plane
-                if oa == split and sp < _STACK:
+                if oa == split and sp < _STACK and empty_second == 0:
                     st_node[sp] = second
                     st_t0[sp] = t0
                     st_t1[sp] = t1
                     sp += 1
                 node = first
+                leaf_end = empty_first != 0
             else:
                 ts = (split - oa) * ia
                 if ts <= 0.0 or ts > t1 + teps:
                     node = first
+                    leaf_end = empty_first != 0
                 elif ts < t0 - teps:
                     node = second
+                    leaf_end = empty_second != 0
                 else:
-                    if sp < _STACK:
+                    if sp < _STACK and empty_second == 0:
                         st_node[sp] = second
                         st_t0[sp] = wp.max(t0, ts - teps)
                         st_t1[sp] = t1
                         sp += 1
                     node = first
                     t1 = wp.min(t1, ts + teps)
+                    leaf_end = empty_first != 0
         else:
-            off = head >> 2
-            n = tree.prims[off]
+            first_ref = head >> 2
+            n = int(nd.split)
             for j in range(n):
-                f = tree.prims[off + 1 + j]
+                ref = first_ref + j
                 hit, t, u, v = intersect_triangle(
                     o, kx, ky, kz, sx, sy, sz,
-                    tree.tri_verts[3 * f], tree.tri_verts[3 * f + 1], tree.tri_verts[3 * f + 2],
+                    tree.ref_verts[3 * ref], tree.ref_verts[3 * ref + 1], tree.ref_verts[3 * ref + 2],
                     tlo, best_t,
                 )
+                f = int(-1)
+                if hit:
+                    f = tree.prims[ref]
                 if hit and (t < best_t or f < prim):
                     best_t = t
                     prim = f
@@ -276,6 +317,8 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                     hit_v = v
                     if any_hit:
                         break
+            leaf_end = True
+        if leaf_end:
             if prim >= 0 and (any_hit or best_t <= t1):
                 done = True
             else:
@@ -359,6 +402,14 @@ class Hits:
         return self.prim >= 0
 
 
+def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float) -> list:
+    """The kernels' ray inputs (origins, directions, tmin, tmax): views of the numpy arrays on the CPU
+    (no copy: serial work before the threads start), copies on a GPU."""
+    copy = not dev.startswith("cpu")
+    return [wp.array(o, dtype=wp.vec3, device=dev, copy=copy), wp.array(d, dtype=wp.vec3, device=dev, copy=copy),
+            float(tmin), wp.array(tm, dtype=float, device=dev, copy=copy)]
+
+
 class KdTree:
     """An SAH kd-tree over a static triangle mesh, traversed by Warp kernels.
 
@@ -411,13 +462,31 @@ class KdTree:
         if data is None:
             wp_ = init_warp()
             data = KdTreeData()
-            nodes = np.zeros(len(self.node_head), dtype=KdNode.numpy_dtype())
-            nodes["head"] = self.node_head
-            nodes["split"] = self.node_split
+            head = self.node_head
+            leaf = (head & 3) == 3
+            off = head >> 2
+            count = np.where(leaf, self.prims[np.where(leaf, off, 0)], 0)  # the empty leaf's block: prims[0] = 0
+            nodes = np.zeros(len(head), dtype=KdNode.numpy_dtype())
+            child = np.where(leaf, 0, off)
+            empty = leaf & (count == 0)
+            if len(head) >= 1 << 27:
+                raise SerenityError(f"kd-tree of {len(head):,} nodes: at most 2^27 fit the 8-byte node")
+            right = np.minimum(child + 1, len(head) - 1)
+            flags = (empty[child].astype(np.int64) << 2) | (empty[right].astype(np.int64) << 3)
+            nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, (child << 4) | flags | (head & 3))
+            nodes["split"] = np.where(leaf, count, self.node_split).astype(np.float32)
             data.nodes = wp_.array(nodes, dtype=KdNode, device=device)
             data.prims = wp_.array(self.prims, dtype=wp.int32, device=device)
-            tv = np.ascontiguousarray(self.vertices[self.faces].reshape(-1, 3), np.float32)
-            data.tri_verts = wp_.array(tv, dtype=wp.vec3, device=device)
+            tri = np.ascontiguousarray(self.vertices[self.faces], np.float32)  # (F, 3, 3)
+            slots = np.zeros(len(self.prims), bool)  # the slots that hold a triangle index (not a count)
+            blocks = off[leaf & (count > 0)]
+            counts = self.prims[blocks]
+            first = blocks + 1 - np.cumsum(np.concatenate([[0], counts[:-1]]))
+            slots[np.repeat(first, counts) + np.arange(counts.sum())] = True
+            ref = np.zeros((len(self.prims), 3, 3), np.float32)
+            ref[slots] = tri[self.prims[slots]]
+            data.ref_verts = wp_.array(ref.reshape(-1, 3), dtype=wp.vec3, device=device)
+            data.tri_verts = wp_.array(tri.reshape(-1, 3), dtype=wp.vec3, device=device)
             lo = self.box[0].astype(np.float64)
             hi = self.box[1].astype(np.float64)
             pad = BOX_PADDING * float(np.max(hi - lo)) + 1e-30
@@ -450,10 +519,8 @@ class KdTree:
         out_u = wp.empty(n, dtype=float, device=dev)
         out_v = wp.empty(n, dtype=float, device=dev)
         if n:
-            args = [self.device_data(dev), wp.array(o, dtype=wp.vec3, device=dev),
-                    wp.array(d, dtype=wp.vec3, device=dev), float(tmin), wp.array(tm, dtype=float, device=dev),
-                    out_t, out_p, out_u, out_v]
-            launch(intersect_rays, n, args, device=dev, threads=threads)
+            args = [self.device_data(dev), *_ray_arrays(o, d, tm, dev, tmin), out_t, out_p, out_u, out_v]
+            launch(intersect_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
@@ -464,11 +531,11 @@ class KdTree:
         n = len(o)
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
-            args = [self.device_data(dev), wp.array(o, dtype=wp.vec3, device=dev),
-                    wp.array(d, dtype=wp.vec3, device=dev), float(tmin), wp.array(tm, dtype=float, device=dev), out]
-            launch(occlude_rays, n, args, device=dev, threads=threads)
+            args = [self.device_data(dev), *_ray_arrays(o, d, tm, dev, tmin), out]
+            launch(occlude_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return out.numpy().astype(bool)
 
 
-__all__ = ["CACHE_MIN_TRIANGLES", "PROGRESS_MIN_TRIANGLES", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
-           "KdTreeData", "cache_dir", "intersect_rays", "intersect_triangle", "occlude_rays", "setup_ray", "trace_kd"]
+__all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "PROGRESS_MIN_TRIANGLES", "Hits", "KdBuildConfig", "KdNode",
+           "KdStats", "KdTree", "KdTreeData", "cache_dir", "intersect_rays", "intersect_triangle", "occlude_rays",
+           "setup_ray", "start_ray", "trace_kd"]

@@ -66,6 +66,7 @@ FORMAT_VERSION = 2  # bump when the build or the cached layout changes
 CACHE_MIN_TRIANGLES = 10_000  # cache=None caches builds of at least this many triangles
 PROGRESS_MIN_TRIANGLES = 200_000  # progress=None shows a bar from this many triangles
 MAX_BINS = 64  # KdBuildConfig.bins is at most this
+_CHUNKS = 8  # per-node launches: chunks per CPU thread, handed out dynamically (nodes differ in cost)
 
 _hist = wp.types.vector(length=MAX_BINS, dtype=wp.int32)
 _F32_EPS = wp.constant(1.1920929e-07)  # 2^-23
@@ -491,13 +492,17 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
     threads of the per-node kernels (None: all)."""
     wp_ = init_warp()
     dev = "cpu"
+
+    def run(kernel, dim: int, inputs: list) -> None:
+        launch(kernel, dim, inputs, device=dev, threads=threads, chunks_per_thread=_CHUNKS)
+
     w_verts = wp_.array(vertices, dtype=wp.vec3, device=dev)
     w_faces = wp_.array(faces, dtype=wp.vec3i, device=dev)
     nf = len(faces)
     valid_w = wp_.empty(nf, dtype=wp.int32, device=dev)
     lo_w = wp_.empty(nf, dtype=wp.vec3, device=dev)
     hi_w = wp_.empty(nf, dtype=wp.vec3, device=dev)
-    launch(_triangle_boxes, nf, [w_verts, w_faces, valid_w, lo_w, hi_w], device=dev, threads=threads)
+    run(_triangle_boxes, nf, [w_verts, w_faces, valid_w, lo_w, hi_w])
     ids = np.flatnonzero(valid_w.numpy()).astype(np.int32)
     nvalid = len(ids)
     if nvalid == 0:
@@ -534,9 +539,8 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         w_nhi = scratch.put("n_hi", n_hi, wp.vec3)
         w_axis = scratch.get("axis", m, wp.int32)
         w_pos = scratch.get("pos", m, float)
-        launch(_node_splits, m, [w_start, r_lo, r_hi, w_nlo, w_nhi, int(depth < max_depth), int(cfg.bins), ct, ci,
-                                 float(cfg.empty_bonus), float(cfg.min_empty_fraction), w_axis, w_pos],
-               device=dev, threads=threads)
+        run(_node_splits, m, [w_start, r_lo, r_hi, w_nlo, w_nhi, int(depth < max_depth), int(cfg.bins), ct, ci,
+                                 float(cfg.empty_bonus), float(cfg.min_empty_fraction), w_axis, w_pos])
         best_axis = w_axis.numpy()[:m].copy()
         best_pos = w_pos.numpy()[:m].copy()
         split = best_axis >= 0
@@ -555,9 +559,8 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         total_block = int(block.sum())
         if total_block:
             arr = wp_.empty(total_block, dtype=wp.int32, device=dev)
-            launch(_emit_leaves, m, [w_start, r_tri, w_axis,
-                                     scratch.put("block", (block_start - prim_len).astype(np.int32), wp.int32), arr],
-                   device=dev, threads=threads)
+            run(_emit_leaves, m, [w_start, r_tri, w_axis,
+                                     scratch.put("block", (block_start - prim_len).astype(np.int32), wp.int32), arr])
             prims.append(arr.numpy())
             prim_len += total_block
         heads.append(head)
@@ -575,8 +578,8 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         l_lo, l_hi = scratch.get("l_lo", n_ref, wp.vec3), scratch.get("l_hi", n_ref, wp.vec3)
         q_lo, q_hi = scratch.get("q_lo", n_ref, wp.vec3), scratch.get("q_hi", n_ref, wp.vec3)
         c_l, c_r = scratch.get("c_l", m, wp.int32), scratch.get("c_r", m, wp.int32)
-        launch(_clip_refs, m, [w_start, r_tri, r_lo, r_hi, w_nlo, w_nhi, w_axis, w_pos, w_verts, w_faces,
-                               side, l_lo, l_hi, q_lo, q_hi, c_l, c_r], device=dev, threads=threads)
+        run(_clip_refs, m, [w_start, r_tri, r_lo, r_hi, w_nlo, w_nhi, w_axis, w_pos, w_verts, w_faces,
+                               side, l_lo, l_hi, q_lo, q_hi, c_l, c_r])
         cl, cr = c_l.numpy()[:m].astype(np.int64), c_r.numpy()[:m].astype(np.int64)
         pair = cl + cr
         first_l = np.concatenate([[0], np.cumsum(pair)[:-1]])
@@ -586,10 +589,10 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         new_tri = scratch.get(names[0], n_new, wp.int32)
         new_lo = scratch.get(names[1], n_new, wp.vec3)
         new_hi = scratch.get(names[2], n_new, wp.vec3)
-        launch(_scatter_refs, m, [w_start, r_tri, side, l_lo, l_hi, q_lo, q_hi, w_axis,
+        run(_scatter_refs, m, [w_start, r_tri, side, l_lo, l_hi, q_lo, q_hi, w_axis,
                                   scratch.put("first_l", first_l.astype(np.int32), wp.int32),
                                   scratch.put("first_r", first_r.astype(np.int32), wp.int32),
-                                  new_tri, new_lo, new_hi], device=dev, threads=threads)
+                                  new_tri, new_lo, new_hi])
         r_tri, r_lo, r_hi = new_tri, new_lo, new_hi
         sidx = np.flatnonzero(split)
         child_counts = np.stack([cl[sidx], cr[sidx]], axis=1).reshape(-1)

@@ -16,10 +16,22 @@ launch chunk adds into its own private copy of the grid (a "slot", found from th
 straight into the grid with real atomics. ``Staging`` turns numpy inputs into device arrays (a
 zero-copy wrap on the CPU, a copy into a grow-only buffer on CUDA). Callers never branch on the
 device: those two differences live here.
+
+Balance (``chunks_per_thread`` > 1): when items cost very different amounts — rays into the sky
+beside rays into geometry, the upper half of a camera's image beside the lower — one chunk per
+thread leaves a thread idle while the other finishes: on the kd-tree benchmark's camera rays the
+two halves cost 0.12 and 0.29 CPU-s, which caps 2 threads at 1.42× one. With k chunks per thread
+the workers take the next chunk as they finish one (dynamic scheduling), so they end together.
+Chunks stay contiguous and thousands of items long, so outputs share a cache line only at chunk
+borders (no false sharing to speak of), and each chunk costs one ``wp.launch`` (~0.1 ms of Python
+under the GIL, while the other workers run native code). With the default of 1 the chunks are
+exactly ``chunk_ranges(dim, threads)`` (callers that key per-worker buffers on the chunk offsets
+rely on that).
 """
 
 from __future__ import annotations
 
+import itertools
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -33,6 +45,8 @@ _pool_size = 0
 
 #: below this many items per thread, splitting costs more than it saves
 MIN_ITEMS_PER_THREAD = 256
+#: with ``chunks_per_thread`` > 1, chunks are not made smaller than this (each is one ``wp.launch``)
+MIN_ITEMS_PER_CHUNK = 4096
 
 
 def _executor(n: int) -> ThreadPoolExecutor:
@@ -59,12 +73,15 @@ def chunk_ranges(dim: int, threads: int, min_items: int = MIN_ITEMS_PER_THREAD) 
     return out
 
 
-def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None = None, start: int = 0) -> None:
+def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None = None, start: int = 0,
+           chunks_per_thread: int = 1) -> None:
     """Launch ``kernel`` over ``[start, start + dim)``; the kernel's trailing ``offset: int`` is appended.
 
     On ``cpu`` the range is split over ``threads`` worker threads (default: all usable CPUs,
-    ``SERENITY_THREADS`` overrides) and this call returns when every chunk is done. On CUDA it is a
-    single asynchronous launch, as ``wp.launch`` is.
+    ``SERENITY_THREADS`` overrides) and this call returns when every chunk is done; with
+    ``chunks_per_thread`` > 1 into that many contiguous chunks per thread, taken in order by
+    whichever worker is free (module docstring). On CUDA it is a single asynchronous launch, as
+    ``wp.launch`` is.
     """
     wp = init_warp()
     dim = int(dim)
@@ -73,17 +90,32 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     if not str(device).startswith("cpu"):
         wp.launch(kernel, dim=dim, inputs=[*inputs, int(start)], device=device)
         return
-    chunks = chunk_ranges(dim, threads or cpu_threads())
+    workers = threads or cpu_threads()
+    n_chunks = workers
+    if chunks_per_thread > 1:
+        n_chunks = max(workers, min(workers * int(chunks_per_thread), dim // MIN_ITEMS_PER_CHUNK))
+    chunks = chunk_ranges(dim, n_chunks)
     if len(chunks) == 1:
         wp.launch(kernel, dim=dim, inputs=[*inputs, int(start)], device=device)
         return
     # compile/load the module on this thread first so worker threads never race to build it
     kernel.module.load(wp.get_device(device))
-    pool = _executor(len(chunks))
-    futures = [
-        pool.submit(wp.launch, kernel, dim=count, inputs=[*inputs, int(start) + first], device=device)
-        for first, count in chunks
-    ]
+    workers = min(workers, len(chunks))
+    pool = _executor(workers)
+    if workers == len(chunks):
+        futures = [
+            pool.submit(wp.launch, kernel, dim=count, inputs=[*inputs, int(start) + first], device=device)
+            for first, count in chunks
+        ]
+    else:
+        ticket = itertools.count()  # next() is atomic under the GIL: each chunk goes to one worker
+
+        def work() -> None:
+            while (k := next(ticket)) < len(chunks):
+                first, count = chunks[k]
+                wp.launch(kernel, dim=count, inputs=[*inputs, int(start) + first], device=device)
+
+        futures = [pool.submit(work) for _ in range(workers)]
     for f in futures:
         f.result()
 

@@ -54,7 +54,7 @@ from serenity.config import KdBuildConfig
 from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
 from serenity.gbuffer_layout import RT_GBUFFER_KEYS
-from serenity.kernels.kdtree import KdTree, KdTreeData, trace_kd
+from serenity.kernels.kdtree import CHUNKS_PER_THREAD, KdTree, KdTreeData, trace_kd
 from serenity.kernels.launch import launch
 
 wp.set_module_options({"enable_backward": False})
@@ -371,7 +371,7 @@ class RayTracer:
             args = [self.data, wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
                     wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev),
                     float(self.ray_epsilon if tmin is None else tmin), float(tmax), int(max(0, transmissions)), *outs]
-            launch(trace_gbuffer, n, args, device=dev, threads=threads)
+            launch(trace_gbuffer, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return {k: a.numpy().reshape(n, 4) for k, a in zip(RT_GBUFFER_KEYS, outs, strict=True)}
 
     def trace_casting_buffer(self, buffer, threads: int | None = None,

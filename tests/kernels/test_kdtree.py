@@ -156,14 +156,45 @@ def test_non_unit_directions_measure_t_in_direction_lengths(device):
     assert np.allclose(long.t[hit] * 4.0, unit.t[hit], rtol=1e-5)
 
 
-def test_split_launch_matches_single_thread():
-    rng = np.random.default_rng(6)
-    v, f = random_soup(rng, 500)
-    o, d = random_rays(rng, 20_000)
+def _hits_equal(a, b) -> bool:
+    return all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("t", "prim", "u", "v"))
+
+
+def test_multi_threaded_trace_equals_single_threaded_bit_for_bit():
+    """Coherent camera rays (cheap sky above, geometry below: uneven chunks) and random rays: the
+    balanced multi-threaded launch (many chunks, handed out dynamically) gives the very same bits."""
+    v, f = lumpy_mesh(4)
     tree = KdTree.build(v, f)
-    a = tree.intersect(o, d, device="cpu", threads=1)
-    b = tree.intersect(o, d, device="cpu", threads=3)
-    assert np.array_equal(a.prim, b.prim) and np.array_equal(a.t, b.t)
+    rng = np.random.default_rng(6)
+    oc, dc = camera_rays(320, 180, position=(0.0, 0.6, 3.5))
+    o2, d2 = random_rays(rng, 40_000, extent=2.0)
+    for o, d in ((oc, dc), (o2, d2)):
+        one = tree.intersect(o, d, device="cpu", threads=1)
+        assert 0.1 < one.hit.mean() < 0.95
+        occ = tree.occluded(o, d, 1.5, device="cpu", threads=1)
+        for threads in (2, 3, 8):
+            assert _hits_equal(tree.intersect(o, d, device="cpu", threads=threads), one), threads
+            assert np.array_equal(tree.occluded(o, d, 1.5, device="cpu", threads=threads), occ), threads
+
+
+def test_build_does_not_depend_on_the_thread_count():
+    from serenity.kernels.kdtree_build import build_arrays
+
+    v, f = lumpy_mesh(3)
+    a = build_arrays(v, f, KdBuildConfig(), progress=False, threads=1)
+    b = build_arrays(v, f, KdBuildConfig(), progress=False, threads=3)
+    for k in ("node_head", "node_split", "prims", "box"):
+        assert np.array_equal(a[k], b[k]), k
+    assert a["stats"] == b["stats"]
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("traversal_cost", 0.0, "traversal_cost"), ("intersection_cost", float("nan"), "intersection_cost"),
+    ("empty_bonus", 1.0, "empty_bonus"), ("bins", 65, "bins"), ("bins", 8.0, "bins"), ("max_depth", 63, "max_depth"),
+])
+def test_build_config_errors_name_the_field(field, value, match):
+    with pytest.raises(SerenityError, match=f"KdBuildConfig.{match}"):
+        KdBuildConfig(**{field: value})
 
 
 def _embree_agreement(v, f, o, d, hits):

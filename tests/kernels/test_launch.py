@@ -94,3 +94,20 @@ def test_staging_wraps_or_copies_and_checks_the_device(device):
         with pytest.raises(ValueError, match="expected"):
             st.input(wp.zeros(3, dtype=wp.vec3, device=other), "p", wp.vec3, 3)
     assert host_array(wp.zeros(3, dtype=float, device="cpu")).shape == (3,)
+
+
+def test_balanced_launch_covers_exactly_once_in_any_order():
+    """chunks_per_thread > 1: many chunks handed out to whichever worker is free; every item once."""
+    n = 100_003
+    start = wp.array(np.arange(1, n + 1, dtype=np.int32), device="cpu")
+    one = wp.zeros(n, dtype=wp.int32, device="cpu")
+    launch(_collatz_steps, n, [start, one], device="cpu", threads=1)
+    for threads, k in ((2, 16), (3, 5), (8, 64)):
+        out = wp.full(n, -1, dtype=wp.int32, device="cpu")
+        launch(_collatz_steps, n, [start, out], device="cpu", threads=threads, chunks_per_thread=k)
+        assert np.array_equal(out.numpy(), one.numpy()), (threads, k)
+    part = wp.full(n, -1, dtype=wp.int32, device="cpu")
+    launch(_collatz_steps, 50_000, [start, part], device="cpu", threads=2, start=7, chunks_per_thread=16)
+    got = part.numpy()
+    assert np.all(got[:7] == -1) and np.all(got[50_007:] == -1)
+    assert np.array_equal(got[7:50_007], one.numpy()[7:50_007])
