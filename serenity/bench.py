@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from serenity.config import RenderConfig
 from serenity.device import resolve_device
-from serenity.frame import Renderer
+from serenity.frame import LPV_UPDATE_STAGES, SKY_UPDATE_STAGES, STAGES, Renderer
 from serenity.optional import pyplot
 from serenity.scene import load
 from serenity.scene.model import Camera, direction_from_angles
@@ -95,8 +95,6 @@ def summarise(records: list[dict], skip_first: int = 1) -> dict:
     """Median ms per stage over the frames after the first ``skip_first`` (uploads, builds), in
     ``STAGES`` order, plus the paper's "LPV update" (the sum of ``LPV_UPDATE_STAGES``) and the frame
     without the sky volume's update (``SKY_UPDATE_STAGES``), which the paper's Table 1 leaves out."""
-    from serenity.frame import LPV_UPDATE_STAGES, SKY_UPDATE_STAGES, STAGES
-
     recs = records[skip_first:] or records
     names = [k for k in STAGES if any(k in r["timings"] for r in recs)]
     stages = {k: float(np.median([r["timings"].get(k, 0.0) for r in recs])) for k in names}
