@@ -7,14 +7,14 @@ Traversal lives in :mod:`serenity.kernels.kdtree`; this module makes the arrays 
 Build — *binned SAH, level by level* (not Wald & Havran 2006's sorted event sweep, whose per-node
 event lists are millions of interpreter-level steps in Python). Every level holds its nodes'
 triangle references sorted by node, so each node owns a contiguous range. Per level, three Warp
-kernels run with one thread per node (split over the CPU cores by
-:func:`serenity.kernels.launch.launch`; a node writes only its own outputs and its own reference
-range, so the result does not depend on the thread count):
-    1. ``_node_splits``: the node's tight geometry bounds, per axis a histogram of its references'
+kernels (:mod:`serenity.kernels.kdtree_build_kernels`) run with one thread per node (split over
+the CPU cores by :func:`serenity.kernels.launch.launch`; a node writes only its own outputs and its
+own reference range, so the result does not depend on the thread count):
+    1. ``node_splits``: the node's tight geometry bounds, per axis a histogram of its references'
        min and max bins, and the SAH cost of every bin plane and of the tight bounds;
-    2. ``_clip_refs``: for a split node, each reference's side(s), the clipped boxes of the
+    2. ``clip_refs``: for a split node, each reference's side(s), the clipped boxes of the
        straddling ones, and the children's reference counts;
-    3. ``_scatter_refs``: the children's references written at their prefix-sum offsets.
+    3. ``scatter_refs``: the children's references written at their prefix-sum offsets.
 numpy does the O(nodes) glue (prefix sums, child cells, leaf blocks). Each level is O(R) for its R
 references and there are O(log N) levels: O(N log N). The price of binning is that split candidates
 are the ``bins − 1`` equally spaced planes over each node's geometry bounds (plus those bounds),
@@ -46,7 +46,6 @@ Layout (numpy):
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -58,19 +57,13 @@ from tqdm import tqdm
 from serenity.config import KdBuildConfig
 from serenity.device import init_warp
 from serenity.errors import SerenityError
+from serenity.kernels.kdtree_build_kernels import clip_refs, emit_leaves, node_splits, scatter_refs, triangle_boxes
 from serenity.kernels.launch import launch
-
-wp.set_module_options({"enable_backward": False})
 
 FORMAT_VERSION = 2  # bump when the build or the cached layout changes
 CACHE_MIN_TRIANGLES = 10_000  # cache=None caches builds of at least this many triangles
 PROGRESS_MIN_TRIANGLES = 200_000  # progress=None shows a bar from this many triangles
-MAX_BINS = 64  # KdBuildConfig.bins is at most this
 _CHUNKS = 8  # per-node launches: chunks per CPU thread, handed out dynamically (nodes differ in cost)
-
-_hist = wp.types.vector(length=MAX_BINS, dtype=wp.int32)
-_F32_EPS = wp.constant(1.1920929e-07)  # 2^-23
-_F32_TINY = wp.constant(1.0e-37)
 
 
 @dataclass
@@ -86,374 +79,6 @@ class KdStats:
     depth: int
     build_seconds: float
     from_cache: bool = False
-
-
-# ----------------------------------------------------------------------------------------------
-# Warp: per-node passes of one level
-# ----------------------------------------------------------------------------------------------
-
-
-@wp.func
-def _split_cost(pos: float, a: int, lo: wp.vec3, hi: wp.vec3, nl: int, nr: int, inv_area: float, ct: float,
-                ci: float, bonus: float, min_empty: float) -> float:
-    """SAH cost of the plane x_a = pos in the cell [lo, hi] with nl / nr references on each side."""
-    if not (pos > lo[a] and pos < hi[a]):
-        return float(math.inf)
-    e1 = hi[(a + 1) % 3] - lo[(a + 1) % 3]
-    e2 = hi[(a + 2) % 3] - lo[(a + 2) % 3]
-    el = pos - lo[a]
-    er = hi[a] - pos
-    perim = e1 + e2
-    face = e1 * e2
-    cost = ct + ci * ((el * perim + face) * float(nl) + (er * perim + face) * float(nr)) * inv_area
-    span = (hi[a] - lo[a]) * min_empty
-    if (nl == 0 and el >= span) or (nr == 0 and er >= span):
-        cost = cost * (1.0 - bonus)
-    return cost
-
-
-@wp.kernel(enable_backward=False)
-def _triangle_boxes(
-    # inputs
-    verts: wp.array(dtype=wp.vec3),
-    faces: wp.array(dtype=wp.vec3i),
-    # outputs
-    valid: wp.array(dtype=wp.int32),
-    lo: wp.array(dtype=wp.vec3),
-    hi: wp.array(dtype=wp.vec3),
-    offset: int,
-):
-    """Triangle f's bounding box, and whether it can be hit: finite vertices, non-zero area (the
-    cross product of its edges in float64, where the products of float32 values are exact)."""
-    f = wp.tid() + offset
-    fv = faces[f]
-    p0 = verts[fv[0]]
-    p1 = verts[fv[1]]
-    p2 = verts[fv[2]]
-    lo[f] = wp.min(wp.min(p0, p1), p2)
-    hi[f] = wp.max(wp.max(p0, p1), p2)
-    ok = 1
-    for k in range(3):
-        if not (wp.isfinite(p0[k]) and wp.isfinite(p1[k]) and wp.isfinite(p2[k])):
-            ok = 0
-    e1 = wp.vec3d(p1) - wp.vec3d(p0)
-    e2 = wp.vec3d(p2) - wp.vec3d(p0)
-    c = wp.cross(e1, e2)
-    zero = wp.float64(0.0)
-    if c[0] == zero and c[1] == zero and c[2] == zero:
-        ok = 0
-    valid[f] = ok
-
-
-@wp.kernel(enable_backward=False)
-def _node_splits(
-    # inputs
-    ref_start: wp.array(dtype=wp.int32),
-    r_lo: wp.array(dtype=wp.vec3),
-    r_hi: wp.array(dtype=wp.vec3),
-    n_lo: wp.array(dtype=wp.vec3),
-    n_hi: wp.array(dtype=wp.vec3),
-    allow_split: int,
-    max_bins: int,
-    ct: float,
-    ci: float,
-    bonus: float,
-    min_empty: float,
-    # outputs
-    out_axis: wp.array(dtype=wp.int32),
-    out_pos: wp.array(dtype=float),
-    offset: int,
-):
-    """Best split of node i: axis (−1 = leaf) and position."""
-    i = wp.tid() + offset
-    s = ref_start[i]
-    cnt = ref_start[i + 1] - s
-    out_axis[i] = -1
-    out_pos[i] = 0.0
-    if cnt == 0 or allow_split == 0:
-        return
-    lo = n_lo[i]
-    hi = n_hi[i]
-    ext = hi - lo
-    area = ext[0] * ext[1] + ext[1] * ext[2] + ext[2] * ext[0]
-    if not (area > 0.0):
-        return
-    inv_area = 1.0 / area
-    tl = wp.vec3(float(math.inf))
-    th = wp.vec3(float(-math.inf))
-    for r in range(s, s + cnt):
-        tl = wp.min(tl, r_lo[r])
-        th = wp.max(th, r_hi[r])
-    bl = wp.max(lo, tl)
-    bh = wp.min(hi, th)
-    nb = int(4)
-    while nb < cnt and nb < max_bins:
-        nb *= 2
-    nb = wp.min(nb, max_bins)
-    best = ci * float(cnt)  # the leaf's cost: a split must beat it
-    best_axis = int(-1)
-    best_pos = float(0.0)
-    # one pass over the references: per axis a histogram of their min bins and one of their max bins
-    hs0 = _hist()
-    he0 = _hist()
-    hs1 = _hist()
-    he1 = _hist()
-    hs2 = _hist()
-    he2 = _hist()
-    width = bh - bl
-    scale = wp.vec3(0.0)
-    for a in range(3):
-        if width[a] > 0.0:
-            scale[a] = float(nb) / width[a]
-    top = nb - 1
-    for r in range(s, s + cnt):
-        q = wp.cw_mul(r_lo[r] - bl, scale)
-        p = wp.cw_mul(r_hi[r] - bl, scale)
-        b = wp.clamp(int(q[0]), 0, top)
-        hs0[b] = hs0[b] + 1
-        b = wp.clamp(int(p[0]), 0, top)
-        he0[b] = he0[b] + 1
-        b = wp.clamp(int(q[1]), 0, top)
-        hs1[b] = hs1[b] + 1
-        b = wp.clamp(int(p[1]), 0, top)
-        he1[b] = he1[b] + 1
-        b = wp.clamp(int(q[2]), 0, top)
-        hs2[b] = hs2[b] + 1
-        b = wp.clamp(int(p[2]), 0, top)
-        he2[b] = he2[b] + 1
-    for a in range(3):
-        # the tight bounds: nothing below / nothing above
-        c = _split_cost(tl[a], a, lo, hi, 0, cnt, inv_area, ct, ci, bonus, min_empty)
-        if c < best:
-            best = c
-            best_axis = a
-            best_pos = tl[a]
-        c = _split_cost(th[a], a, lo, hi, cnt, 0, inv_area, ct, ci, bonus, min_empty)
-        if c < best:
-            best = c
-            best_axis = a
-            best_pos = th[a]
-        if width[a] > 0.0:
-            step = width[a] / float(nb)
-            nl = int(0)
-            ended = int(0)
-            for k in range(1, nb):
-                if a == 0:
-                    nl += hs0[k - 1]
-                    ended += he0[k - 1]
-                elif a == 1:
-                    nl += hs1[k - 1]
-                    ended += he1[k - 1]
-                else:
-                    nl += hs2[k - 1]
-                    ended += he2[k - 1]
-                pos = bl[a] + step * float(k)
-                c = _split_cost(pos, a, lo, hi, nl, cnt - ended, inv_area, ct, ci, bonus, min_empty)
-                if c < best:
-                    best = c
-                    best_axis = a
-                    best_pos = pos
-    out_axis[i] = best_axis
-    out_pos[i] = best_pos
-
-
-@wp.func
-def _round_down(x: wp.float64) -> float:
-    """A float32 ≤ x (x finite)."""
-    f = float(x)
-    if wp.float64(f) > x:
-        f = f - wp.max(wp.abs(f) * _F32_EPS, _F32_TINY)
-    return f
-
-
-@wp.func
-def _round_up(x: wp.float64) -> float:
-    """A float32 ≥ x (x finite)."""
-    f = float(x)
-    if wp.float64(f) < x:
-        f = f + wp.max(wp.abs(f) * _F32_EPS, _F32_TINY)
-    return f
-
-
-@wp.kernel(enable_backward=False)
-def _clip_refs(
-    # inputs
-    ref_start: wp.array(dtype=wp.int32),
-    r_tri: wp.array(dtype=wp.int32),
-    r_lo: wp.array(dtype=wp.vec3),
-    r_hi: wp.array(dtype=wp.vec3),
-    n_lo: wp.array(dtype=wp.vec3),
-    n_hi: wp.array(dtype=wp.vec3),
-    split_axis: wp.array(dtype=wp.int32),
-    split_pos: wp.array(dtype=float),
-    verts: wp.array(dtype=wp.vec3),
-    faces: wp.array(dtype=wp.vec3i),
-    # outputs
-    side: wp.array(dtype=wp.int32),
-    l_lo: wp.array(dtype=wp.vec3),
-    l_hi: wp.array(dtype=wp.vec3),
-    r_lo_out: wp.array(dtype=wp.vec3),
-    r_hi_out: wp.array(dtype=wp.vec3),
-    count_l: wp.array(dtype=wp.int32),
-    count_r: wp.array(dtype=wp.int32),
-    offset: int,
-):
-    """For each reference of split node i: ``side`` bit 0 = goes left, bit 1 = goes right, and its
-    box on each side (clipped where it straddles the plane); the children's counts."""
-    i = wp.tid() + offset
-    a = split_axis[i]
-    count_l[i] = 0
-    count_r[i] = 0
-    if a < 0:
-        return
-    p = split_pos[i]
-    p64 = wp.float64(p)
-    s = ref_start[i]
-    e = ref_start[i + 1]
-    cell_lo = n_lo[i]
-    cell_hi = n_hi[i]
-    nl = int(0)
-    nr = int(0)
-    for r in range(s, e):
-        blo = r_lo[r]
-        bhi = r_hi[r]
-        go_r = bhi[a] > p
-        go_l = blo[a] < p or not go_r
-        flag = int(0)
-        if go_l and go_r:
-            fv = faces[r_tri[r]]
-            q0 = wp.vec3d(verts[fv[0]])
-            q1 = wp.vec3d(verts[fv[1]])
-            q2 = wp.vec3d(verts[fv[2]])
-            inf64 = wp.float64(math.inf)
-            llo = wp.vec3d(inf64, inf64, inf64)
-            lhi = wp.vec3d(-inf64, -inf64, -inf64)
-            rlo = wp.vec3d(inf64, inf64, inf64)
-            rhi = wp.vec3d(-inf64, -inf64, -inf64)
-            for j in range(3):
-                qa = q0
-                qb = q1
-                if j == 1:
-                    qa = q1
-                    qb = q2
-                elif j == 2:
-                    qa = q2
-                    qb = q0
-                da = qa[a] - p64
-                db = qb[a] - p64
-                if da <= wp.float64(0.0):
-                    llo = wp.min(llo, qa)
-                    lhi = wp.max(lhi, qa)
-                if da >= wp.float64(0.0):
-                    rlo = wp.min(rlo, qa)
-                    rhi = wp.max(rhi, qa)
-                if da * db < wp.float64(0.0):
-                    q = qa + (da / (da - db)) * (qb - qa)  # edge ∩ plane
-                    q[a] = p64
-                    llo = wp.min(llo, q)
-                    lhi = wp.max(lhi, q)
-                    rlo = wp.min(rlo, q)
-                    rhi = wp.max(rhi, q)
-            # left part: previous box ∩ clipped box ∩ left cell
-            if llo[0] <= lhi[0]:
-                nlo = wp.vec3(_round_down(llo[0]), _round_down(llo[1]), _round_down(llo[2]))
-                nhi = wp.vec3(_round_up(lhi[0]), _round_up(lhi[1]), _round_up(lhi[2]))
-                chi = wp.vec3(cell_hi[0], cell_hi[1], cell_hi[2])
-                chi[a] = p
-                nlo = wp.max(wp.max(nlo, blo), cell_lo)
-                nhi = wp.min(wp.min(nhi, bhi), chi)
-                if nlo[0] <= nhi[0] and nlo[1] <= nhi[1] and nlo[2] <= nhi[2]:
-                    flag = flag | 1
-                    l_lo[r] = nlo
-                    l_hi[r] = nhi
-            if rlo[0] <= rhi[0]:
-                nlo = wp.vec3(_round_down(rlo[0]), _round_down(rlo[1]), _round_down(rlo[2]))
-                nhi = wp.vec3(_round_up(rhi[0]), _round_up(rhi[1]), _round_up(rhi[2]))
-                clo = wp.vec3(cell_lo[0], cell_lo[1], cell_lo[2])
-                clo[a] = p
-                nlo = wp.max(wp.max(nlo, blo), clo)
-                nhi = wp.min(wp.min(nhi, bhi), cell_hi)
-                if nlo[0] <= nhi[0] and nlo[1] <= nhi[1] and nlo[2] <= nhi[2]:
-                    flag = flag | 2
-                    r_lo_out[r] = nlo
-                    r_hi_out[r] = nhi
-        elif go_l:
-            flag = 1
-            l_lo[r] = blo
-            l_hi[r] = bhi
-        else:
-            flag = 2
-            r_lo_out[r] = blo
-            r_hi_out[r] = bhi
-        side[r] = flag
-        if flag & 1:
-            nl += 1
-        if flag & 2:
-            nr += 1
-    count_l[i] = nl
-    count_r[i] = nr
-
-
-@wp.kernel(enable_backward=False)
-def _scatter_refs(
-    # inputs
-    ref_start: wp.array(dtype=wp.int32),
-    r_tri: wp.array(dtype=wp.int32),
-    side: wp.array(dtype=wp.int32),
-    l_lo: wp.array(dtype=wp.vec3),
-    l_hi: wp.array(dtype=wp.vec3),
-    r_lo: wp.array(dtype=wp.vec3),
-    r_hi: wp.array(dtype=wp.vec3),
-    split_axis: wp.array(dtype=wp.int32),
-    first_l: wp.array(dtype=wp.int32),
-    first_r: wp.array(dtype=wp.int32),
-    # outputs
-    new_tri: wp.array(dtype=wp.int32),
-    new_lo: wp.array(dtype=wp.vec3),
-    new_hi: wp.array(dtype=wp.vec3),
-    offset: int,
-):
-    """The references of split node i, in order, into its left child's range then its right one's."""
-    i = wp.tid() + offset
-    if split_axis[i] < 0:
-        return
-    jl = first_l[i]
-    jr = first_r[i]
-    for r in range(ref_start[i], ref_start[i + 1]):
-        flag = side[r]
-        if flag & 1:
-            new_tri[jl] = r_tri[r]
-            new_lo[jl] = l_lo[r]
-            new_hi[jl] = l_hi[r]
-            jl += 1
-        if flag & 2:
-            new_tri[jr] = r_tri[r]
-            new_lo[jr] = r_lo[r]
-            new_hi[jr] = r_hi[r]
-            jr += 1
-
-
-@wp.kernel(enable_backward=False)
-def _emit_leaves(
-    # inputs
-    ref_start: wp.array(dtype=wp.int32),
-    r_tri: wp.array(dtype=wp.int32),
-    split_axis: wp.array(dtype=wp.int32),
-    block_start: wp.array(dtype=wp.int32),
-    # outputs
-    prims: wp.array(dtype=wp.int32),
-    offset: int,
-):
-    """Leaf i's block in ``prims``: its reference count, then its triangles."""
-    i = wp.tid() + offset
-    s = ref_start[i]
-    n = ref_start[i + 1] - s
-    if split_axis[i] >= 0 or n == 0:
-        return
-    j = block_start[i]
-    prims[j] = n
-    for k in range(n):
-        prims[j + 1 + k] = r_tri[s + k]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -502,7 +127,7 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
     valid_w = wp_.empty(nf, dtype=wp.int32, device=dev)
     lo_w = wp_.empty(nf, dtype=wp.vec3, device=dev)
     hi_w = wp_.empty(nf, dtype=wp.vec3, device=dev)
-    run(_triangle_boxes, nf, [w_verts, w_faces, valid_w, lo_w, hi_w])
+    run(triangle_boxes, nf, [w_verts, w_faces, valid_w, lo_w, hi_w])
     ids = np.flatnonzero(valid_w.numpy()).astype(np.int32)
     nvalid = len(ids)
     if nvalid == 0:
@@ -539,7 +164,7 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         w_nhi = scratch.put("n_hi", n_hi, wp.vec3)
         w_axis = scratch.get("axis", m, wp.int32)
         w_pos = scratch.get("pos", m, float)
-        run(_node_splits, m, [w_start, r_lo, r_hi, w_nlo, w_nhi, int(depth < max_depth), int(cfg.bins), ct, ci,
+        run(node_splits, m, [w_start, r_lo, r_hi, w_nlo, w_nhi, int(depth < max_depth), int(cfg.bins), ct, ci,
                                  float(cfg.empty_bonus), float(cfg.min_empty_fraction), w_axis, w_pos])
         best_axis = w_axis.numpy()[:m].copy()
         best_pos = w_pos.numpy()[:m].copy()
@@ -559,7 +184,7 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         total_block = int(block.sum())
         if total_block:
             arr = wp_.empty(total_block, dtype=wp.int32, device=dev)
-            run(_emit_leaves, m, [w_start, r_tri, w_axis,
+            run(emit_leaves, m, [w_start, r_tri, w_axis,
                                      scratch.put("block", (block_start - prim_len).astype(np.int32), wp.int32), arr])
             prims.append(arr.numpy())
             prim_len += total_block
@@ -578,7 +203,7 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         l_lo, l_hi = scratch.get("l_lo", n_ref, wp.vec3), scratch.get("l_hi", n_ref, wp.vec3)
         q_lo, q_hi = scratch.get("q_lo", n_ref, wp.vec3), scratch.get("q_hi", n_ref, wp.vec3)
         c_l, c_r = scratch.get("c_l", m, wp.int32), scratch.get("c_r", m, wp.int32)
-        run(_clip_refs, m, [w_start, r_tri, r_lo, r_hi, w_nlo, w_nhi, w_axis, w_pos, w_verts, w_faces,
+        run(clip_refs, m, [w_start, r_tri, r_lo, r_hi, w_nlo, w_nhi, w_axis, w_pos, w_verts, w_faces,
                                side, l_lo, l_hi, q_lo, q_hi, c_l, c_r])
         cl, cr = c_l.numpy()[:m].astype(np.int64), c_r.numpy()[:m].astype(np.int64)
         pair = cl + cr
@@ -589,7 +214,7 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         new_tri = scratch.get(names[0], n_new, wp.int32)
         new_lo = scratch.get(names[1], n_new, wp.vec3)
         new_hi = scratch.get(names[2], n_new, wp.vec3)
-        run(_scatter_refs, m, [w_start, r_tri, side, l_lo, l_hi, q_lo, q_hi, w_axis,
+        run(scatter_refs, m, [w_start, r_tri, side, l_lo, l_hi, q_lo, q_hi, w_axis,
                                   scratch.put("first_l", first_l.astype(np.int32), wp.int32),
                                   scratch.put("first_r", first_r.astype(np.int32), wp.int32),
                                   new_tri, new_lo, new_hi])
