@@ -23,8 +23,9 @@ Figures (ratios of this run's own measurements; incoherent rays unless ``_cohere
   time: on a machine shared with other busy sessions (Linux groups each session's threads and
   shares the CPUs equally between groups: ``sched_autogroup``) a second thread gets no more CPU, so
   this reads ~1 there; ``machine.load_average`` says how busy the machine was.
-  ``thread_scaling_cpu_bound``: the same split's Σ thread CPU-s / the busiest thread's CPU-s — the
-  speed-up 2 threads give when each has a core to itself (imbalance and overheads, not the load);
+  ``thread_scaling_cpu_bound``: the same split's Σ thread CPU-s / the busiest thread's CPU-s inside
+  the kernel launches — their speed-up on 2 threads when each has a core to itself (imbalance and
+  overheads, not the load; the serial Python before and after the launches is not in it);
 - ``build_1m_s``: wall seconds of one build of 1 M triangles (no cache), measured;
   ``build_1m_cpu_s`` its CPU seconds (all threads). The sweep over ``--build-sizes`` builds random
   subsets (seeded) of the subdivision-8 scene (2.6 M triangles), with an N log N least-squares fit.
