@@ -14,11 +14,11 @@ Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`
         integer, exact in float32), so a leaf costs no extra load before its triangles. The empty
         flags let the traversal skip empty leaves (most leaves a ray meets: 6 of 7 on the
         benchmark's camera rays) without loading them or pushing them on the stack.
-    prims (P,) int32: the build's leaf blocks (a count, then that many triangle indices); a leaf's
-        references are the slots after its count: reference r is triangle ``prims[r]``.
-    ref_verts (3P,) vec3: reference r's three vertices at 3r, 3r+1, 3r+2 — a leaf's triangles lie
-        next to each other in memory (the traversal's time goes mostly into cache misses on nodes
-        and triangles: a copy per reference trades memory for one miss per leaf, not per triangle).
+    refs (P,) KdRef: reference r = slot r of the build's leaf blocks (``prims``: a count, then that
+        many triangle indices; a leaf's references are the slots after its count): the triangle's
+        three vertices and its index, 40 bytes — a leaf's triangles lie next to each other in memory
+        (the traversal's time goes mostly into cache misses on nodes and triangles: a copy per
+        reference trades memory for one miss per leaf, not one per triangle and its index).
     tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2 (for shading a hit).
 
 Traversal (Warp, ``trace_kd``): rays with origin ``o`` (N,3) and direction ``d`` (N,3) float32,
@@ -41,7 +41,7 @@ On the CPU the launches are split over all cores with :func:`serenity.kernels.la
 Where the time goes (``perf record -e cpu-clock`` on the Warp-generated CPU code, incoherent rays,
 samples mapped onto the disassembly of the cached object file): about a quarter on the node load
 of each step, a quarter on the triangles' vertex loads and 7 % on a leaf's count — cache misses,
-not arithmetic. Hence the count in the node, the leaf-contiguous ``ref_verts`` and the empty-leaf
+not arithmetic. Hence the count in the node, the leaf-contiguous ``refs`` and the empty-leaf
 flags. Tried without a measurable gain: two rays per thread with interleaved steps (to overlap
 their misses), -O3 instead of Warp's CPU -O2, other SAH cost ratios.
 """
@@ -111,12 +111,22 @@ class KdNode:
 
 
 @wp.struct
+class KdRef:
+    """One triangle reference of a leaf, 40 bytes: its three vertices and its triangle index,
+    together so that a leaf's references cost one stream of cache lines."""
+
+    v0: wp.vec3
+    v1: wp.vec3
+    v2: wp.vec3
+    prim: wp.int32
+
+
+@wp.struct
 class KdTreeData:
     """The tree on one device (see the module docstring for the layout)."""
 
     nodes: wp.array(dtype=KdNode)
-    prims: wp.array(dtype=wp.int32)
-    ref_verts: wp.array(dtype=wp.vec3)
+    refs: wp.array(dtype=KdRef)
     tri_verts: wp.array(dtype=wp.vec3)
     box_lo: wp.vec3  # padded root box
     box_hi: wp.vec3
@@ -301,15 +311,11 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
             first_ref = head >> 2
             n = int(nd.split)
             for j in range(n):
-                ref = first_ref + j
-                hit, t, u, v = intersect_triangle(
-                    o, kx, ky, kz, sx, sy, sz,
-                    tree.ref_verts[3 * ref], tree.ref_verts[3 * ref + 1], tree.ref_verts[3 * ref + 2],
-                    tlo, best_t,
-                )
+                rf = tree.refs[first_ref + j]
+                hit, t, u, v = intersect_triangle(o, kx, ky, kz, sx, sy, sz, rf.v0, rf.v1, rf.v2, tlo, best_t)
                 f = int(-1)
                 if hit:
-                    f = tree.prims[ref]
+                    f = rf.prim
                 if hit and (t < best_t or f < prim):
                     best_t = t
                     prim = f
@@ -476,16 +482,17 @@ class KdTree:
             nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, (child << 4) | flags | (head & 3))
             nodes["split"] = np.where(leaf, count, self.node_split).astype(np.float32)
             data.nodes = wp_.array(nodes, dtype=KdNode, device=device)
-            data.prims = wp_.array(self.prims, dtype=wp.int32, device=device)
             tri = np.ascontiguousarray(self.vertices[self.faces], np.float32)  # (F, 3, 3)
             slots = np.zeros(len(self.prims), bool)  # the slots that hold a triangle index (not a count)
             blocks = off[leaf & (count > 0)]
             counts = self.prims[blocks]
             first = blocks + 1 - np.cumsum(np.concatenate([[0], counts[:-1]]))
             slots[np.repeat(first, counts) + np.arange(counts.sum())] = True
-            ref = np.zeros((len(self.prims), 3, 3), np.float32)
-            ref[slots] = tri[self.prims[slots]]
-            data.ref_verts = wp_.array(ref.reshape(-1, 3), dtype=wp.vec3, device=device)
+            refs = np.zeros(len(self.prims), dtype=KdRef.numpy_dtype())
+            for k, name in enumerate(("v0", "v1", "v2")):
+                refs[name][slots] = tri[self.prims[slots], k]
+            refs["prim"][slots] = self.prims[slots]
+            data.refs = wp_.array(refs, dtype=KdRef, device=device)
             data.tri_verts = wp_.array(tri.reshape(-1, 3), dtype=wp.vec3, device=device)
             lo = self.box[0].astype(np.float64)
             hi = self.box[1].astype(np.float64)
