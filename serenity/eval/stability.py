@@ -707,3 +707,36 @@ def horizon_sweep(elevations, size=(48, 27), device=None, rebuild_angle_deg: flo
     return {"steps": rows, "finite": finite, "min_radiance": lo, "max_excess_step": float(excess.max()),
             "max_rel_error": float(np.max(np.abs(ours - exact) / np.maximum(exact, 1e-6))),
             "images": images}
+
+
+def nested_glass_error(count: int = 32, transmissions: int = 4, seed: int = 1, device=None):
+    """A glass block (x ∈ [−1, 1], y ∈ [0, 2], z ∈ [−0.5, 0.5]) holding a smaller block of the same
+    glass (x ∈ [−0.5, 0.5], y ∈ [0.5, 1.5], z ∈ [−0.25, 0.25]) in front of a wall at z = −3. Exact:
+    the inner faces separate glass from the same glass, so rays bend only at the outer faces and
+    leave parallel to where they came from. Returns the distances (m) of the traced wall hits from
+    the exact ones (inf where the ray did not reach the wall)."""
+    from serenity.kernels.raytrace import RayTracer
+    from serenity.scene.model import Camera, Sun
+    from serenity.scene.procedural import _Builder
+
+    b = _Builder()
+    b.material("glass", albedo=(0.95,) * 3, transparency=0.95, ior=1.5)
+    b.material("wall", albedo=(0.5,) * 3)
+    b.box("glass", (-1.0, 0.0, -0.5), (1.0, 2.0, 0.5))
+    b.box("glass", (-0.5, 0.5, -0.25), (0.5, 1.5, 0.25))
+    b.rect("wall", (0.0, 1.0, -3.0), (6.0, 0.0, 0.0), (0.0, 4.0, 0.0))
+    scene = b.scene("nested-glass", Camera((0.0, 1.0, 4.0), (0.0, 1.0, 0.0)), Sun((0.3, 1.0, 0.2)))
+    tracer = RayTracer(scene, device=device, cache=False)
+    rng = np.random.default_rng(seed)
+    entry = np.stack([rng.uniform(-0.3, 0.3, count), rng.uniform(0.8, 1.2, count), np.full(count, 0.5)], 1)
+    src = entry + np.stack([rng.uniform(-0.6, 0.6, count), rng.uniform(-0.3, 0.3, count), np.full(count, 2.0)], 1)
+    d = (entry - src) / np.linalg.norm(entry - src, axis=1, keepdims=True)
+    z = np.array([[0.0, 0.0, 1.0]])
+    dt = _refract(d, np.repeat(z, count, 0), 1 / 1.5)
+    exit_ = entry + dt * ((-0.5 - 0.5) / dt[:, 2:3])
+    do = _refract(dt, np.repeat(z, count, 0), 1.5)
+    exact = exit_ + do * ((-3.0 - exit_[:, 2:3]) / do[:, 2:3])
+    g = tracer.trace(src, d, transmissions=transmissions)
+    err = np.linalg.norm(g["position"][:, :3] - exact, axis=1)
+    on_wall = (g["position"][:, 3] > 0) & (np.abs(g["position"][:, 2] + 3.0) < 1e-3)
+    return np.where(on_wall, err, np.inf)
