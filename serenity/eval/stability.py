@@ -63,7 +63,8 @@ def _timed(fn, *args, **kw):
 
 def _unit_lpv(res: int, cell: float, iterations: int, device=None, **kw):
     """One cascade of ``res``³ cells of ``cell`` m with its origin at (−cell, −cell, −cell)."""
-    from serenity.kernels.lpv import LightPropagationVolume, LPVConfig
+    from serenity.config import LPVConfig
+    from serenity.kernels.lpv import LightPropagationVolume
 
     kw.setdefault("cross_scene", False)
     cfg = LPVConfig(resolution=res, cascades=1, iterations=iterations, early_stop=0.0, **kw)
@@ -215,17 +216,17 @@ def sky_ringing(elevation: float = 3.0, window: str = "none", rays: int = 4096, 
     of the same sky map at ``normals`` Fibonacci normals, at every probe: returns (max |E − E_exact|
     over max E_exact, min of the unclamped SH irradiance over max E_exact, E (probes, normals) of
     the green channel, exact (normals,), ms of the build)."""
+    from serenity.config import SkyConfig
     from serenity.kernels import sh
     from serenity.kernels.sampling import fibonacci_sphere
-    from serenity.kernels.skyvolume import SkyVolume, SkyVolumeConfig
+    from serenity.kernels.skyvolume import SkyVolume
     from serenity.scene.model import Sky, direction_from_angles
     from serenity.scene.procedural import plane_scene
 
     scene = plane_scene(elevation_deg=elevation, azimuth_deg=250.0)
     scene.sky = Sky()  # the atmosphere
     scene.sun.direction = direction_from_angles(elevation, 250.0)
-    cfg = SkyVolumeConfig(rays_per_probe=rays, resolution=(2, 2, 2), auto_quads=False, normal_offset=0.0,
-                          window=window)
+    cfg = SkyConfig(rays_per_probe=rays, resolution=(2, 2, 2), auto_quads=False, normal_offset=0.0, window=window)
     vol = SkyVolume(scene, cfg, device=device)
     vol.rebuild()
     t0 = time.perf_counter()
@@ -289,9 +290,10 @@ def terrain_sky_visibility(scene="terrain", count: int = 48, rays: int = 256, n_
     with the terrain's exact visibility (its kd-tree; occluded rays black, as the volume treats
     quads). Returns {config: (mean relative error (green), E (count,), ms of the build)}, the
     exact E, the points and the build ms."""
+    from serenity.config import SkyConfig
     from serenity.kernels.kdtree import KdTree
     from serenity.kernels.sampling import fibonacci_sphere
-    from serenity.kernels.skyvolume import SkyVolume, SkyVolumeConfig
+    from serenity.kernels.skyvolume import SkyVolume
     from serenity.scene import load
 
     base = load(scene) if isinstance(scene, str) else scene
@@ -304,7 +306,7 @@ def terrain_sky_visibility(scene="terrain", count: int = 48, rays: int = 256, n_
                                ("automatic fit", [], True)):
         s = load(base.name) if isinstance(scene, str) else base
         s.occlusion_quads = list(quads)
-        cfg = SkyVolumeConfig(rays_per_probe=rays, auto_quads=auto)
+        cfg = SkyConfig(rays_per_probe=rays, auto_quads=auto)
         t0 = time.perf_counter()
         vol = SkyVolume(s, cfg, device=device)
         vol.rebuild()
@@ -365,10 +367,11 @@ def render_sun_visibility(scene, width: int, height: int, shadow, sky: bool = Fa
     """Render ``scene`` (direct light only: no LPV, SSAO, sky lighting) and return (visibility
     (H, W) = direct / unshadowed direct on the ground (NaN elsewhere), positions (H, W, 3), the
     ground mask, ms of the frame)."""
-    from serenity.config import RenderConfig, SSAOConfig
+    from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
     from serenity.frame import Renderer
 
-    cfg = RenderConfig(lpv=False, sky_lighting=sky, ssao=SSAOConfig(enabled=False), shadow=shadow)
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=sky), ssao=SSAOConfig(enabled=False),
+                       shadow=shadow)
     r = Renderer(scene, width, height, config=cfg)
     r.render()
     t0 = time.perf_counter()
@@ -445,7 +448,7 @@ def cascade_seams(shadow, size=(320, 180), elevation: float = 30.0):
     edge (x = −2/tan(elevation) − 0.1) runs through every cascade split. Returns (max over splits of
     |mean visibility in the 0.5 m of depth past the split − before it| along the edge band, minus
     the exact's; mean |vis − exact| near the edge; visibility image; exact image; ms)."""
-    from serenity.raster.shadow import fit_cascades
+    from serenity.raster.shadow import fit_shadow_cascades
 
     scene = shadow_scene(elevation, azimuth=90.0, wall=True)
     vis, pos, ground, ms = render_sun_visibility(scene, *size, shadow)
@@ -456,8 +459,8 @@ def cascade_seams(shadow, size=(320, 180), elevation: float = 30.0):
     ex_img[near] = ex
     cam = scene.camera
     depth = (pos[near] - cam.position) @ cam.forward
-    cascades = fit_cascades(cam, size[0] / size[1], scene.sun.direction, scene.bounds, shadow.cascades, shadow.size,
-                            shadow.split_lambda, shadow.max_distance)
+    cascades = fit_shadow_cascades(cam, size[0] / size[1], scene.sun.direction, scene.bounds, shadow.cascades,
+                                   shadow.size, shadow.split_lambda, shadow.max_distance)
     jumps = []
     v = vis[near]
     for c in cascades[:-1]:
@@ -593,14 +596,15 @@ def mirror_shadow_case(size=(160, 90), device=None) -> Case:
     hits (the kd-tree) vs the overlapped shadow maps' answer as the RT direct-lighting pass uses it
     (its direct term over the unshadowed one). Error: fraction of hits whose shadow state (exact
     visibility < 0.5) differs; "without" lights every hit as unshadowed."""
-    from serenity.config import RenderConfig, SSAOConfig
+    from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
     from serenity.eval.exact import exact_sun_visibility
     from serenity.frame import Renderer
     from serenity.raster.interop import read_texture
     from serenity.scene import load
 
     scene = load("mirror-box")
-    cfg = RenderConfig(lpv=False, sky_lighting=False, ssao=SSAOConfig(enabled=False), overlap=False)
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ssao=SSAOConfig(enabled=False),
+                       overlap=False)
     r = Renderer(scene, *size, device=device, config=cfg)
     r.render()
     f, ms = _timed(r.render)
@@ -669,17 +673,14 @@ def horizon_sweep(elevations, size=(48, 27), device=None, rebuild_angle_deg: flo
     image was finite, the smallest radiance, and the largest step excess (|Δours| − |Δexact|) over
     the larger exact value of the two steps. ``probes`` / ``rays``: the sky volume's resolution
     (None: its default) and rays per probe."""
-    from serenity.config import RenderConfig, SSAOConfig
+    from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
     from serenity.frame import Renderer
     from serenity.kernels.atmosphere import bake_sky_map, horizontal_irradiance, scene_sun_irradiance
     from serenity.scene.model import direction_from_angles
 
     scene = horizon_scene(float(elevations[0]))
-    from serenity.kernels.skyvolume import SkyVolumeConfig
-
-    cfg = RenderConfig(lpv=False, ssao=SSAOConfig(enabled=False), sky_layers_per_frame=1 << 10,
-                       sky_settings=SkyVolumeConfig(rebuild_angle_deg=rebuild_angle_deg, resolution=probes,
-                                                    rays_per_probe=rays))
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False), sky_layers_per_frame=1 << 10,
+                       sky=SkyConfig(rebuild_angle_deg=rebuild_angle_deg, resolution=probes, rays_per_probe=rays))
     r = Renderer(scene, *size, device=device, config=cfg)
     n_wall = np.array([-1.0, 0.0, 0.0])
     rows, finite, lo, ours, exact, images = [], True, np.inf, [], [], []
@@ -765,10 +766,10 @@ def sun_motion_sequence(frames: int = 60, step_deg: float = 0.05, size=(64, 36),
     e_k = mean|I_k − R_k|/mean R_k. Returns the arrays, the largest step excess max(c_k − r_k)
     ("pop"), the largest lag, the mean ms per frame of both, the first/last images and the
     per-pixel error of the worst-lag frame. ``probes`` / ``rays``: the sky volume's resolution (None:
-    its default), rays per probe and sky map size; ``gi``: further RenderConfig fields (e.g. lpv=False)."""
-    from serenity.config import RenderConfig
+    its default), rays per probe and sky map size; ``gi``: further RenderConfig fields (e.g.
+    ``lpv=LPVConfig(enabled=False)``)."""
+    from serenity.config import RenderConfig, SkyConfig
     from serenity.frame import Renderer
-    from serenity.kernels.skyvolume import SkyVolumeConfig
     from serenity.scene import load
     from serenity.scene.model import direction_from_angles
 
@@ -777,8 +778,8 @@ def sun_motion_sequence(frames: int = 60, step_deg: float = 0.05, size=(64, 36),
         scene = load(scene_name)
         az = float(scene.sun.azimuth_deg)
         cfg = RenderConfig(sky_layers_per_frame=layers, **(gi or {}),
-                           sky_settings=SkyVolumeConfig(rebuild_angle_deg=angle, resolution=probes, rays_per_probe=rays,
-                                                        sky_map_size=sky_map_size))
+                           sky=SkyConfig(rebuild_angle_deg=angle, resolution=probes, rays_per_probe=rays,
+                                         sky_map_size=sky_map_size))
         r = Renderer(scene, *size, device=device, config=cfg)
         imgs, ms = [], []
         for k in range(frames + 1):
@@ -825,12 +826,12 @@ def camera_path_sequence(frames: int = 60, size=(96, 54), scene_name: str = "thi
     the previous frame's luminance interpolated bilinearly there, all 4 taps on the same surface: same
     normal, within ``tolerance`` m of its plane), the change |I_k − I_{k−1}| over the mean. ``gi=False``
     renders direct light only (no LPV, sky volume, SSAO) — the floor the nearest-pixel reprojection
-    itself leaves; a dict gives RenderConfig fields (e.g. {"lpv": False}). Returns per-frame flicker,
+    itself leaves; a dict gives RenderConfig fields (e.g. {"lpv": LPVConfig(enabled=False)}). Returns per-frame flicker,
     its max and mean, ms per frame, and the fewest points matched in a frame (``matched``). The
     interpolation itself errs across shadow edges, so points whose 4 taps differ by more than 5 % are
     left out; the direct-only run measures what error remains from the reprojection."""
     from serenity.bench import camera_path
-    from serenity.config import RenderConfig, SSAOConfig
+    from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
     from serenity.frame import Renderer
     from serenity.scene import load
 
@@ -839,7 +840,8 @@ def camera_path_sequence(frames: int = 60, size=(96, 54), scene_name: str = "thi
     if isinstance(gi, dict):
         cfg = RenderConfig(**gi)
     else:
-        cfg = RenderConfig() if gi else RenderConfig(lpv=False, sky_lighting=False, ssao=SSAOConfig(enabled=False))
+        cfg = RenderConfig() if gi else RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False),
+                                                     ssao=SSAOConfig(enabled=False))
     r = Renderer(scene, *size, device=device, config=cfg)
     w, h = size
     prev, flicker, ms, matched = None, [], [], []
@@ -898,7 +900,9 @@ def camera_path_case(frames: int = 60, size=(96, 54), device=None) -> Case:
     renderer (LPV, sky volume, SSAO)."""
     a = camera_path_sequence(frames, size, gi=False, device=device)
     b = camera_path_sequence(frames, size, gi=True, device=device)
-    c = camera_path_sequence(frames, size, gi={"lpv": False}, device=device)
+    from serenity.config import LPVConfig
+
+    c = camera_path_sequence(frames, size, gi={"lpv": LPVConfig(enabled=False)}, device=device)
     return Case(f"camera on the bench path, {frames} frames (thin-wall)", "frame to frame",
                 "max over frames of mean abs(change) of reprojected diffuse points (of mean luminance)",
                 "none to switch: direct only (floor) vs full GI", a["max"], b["max"], a["ms"], b["ms"], exact=0.0,

@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from serenity.config import SSAOConfig
+from serenity.config import LPVConfig, SSAOConfig
 from serenity.eval import stability as S
 
 pytestmark = pytest.mark.gl
-DIRECT_AND_SKY = {"lpv": False, "ssao": SSAOConfig(enabled=False)}
+DIRECT_AND_SKY = {"lpv": LPVConfig(enabled=False), "ssao": SSAOConfig(enabled=False)}
 
 
 def test_sun_moving_pops_only_at_sky_rebakes_and_within_bound(gl_ctx):

@@ -38,14 +38,15 @@ def test_nested_glass_of_one_index(device):
 def test_mirror_shows_off_screen_geometry_shadowed(gl_ctx):
     """``mirror-box``: the mirror shows the room behind the camera, outside the main view's shadow
     cascades. For every reflected hit on a sun-facing surface, the exact sun-disc visibility (kd-tree)
-    vs the shadow term the RT lighting pass applies (overlapped shadow maps). Measured at 160×90:
-    20 % of those hits are in shadow (lighting them unshadowed would get all of those wrong); the
-    overlapped maps get 0.09 % wrong. Bound: ≤ 2 % wrong, and the case has shadowed hits (> 5 %)."""
+    vs the shadow term the RT lighting pass applies (overlapped shadow maps). Measured at 128×72:
+    22 % of those hits are in shadow (lighting them unshadowed would get all of those wrong); the
+    overlapped maps get 1.6 % wrong (texel-sized misses along shadow edges). Bound: ≤ 4 % wrong, and
+    the case has shadowed hits (> 5 %)."""
     case = S.mirror_shadow_case(size=(128, 72))
     print(case.row())
     assert case.extra["reflected_hits"] > 200
     assert case.error_without > 0.05
-    assert case.error_with <= 0.02
+    assert case.error_with <= 0.04
 
 
 def test_nan_and_inf_input_give_a_clear_error_or_untraced_rays(device):
@@ -70,18 +71,19 @@ def test_nan_and_inf_input_give_a_clear_error_or_untraced_rays(device):
 
 
 @pytest.mark.gl
+@pytest.mark.slow
 def test_degenerate_triangles_and_glass_render_finite(gl_ctx):
     """The ``glass`` scene (total internal reflection in the prism, four transmissions) with a fan of
     zero-area triangles added (collinear, repeated vertex, a point) in front of the camera: the
     frame is finite and non-negative (exact: degenerate triangles cover no area, so the image equals
     the one without them up to rasterisation of zero-area primitives, which draws nothing) — bound:
     identical to the frame without them within 1e-3 relative mean."""
-    from serenity.config import RenderConfig, SSAOConfig
+    from serenity.config import LPVConfig, RenderConfig, SSAOConfig
     from serenity.frame import Renderer
     from serenity.scene import load
     from serenity.scene.model import Mesh
 
-    cfg = RenderConfig(lpv=False, ssao=SSAOConfig(enabled=False), overlap=False)
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False), overlap=False)
     clean = load("glass")
     ref = Renderer(clean, 64, 36, config=cfg).render().hdr
     scene = load("glass")

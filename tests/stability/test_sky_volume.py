@@ -1,18 +1,14 @@
-"""Sky irradiance volume where it fails: SH truncation under a low sun, occlusion quads that fit a
-height field badly, and the layer-per-frame update while the sun keeps moving."""
+"""Sky irradiance volume where it fails: SH truncation under a low sun, and occlusion quads that fit
+a height field badly. (The layer sweep under a moving sun is tests/kernels/test_skyvolume.py's.)"""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
 from serenity.eval import stability as S
 from serenity.kernels import sh
 from serenity.kernels.sampling import fibonacci_sphere
-from serenity.kernels.skyvolume import SkyVolume, SkyVolumeConfig
 from serenity.scene.model import direction_from_angles
-from serenity.scene.procedural import build_scene
 
 
 def test_low_sun_sky_irradiance_never_negative_and_close_to_the_exact_integral(device):
@@ -59,33 +55,3 @@ def test_terrain_quads_vs_brute_force_visibility(device):
         assert np.all(np.isfinite(e)) and e.min() >= 0, label
         assert err <= 0.35, f"{label}: {err:.3f}"
     assert out["automatic fit"][0] <= out["no quads"][0] + 0.02
-
-
-def test_every_layer_refreshes_while_the_sun_keeps_moving(device):
-    """Sun moving 0.05° per frame, rebake every 0.5° (every 10 frames), one layer per frame: the
-    exact answer is a volume at most Y frames behind the sky everywhere. Before the fix a rebake
-    restarted the sweep at layer 0, so with Y = 16 layers the top 6 were never refreshed again (the
-    sky at their height froze while the sun moved). Bound: after 4·Y frames every layer has been
-    integrated within the last Y frames (the sweep continues cyclically across rebakes)."""
-    scene = build_scene("courtyard")
-    vol = SkyVolume(scene, SkyVolumeConfig(rays_per_probe=4, resolution=(2, 16, 2)), device=device)
-    vol.rebuild()
-    y = vol.resolution[1]
-    last = np.zeros(y, int)
-    calls = []
-    real = vol._integrate
-
-    def spy(sky_map, first, count):
-        calls.append((first, count))
-        real(sky_map, first, count)
-
-    vol._integrate = spy
-    el0, az = 20.0, 200.0
-    for frame in range(1, 4 * y + 1):
-        calls.clear()
-        vol.update(layers=1, sun_direction=direction_from_angles(el0 + 0.05 * frame, az))
-        for first, count in calls:
-            last[first:first + count] = frame
-    age = 4 * y - last
-    assert age.max() < y, f"layer ages {age.tolist()}"
-    assert math.isclose(vol.sky.rebuild_angle_deg, 0.5)
