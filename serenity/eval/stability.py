@@ -613,19 +613,21 @@ def mirror_shadow_case(size=(160, 90), device=None) -> Case:
     sel = rcb.reflection_rays()
     g = r.tracer.trace(rcb.origins[sel], rcb.reflect_dirs[sel], rcb.cone_width[sel], rcb.cone_spread[sel])
     pix = rcb.pixels[sel]
+    texel = np.arange(len(pix))  # packed RT G-buffer: the k-th reflection ray is texel k (rt_gbuffer doc)
     hit = g["position"][:, 3] > 0
     p, n = g["position"][hit, :3].astype(np.float64), g["normal"][hit, :3].astype(np.float64)
     alb = g["albedo"][hit, :3].astype(np.float64)
     sun = scene.sun.direction
     cos = n @ sun
     lit_side = cos > 0.2
-    p, n, alb, cos, pix = p[lit_side], n[lit_side], alb[lit_side], cos[lit_side], pix[hit][lit_side]
+    p, n, alb, cos = p[lit_side], n[lit_side], alb[lit_side], cos[lit_side]
+    pix, texel = pix[hit][lit_side], texel[hit][lit_side]
     vis = exact_sun_visibility(r.tracer.tree, p, n, sun, scene.sun.angular_diameter_deg, n=64)
-    direct = read_texture(r.rt_deferred.direct, 3)[:h].reshape(-1, 3)  # the reflection half (top)
+    direct = read_texture(r.rt_deferred.direct, 3)[::-1].reshape(-1, 3)  # GL row order: texel k = (k mod W, k div W)
     from serenity.kernels.atmosphere import scene_sun_irradiance
 
     e = scene_sun_irradiance(scene)
-    ours = direct[pix, 1] / np.maximum(alb[:, 1] / math.pi * e[1] * cos, 1e-9)
+    ours = direct[texel, 1] / np.maximum(alb[:, 1] / math.pi * e[1] * cos, 1e-9)
     r.close()
     shadowed = vis < 0.5
     err_with = float(np.mean((ours < 0.5) != shadowed))
