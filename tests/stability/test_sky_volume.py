@@ -13,14 +13,15 @@ from serenity.scene.model import direction_from_angles
 
 def test_low_sun_sky_irradiance_never_negative_and_close_to_the_exact_integral(device):
     """Sun 3° high (the atmosphere's brightest, most peaked sky; the sun's disc itself is direct
-    light, not in the volume): at every probe and 128 normals, E ≥ 0 and |E − E_exact| ≤ 7 % of the
+    light, not in the volume): at every probe and 128 normals, E ≥ 0 and |E − E_exact| ≤ 8 % of the
     peak E_exact (E_exact = brute-force cosine integral of the same sky map, 16 384 directions).
-    Measured (4096 rays): no window 4.9–5.4 % (L2 truncation), "nonneg" window 9.6–10.4 % (it
-    blurs: the price of non-negativity by construction); unclamped SH irradiance ≥ +6 % of the peak
-    (no ringing below zero from the sky alone)."""
+    Measured (2048 rays, the default "transfer" method): no window 6.8 % (the sky's L2 truncation
+    — the transfer's band-5 sky projection included), "nonneg" window 8.8 % (it blurs: the price of
+    non-negativity by construction); unclamped SH irradiance ≥ +7 % of the peak (no ringing below
+    zero from the sky alone). Bounds: 8 % and 12 %."""
     err, raw_min, img, exact, _ = S.sky_ringing(3.0, "none", rays=2048, device=device, normals=128)
     assert np.all(img >= 0)
-    assert err <= 0.07, f"{err:.3f} of the peak"
+    assert err <= 0.08, f"{err:.3f} of the peak"
     assert raw_min > 0.0
     err_nn, raw_nn, img_nn, _, _ = S.sky_ringing(3.0, "nonneg", rays=2048, device=device, normals=128)
     assert np.all(img_nn >= 0) and raw_nn > 0.0 and err_nn <= 0.12
@@ -45,9 +46,10 @@ def test_point_sun_in_the_sh_rings_below_zero_unless_windowed():
 def test_terrain_quads_vs_brute_force_visibility(device):
     """Sky irradiance at 24 terrain points (surface normal) vs the brute-force cosine integral with
     the terrain's exact visibility (kd-tree, 2048 directions): quads are rectangles, a height field
-    is not. Measured mean relative error (256 rays per probe): no quads 0.24, the scene's 4
-    hand-placed quads 0.26, the automatic fit 0.20. Bounds: every configuration ≤ 0.35 (the volume
-    is useful, but a quarter off on terrain), and the automatic fit no worse than no quads + 0.02."""
+    is not. Measured mean relative error (128 rays per probe): no quads 0.20, the scene's 4
+    hand-placed quads 0.30, the automatic fit 0.18. Bounds: every configuration ≤ 0.35 (the volume
+    is useful, but a fifth to a third off on terrain), and the automatic fit no worse than no quads
+    + 0.02."""
     out, exact, _ = S.terrain_sky_visibility(count=24, rays=128, n_dirs=2048, device=device)
     print({k: round(v[0], 3) for k, v in out.items()})
     assert np.all(exact > 0)
