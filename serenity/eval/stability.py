@@ -18,6 +18,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from serenity.bench import camera_path
+from serenity.config import LPVConfig, RenderConfig, ShadowConfig, SkyConfig, SSAOConfig
+from serenity.eval.exact import exact_sun_visibility
+from serenity.frame import Renderer
+from serenity.kernels import sh
+from serenity.kernels.atmosphere import bake_sky_map, horizontal_irradiance, sample_sky_map_np, scene_sun_irradiance
+from serenity.kernels.kdtree import KdTree
+from serenity.kernels.lpv import LightPropagationVolume
+from serenity.kernels.raytrace import RayTracer
+from serenity.kernels.sampling import fibonacci_sphere
+from serenity.kernels.skyvolume import SkyVolume
+from serenity.raster.interop import read_texture
+from serenity.raster.shadow import fit_shadow_cascades
+from serenity.scene import load
+from serenity.scene.model import Camera, Sky, Sun, direction_from_angles
+from serenity.scene.procedural import _Builder, plane_scene
+
 UP = np.array([0.0, 1.0, 0.0])
 
 
@@ -29,7 +46,6 @@ class Case:
     ``ms_without`` / ``ms_with`` the cost of the evaluated technique without / with the mitigation
     (wall clock, one run after a warm-up where stated); ``images`` name → (H, W) or (H, W, 3) float
     arrays for the gallery (``exact``, ``without``, ``with``, ``error``); ``extra`` further numbers."""
-
     name: str
     technique: str
     metric: str
@@ -63,9 +79,6 @@ def _timed(fn, *args, **kw):
 
 def _unit_lpv(res: int, cell: float, iterations: int, device=None, **kw):
     """One cascade of ``res``³ cells of ``cell`` m with its origin at (−cell, −cell, −cell)."""
-    from serenity.config import LPVConfig
-    from serenity.kernels.lpv import LightPropagationVolume
-
     kw.setdefault("cross_scene", False)
     cfg = LPVConfig(resolution=res, cascades=1, iterations=iterations, early_stop=0.0, **kw)
     v = LightPropagationVolume(cfg, device=device)
@@ -206,9 +219,6 @@ def _brute_sky_irradiance(sky_map, ground_radiance, normals, visible=None, n_dir
     """(N, 3) W/m²: ∫ L(ω)·V(ω)·max(0, n·ω) dω over a Fibonacci sphere of ``n_dirs`` directions, L
     the sky map above the horizon and ``ground_radiance`` below (the sky volume's model), V the
     (n_dirs,) bool visibility (None: all visible)."""
-    from serenity.kernels.atmosphere import sample_sky_map_np
-    from serenity.kernels.sampling import fibonacci_sphere
-
     d = fibonacci_sphere(n_dirs)
     rad = np.where((d[:, 1] >= 0)[:, None], sample_sky_map_np(sky_map, d), np.asarray(ground_radiance)[None])
     if visible is not None:
@@ -222,13 +232,6 @@ def sky_ringing(elevation: float = 3.0, window: str = "none", rays: int = 4096, 
     of the same sky map at ``normals`` Fibonacci normals, at every probe: returns (max |E − E_exact|
     over max E_exact, min of the unclamped SH irradiance over max E_exact, E (probes, normals) of
     the green channel, exact (normals,), ms of the build)."""
-    from serenity.config import SkyConfig
-    from serenity.kernels import sh
-    from serenity.kernels.sampling import fibonacci_sphere
-    from serenity.kernels.skyvolume import SkyVolume
-    from serenity.scene.model import Sky, direction_from_angles
-    from serenity.scene.procedural import plane_scene
-
     scene = plane_scene(elevation_deg=elevation, azimuth_deg=250.0)
     scene.sky = Sky()  # the atmosphere
     scene.sun.direction = direction_from_angles(elevation, 250.0)
@@ -296,12 +299,6 @@ def terrain_sky_visibility(scene="terrain", count: int = 48, rays: int = 256, n_
     with the terrain's exact visibility (its kd-tree; occluded rays black, as the volume treats
     quads). Returns {config: (mean relative error (green), E (count,), ms of the build)}, the
     exact E, the points and the build ms."""
-    from serenity.config import SkyConfig
-    from serenity.kernels.kdtree import KdTree
-    from serenity.kernels.sampling import fibonacci_sphere
-    from serenity.kernels.skyvolume import SkyVolume
-    from serenity.scene import load
-
     base = load(scene) if isinstance(scene, str) else scene
     pts, nrm = terrain_sky_points(base, count)
     pos, _, _, faces, _ = base.merged()
@@ -353,9 +350,6 @@ def shadow_scene(elevation: float, azimuth: float = 90.0, wall: bool = False, bo
     """A 40 × 40 m grey plane (albedo 0.5) under a sun of 1000 W/m² (black sky), optionally a 2 m
     high, 0.2 m thick wall along z at x ∈ [−0.1, 0.1], z ∈ [−19, 15] and a 2 m cube at the origin
     (x, z ∈ [−1, 1]). The camera looks down −z from (−3, 1.7, 18)."""
-    from serenity.scene.model import Camera, Sky, Sun, direction_from_angles
-    from serenity.scene.procedural import _Builder
-
     b = _Builder()
     b.material("plane", albedo=(0.5, 0.5, 0.5))
     b.material("block", albedo=(0.5, 0.5, 0.5))
@@ -373,9 +367,6 @@ def render_sun_visibility(scene, width: int, height: int, shadow, sky: bool = Fa
     """Render ``scene`` (direct light only: no LPV, SSAO, sky lighting) and return (visibility
     (H, W) = direct / unshadowed direct on the ground (NaN elsewhere), positions (H, W, 3), the
     ground mask, ms of the frame)."""
-    from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
-    from serenity.frame import Renderer
-
     cfg = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=sky), ssao=SSAOConfig(enabled=False),
                        shadow=shadow)
     r = Renderer(scene, width, height, config=cfg)
@@ -393,9 +384,6 @@ def render_sun_visibility(scene, width: int, height: int, shadow, sky: bool = Fa
 
 def exact_ground_visibility(scene, points, n: int = 256):
     """Exact sun-disc visibility (P,) at ground points (normal +y), traced with the scene's kd-tree."""
-    from serenity.eval.exact import exact_sun_visibility
-    from serenity.kernels.kdtree import KdTree
-
     pos, _, _, faces, _ = scene.merged()
     tree = KdTree.build(pos, faces, cache=False)
     return exact_sun_visibility(tree, np.asarray(points, np.float64), np.tile(UP, (len(points), 1)),
@@ -406,8 +394,6 @@ def shadow_acne_case(elevation: float = 2.0, size=(160, 90)) -> Case:
     """Shadow acne on an open plane under a grazing sun (exact visibility 1 everywhere): fraction of
     ground pixels darker than 0.99 of the unshadowed light, without depth bias and normal offset
     vs the defaults. Images: visibility."""
-    from serenity.config import ShadowConfig
-
     scene = shadow_scene(elevation)
     a = render_sun_visibility(scene, *size, ShadowConfig(bias=0.0, normal_offset=0.0))
     b = render_sun_visibility(scene, *size, ShadowConfig())
@@ -423,8 +409,6 @@ def peter_panning(elevation: float, shadow, size=(160, 90), band: float = 0.25):
     shadow side from above: (fraction of ground pixels within ``band`` m of the cube's base on its
     shadow side, in the exact umbra, that come out more than half lit; visibility image; exact
     image; ms)."""
-    from serenity.scene.model import Camera
-
     scene = shadow_scene(elevation, azimuth=90.0, box=True)
     scene.camera = Camera(position=(-3.5, 3.0, 3.0), target=(-1.3, 0.0, 0.0), fov_y_deg=50.0, near=0.05, far=100.0)
     vis, pos, ground, ms = render_sun_visibility(scene, *size, shadow)
@@ -439,8 +423,6 @@ def peter_panning(elevation: float, shadow, size=(160, 90), band: float = 0.25):
 def peter_panning_case(elevation: float = 10.0, size=(160, 90)) -> Case:
     """Peter-panning: the bias that cures acne detaches shadows from their casters. Fraction of the
     exact umbra within 25 cm of a cube's base rendered more than half lit: no bias vs default bias."""
-    from serenity.config import ShadowConfig
-
     a = peter_panning(elevation, ShadowConfig(bias=0.0, normal_offset=0.0), size)
     b = peter_panning(elevation, ShadowConfig(), size)
     return Case(f"peter-panning (sun {elevation} deg, cube contact)", "shadows",
@@ -454,8 +436,6 @@ def cascade_seams(shadow, size=(320, 180), elevation: float = 30.0):
     edge (x = −2/tan(elevation) − 0.1) runs through every cascade split. Returns (max over splits of
     |mean visibility in the 0.5 m of depth past the split − before it| along the edge band, minus
     the exact's; mean |vis − exact| near the edge; visibility image; exact image; ms)."""
-    from serenity.raster.shadow import fit_shadow_cascades
-
     scene = shadow_scene(elevation, azimuth=90.0, wall=True)
     vis, pos, ground, ms = render_sun_visibility(scene, *size, shadow)
     x_edge = -0.1 - 2.0 / math.tan(math.radians(elevation))
@@ -481,8 +461,6 @@ def cascade_seams(shadow, size=(320, 180), elevation: float = 30.0):
 def cascade_seam_case(size=(320, 180)) -> Case:
     """Cascade seams: the step in the shadow term across each CSM split along a shadow edge that
     runs through all of them, without the cross-fade band (cascade_blend 0) vs the default 0.1."""
-    from serenity.config import ShadowConfig
-
     a = cascade_seams(ShadowConfig(cascade_blend=0.0), size)
     b = cascade_seams(ShadowConfig(), size)
     return Case("CSM cascade seams (shadow edge across splits)", "shadows",
@@ -498,8 +476,6 @@ def penumbra(elevation: float, shadow, size=(256, 256)):
     from straight above: (mean |vis − exact| over ground pixels within max(0.3 m, 1.5 exact
     penumbra widths) of the edge, rendered
     10–90 % width / exact width, visibility image, exact image, ms)."""
-    from serenity.scene.model import Camera
-
     scene = shadow_scene(elevation, azimuth=90.0, box=True)
     x_edge = -1.0 - 2.0 / math.tan(math.radians(elevation))
     width_exact = 2.0 * math.radians(scene.sun.angular_diameter_deg) / math.sin(math.radians(elevation)) ** 2
@@ -522,8 +498,6 @@ def penumbra(elevation: float, shadow, size=(256, 256)):
 
 def penumbra_case(elevation: float = 10.0, size=(256, 256)) -> Case:
     """PCSS penumbra vs the exact sun-disc visibility at a cube's shadow edge: hard shadows vs PCSS."""
-    from serenity.config import ShadowConfig
-
     a = penumbra(elevation, ShadowConfig(filter="hard"), size)
     b = penumbra(elevation, ShadowConfig(filter="pcss"), size)
     return Case(f"penumbra width (sun {elevation} deg)", "shadows", "mean abs(vis - exact) across the penumbra",
@@ -577,9 +551,6 @@ def glass_slab_case(count: int = 64, device=None) -> Case:
     """Refraction through the ``glass`` scene's slab (two interfaces): distance of the reported hit
     from the exact floor hit, the paper's single refraction (transmissions 0: the slab's own back
     face) vs bending through up to 4 interfaces. Images: hit distance errors per ray (1 row)."""
-    from serenity.kernels.raytrace import RayTracer
-    from serenity.scene import load
-
     tracer = RayTracer(load("glass"), device=device)
     o, d, exact = glass_slab_rays(count)
     out = {}
@@ -602,12 +573,6 @@ def mirror_shadow_case(size=(160, 90), device=None) -> Case:
     hits (the kd-tree) vs the overlapped shadow maps' answer as the RT direct-lighting pass uses it
     (its direct term over the unshadowed one). Error: fraction of hits whose shadow state (exact
     visibility < 0.5) differs; "without" lights every hit as unshadowed."""
-    from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
-    from serenity.eval.exact import exact_sun_visibility
-    from serenity.frame import Renderer
-    from serenity.raster.interop import read_texture
-    from serenity.scene import load
-
     scene = load("mirror-box")
     cfg = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ssao=SSAOConfig(enabled=False),
                        overlap=False)
@@ -630,7 +595,6 @@ def mirror_shadow_case(size=(160, 90), device=None) -> Case:
     pix, texel = pix[hit][lit_side], texel[hit][lit_side]
     vis = exact_sun_visibility(r.tracer.tree, p, n, sun, scene.sun.angular_diameter_deg, n=64)
     direct = read_texture(r.rt_deferred.direct, 3)[::-1].reshape(-1, 3)  # GL row order: texel k = (k mod W, k div W)
-    from serenity.kernels.atmosphere import scene_sun_irradiance
 
     e = scene_sun_irradiance(scene)
     ours = direct[texel, 1] / np.maximum(alb[:, 1] / math.pi * e[1] * cos, 1e-9)
@@ -658,9 +622,6 @@ def mirror_shadow_case(size=(160, 90), device=None) -> Case:
 def horizon_scene(elevation: float):
     """A 4 × 3 m grey block (albedo 0.5) on a grey plane under the atmosphere, the sun ``elevation``°
     in the west (azimuth 270°); the camera looks at the block's sunlit west face."""
-    from serenity.scene.model import Camera, Sky, Sun, direction_from_angles
-    from serenity.scene.procedural import _Builder
-
     b = _Builder()
     b.material("ground", albedo=(0.5, 0.5, 0.5))
     b.material("block", albedo=(0.5, 0.5, 0.5))
@@ -681,11 +642,6 @@ def horizon_sweep(elevations, size=(48, 27), device=None, rebuild_angle_deg: flo
     image was finite, the smallest radiance, and the largest step excess (|Δours| − |Δexact|) over
     the larger exact value of the two steps. ``probes`` / ``rays``: the sky volume's resolution
     (None: its default) and rays per probe."""
-    from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
-    from serenity.frame import Renderer
-    from serenity.kernels.atmosphere import bake_sky_map, horizontal_irradiance, scene_sun_irradiance
-    from serenity.scene.model import direction_from_angles
-
     scene = horizon_scene(float(elevations[0]))
     cfg = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False), sky_layers_per_frame=1 << 10,
                        sky=SkyConfig(rebuild_angle_deg=rebuild_angle_deg, resolution=probes, rays_per_probe=rays))
@@ -727,10 +683,6 @@ def nested_glass_error(count: int = 32, transmissions: int = 4, seed: int = 1, d
     the inner faces separate glass from the same glass, so rays bend only at the outer faces and
     leave parallel to where they came from. Returns the distances (m) of the traced wall hits from
     the exact ones (inf where the ray did not reach the wall)."""
-    from serenity.kernels.raytrace import RayTracer
-    from serenity.scene.model import Camera, Sun
-    from serenity.scene.procedural import _Builder
-
     b = _Builder()
     b.material("glass", albedo=(0.95,) * 3, transparency=0.95, ior=1.5)
     b.material("wall", albedo=(0.5,) * 3)
@@ -776,11 +728,6 @@ def sun_motion_sequence(frames: int = 60, step_deg: float = 0.05, size=(64, 36),
     per-pixel error of the worst-lag frame. ``probes`` / ``rays``: the sky volume's resolution (None:
     its default), rays per probe and sky map size; ``gi``: further RenderConfig fields (e.g.
     ``lpv=LPVConfig(enabled=False)``)."""
-    from serenity.config import RenderConfig, SkyConfig
-    from serenity.frame import Renderer
-    from serenity.scene import load
-    from serenity.scene.model import direction_from_angles
-
     runs = {}
     for label, layers, angle in (("ours", 1, rebuild_angle_deg), ("converged", 1 << 10, 0.0)):
         scene = load(scene_name)
@@ -838,11 +785,6 @@ def camera_path_sequence(frames: int = 60, size=(96, 54), scene_name: str = "thi
     its max and mean, ms per frame, and the fewest points matched in a frame (``matched``). The
     interpolation itself errs across shadow edges, so points whose 4 taps differ by more than 5 % are
     left out; the direct-only run measures what error remains from the reprojection."""
-    from serenity.bench import camera_path
-    from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
-    from serenity.frame import Renderer
-    from serenity.scene import load
-
     scene = load(scene_name)
     base = scene.camera
     if isinstance(gi, dict):
@@ -908,7 +850,6 @@ def camera_path_case(frames: int = 60, size=(96, 54), device=None) -> Case:
     renderer (LPV, sky volume, SSAO)."""
     a = camera_path_sequence(frames, size, gi=False, device=device)
     b = camera_path_sequence(frames, size, gi=True, device=device)
-    from serenity.config import LPVConfig
 
     c = camera_path_sequence(frames, size, gi={"lpv": LPVConfig(enabled=False)}, device=device)
     return Case(f"camera on the bench path, {frames} frames (thin-wall)", "frame to frame",
