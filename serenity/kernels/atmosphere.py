@@ -43,7 +43,8 @@ geometry for both optical depths. The tests and ``benchmarks/bench_sky.py`` meas
 against it.
 
 **Sun** (paper §6): :func:`sun_irradiance` = E₀·exp(−τ(ground → sun)) on a surface facing the sun
-(0 once the sun is below the geometric horizon; no refraction), :func:`sun_radiance` = that over the
+(× the fraction of its disc above the geometric horizon: it fades over ±0.27° and is 0 once all
+of it is below; no refraction), :func:`sun_radiance` = that over the
 disc's solid angle, :func:`make_sun` a :class:`serenity.scene.model.Sun` with it.
 E₀ = ``SOLAR_IRRADIANCE`` = 1100 W·m⁻² per channel (white): the solar constant is 1361 W·m⁻² over
 the whole spectrum; in the renderer's radiometric RGB the sun at zenith then delivers
@@ -112,6 +113,7 @@ from serenity.kernels.atmosphere_ref import (
     sky_map_directions,
     sky_map_solid_angles,
     sky_radiance_reference,
+    sun_disc_fraction,
     sun_irradiance,
     sun_radiance,
     sun_transmittance,
@@ -438,7 +440,7 @@ __all__ = [
     "RAYLEIGH_SCATTERING", "SOLAR_IRRADIANCE", "SUN_ANGULAR_DIAMETER_DEG", "SKY_MAP_SIZE", "angle_between_deg",
     "direction_to_paraboloid", "equirect_directions", "horizontal_irradiance", "make_sun", "paraboloid_direction",
     "sample_sky_map_np", "scene_sun_irradiance", "sky_map_directions", "sky_map_solid_angles",
-    "sky_radiance_reference", "sun_irradiance", "sun_radiance", "sun_transmittance",
+    "sky_radiance_reference", "sun_disc_fraction", "sun_irradiance", "sun_radiance", "sun_transmittance",
     # the Warp model
     "SkyMapCache", "bake_sky_map", "bake_sky_map_wp", "equirect_sky", "sample_sky_map", "sample_sky_map_wp",
     "sky_radiance",

@@ -5,7 +5,9 @@ Warp model and the sky-map layout are described in ``serenity/kernels/atmosphere
 **Reference model** (:func:`sky_radiance_reference`): the single-scattering integral with uniform
 midpoint steps (512 along the view ray, 256 along each sun ray by default) and the exact geometry
 for both optical depths. The tests and ``benchmarks/bench_sky.py`` measure the fast model against
-it. **Sun** (paper §6): :func:`sun_irradiance` = E₀·exp(−τ(ground → sun)), :func:`sun_radiance`,
+it. **Sun** (paper §6): :func:`sun_irradiance` = E₀·exp(−τ(ground → sun)) × the fraction of its disc
+above the geometric horizon (:func:`sun_disc_fraction`: it fades over ±0.27° instead of popping),
+:func:`sun_radiance`,
 :func:`make_sun`, :func:`scene_sun_irradiance` (what the renderer and the Mitsuba reference light with).
 """
 
@@ -201,15 +203,35 @@ def sun_transmittance(sun_direction, steps: int = 4096) -> np.ndarray:
     return np.exp(-(_BETA_R_NP * tr[0] + MIE_EXTINCTION * tm[0]))
 
 
-def sun_irradiance(sun_direction) -> np.ndarray:
-    """(3,) float64 W·m⁻² of the sun on a surface facing it at the ground (E₀ × transmittance)."""
-    return _E0_NP * sun_transmittance(sun_direction)
+def sun_disc_fraction(sun_direction, angular_diameter_deg: float = SUN_ANGULAR_DIAMETER_DEG) -> float:
+    """Fraction of the sun's disc above the geometric horizon: 1 when its centre is more than the
+    disc's angular radius r above it, 0 when more than r below, the circular segment's share of
+    the disc in between (x = elevation/r: 1 − (acos x − x·√(1 − x²))/π; ½ at sunset)."""
+    sun = _unit(sun_direction)
+    r = math.radians(angular_diameter_deg) / 2.0
+    x = min(max(math.asin(min(max(sun[1], -1.0), 1.0)) / r, -1.0), 1.0)
+    return 1.0 - (math.acos(x) - x * math.sqrt(1.0 - x * x)) / math.pi
+
+
+def sun_irradiance(sun_direction, angular_diameter_deg: float = SUN_ANGULAR_DIAMETER_DEG) -> np.ndarray:
+    """(3,) float64 W·m⁻² of the sun on a surface facing it at the ground: E₀ × transmittance ×
+    :func:`sun_disc_fraction`. While the disc sets (centre within its radius of the horizon) the
+    transmittance is the horizon's, so the sun fades over ±0.27° instead of popping from the
+    horizon's ~17 W/m² (red) to 0 as its centre crosses it."""
+    sun = _unit(sun_direction)
+    f = sun_disc_fraction(sun, angular_diameter_deg)
+    if f <= 0.0:
+        return np.zeros(3)
+    if sun[1] < 0.0:  # the visible sliver: the horizon's transmittance
+        h = math.hypot(sun[0], sun[2])
+        sun = np.array([sun[0] / h, 0.0, sun[2] / h]) if h > 0 else np.array([1.0, 0.0, 0.0])
+    return _E0_NP * sun_transmittance(sun) * f
 
 
 def sun_radiance(sun_direction, angular_diameter_deg: float = SUN_ANGULAR_DIAMETER_DEG) -> np.ndarray:
     """(3,) float64 W·m⁻²·sr⁻¹ of the (uniform) sun disc: :func:`sun_irradiance` / disc solid angle."""
     omega = 2.0 * math.pi * (1.0 - math.cos(math.radians(angular_diameter_deg) / 2.0))
-    return sun_irradiance(sun_direction) / omega
+    return sun_irradiance(sun_direction, angular_diameter_deg) / omega
 
 
 def make_sun(sun_direction, angular_diameter_deg: float = SUN_ANGULAR_DIAMETER_DEG):
@@ -236,11 +258,12 @@ def angle_between_deg(a, b) -> float:
 def scene_sun_irradiance(scene) -> np.ndarray:
     """(3,) W·m⁻² the sun delivers in ``scene``: the atmosphere's transmitted irradiance
     (:func:`sun_irradiance`, the sun's colour by time of day, paper §6) when ``scene.sky.model`` is
-    "atmosphere", else the scene's own ``Sun.irradiance``; zero below the horizon. The renderer and
+    "atmosphere" (fading as the disc sets, zero once all of it is below the horizon), else the
+    scene's own ``Sun.irradiance``, zero with the sun's centre below the horizon. The renderer and
     the Mitsuba reference both take the sun from here, so they agree."""
     sun = scene.sun
+    if getattr(scene.sky, "model", "constant") == "atmosphere":
+        return sun_irradiance(sun.direction, sun.angular_diameter_deg)
     if not sun.is_up:
         return np.zeros(3)
-    if getattr(scene.sky, "model", "constant") == "atmosphere":
-        return sun_irradiance(sun.direction)
     return np.asarray(sun.irradiance, np.float64)
