@@ -6,8 +6,8 @@ LPV's atomic scatter and staging, the single-launch path of ``kernels/launch.py`
 GPUs (``tests/kernels/test_cuda_compile.py``) but has not run on one yet, so it is chosen only
 explicitly (``--device cuda:0``) and says so once, in one line on stderr. A device that does not
 exist raises ``DeviceError`` (a ``SerenityError``: the CLI prints one line). Nothing happens at
-import time: Warp is initialised on the first call (quietly), so importing ``serenity`` costs
-nothing and never touches a GPU.
+import time: Warp is imported but initialised on the first call (quietly), so importing this
+module never touches a GPU (and ``import serenity`` does not import it).
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ import sys
 import tempfile
 import threading
 from dataclasses import dataclass
+
+import warp as wp
 
 from serenity.errors import SerenityError
 
@@ -36,8 +38,6 @@ class DeviceError(SerenityError, RuntimeError):
 def init_warp():
     """Initialise Warp once (quiet, no backward passes); return the ``warp`` module."""
     global _initialised
-    import warp as wp
-
     if not _initialised:
         with _lock:
             if not _initialised:

@@ -39,15 +39,10 @@ LAZY_IMPORT_PACKAGES = ("serenity.commands",)
 """Where a function may import anything: a command imports what it runs when it runs, so that
 ``serenity --help`` does not load Warp, OpenGL or trimesh."""
 
-PENDING_LOCAL_IMPORTS = {
-    "serenity.frame", "serenity.device", "serenity.raster.context",
-    "serenity.kernels.kdtree", "serenity.kernels.quadfit", "serenity.kernels.sampling",
-    "serenity.kernels.atmosphere", "serenity.kernels.skyvolume",
-}
-"""Modules still importing required packages or serenity modules inside functions, because they
-were being rewritten in parallel (the frame, the device resolution, the sky volume and atmosphere
-splits) when this rule came in. Delete a name here once its module follows the rule; a module missing from
-the package is ignored, so a split leaves no stale entry behind."""
+PENDING_LOCAL_IMPORTS: set[str] = set()
+"""Modules allowed, for now, to import required packages or serenity modules inside functions (while
+being rewritten when the rule came in; empty since every module follows it). A name here exempts
+that module only; a module missing from the package is ignored."""
 
 
 @dataclass(frozen=True)
