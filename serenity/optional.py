@@ -21,6 +21,9 @@ PACKAGES: dict[str, tuple[str, str]] = {
     "flip_evaluator": ("flip-evaluator", "eval"),
     "matplotlib": ("matplotlib", "eval"),
     "embreex": ("embreex", "bench"),
+    "glfw": ("glfw", "view"),
+    "moderngl_window": ("moderngl-window", "view"),
+    "imgui_bundle": ("imgui-bundle", "view"),
 }
 """Import name → (what to call it in a message, the extra that installs it)."""
 

@@ -1,15 +1,16 @@
 #!/bin/sh
 # Headless rendering needs libEGL + Mesa's software rasteriser (llvmpipe) or a GPU driver; the
-# viewer's test (serenity view under a virtual X server) needs Xvfb (xvfb-run, xauth) and GLX.
+# viewer's tests (serenity view under a virtual X server) need Xvfb (xvfb-run, xauth), GLX and the
+# X libraries GLFW loads, and xdotool to send real key and mouse events.
 # On Debian/Ubuntu as root, install them; otherwise say exactly what to install.
 PKGS="libegl1 libgl1-mesa-dri libgles2"
-VIEW_PKGS="xvfb xauth libgl1 libglx-mesa0 libx11-6 libxrandr2 libxinerama1 libxcursor1 libxi6"
+VIEW_PKGS="xvfb xauth xdotool libgl1 libglx-mesa0 libx11-6 libxrandr2 libxinerama1 libxcursor1 libxi6"
 have_gl() {
   ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' && \
     { ls /usr/lib/*/dri/swrast_dri.so /usr/lib/*/dri/*_dri.so >/dev/null 2>&1 || ldconfig -p | grep -q libEGL_nvidia; }
 }
 have_view() {
-  command -v xvfb-run >/dev/null 2>&1 && command -v xauth >/dev/null 2>&1 && \
+  command -v xvfb-run >/dev/null 2>&1 && command -v xauth >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1 && \
     ldconfig -p 2>/dev/null | grep -q 'libGLX_mesa.so.0\|libGLX_nvidia.so.0' && ldconfig -p | grep -q 'libXrandr.so.2'
 }
 if have_gl && have_view; then

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 
-from serenity.commands.common import DEFAULT_OUT_DIR, DEFAULT_SCENE, DEFAULT_SIZE, parse_size
+from serenity.commands.common import DEFAULT_OUT_DIR, DEFAULT_SCENE, DEFAULT_SIZE, add_quality_argument, parse_size
 from serenity.config import DEFAULT_EXPOSURE
 from serenity.errors import SerenityError
 
@@ -16,7 +16,7 @@ def register(subparsers) -> None:
     v.add_argument("scene", nargs="?", default=DEFAULT_SCENE, help="built-in scene name or a scene/mesh file")
     v.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}",
                    help="render size WxH (default %(default)s); the window opens at this size")
-    v.add_argument("--quality", default="high", help="quality preset: low | medium | high (default %(default)s)")
+    add_quality_argument(v)
     v.add_argument("--device", help="cpu (default) | cuda:0 (compiles, not yet run on a GPU: unverified)")
     v.add_argument("--exposure", type=float, default=DEFAULT_EXPOSURE,
                    help="exposure before Reinhard (default %(default)s)")

@@ -23,9 +23,9 @@ from serenity.eval.metrics import compare, flip_png
 from serenity.frame import Renderer
 from serenity.io.exr import write_exr
 from serenity.io.png import write_png
+from serenity.optional import require
 from serenity.raster.interop import read_texture, upload_texture
 from serenity.scene.mesh_io import export_glb
-from serenity.scene.sun import DEFAULT_LOCATION
 from serenity.scene.toml_scene import save_toml
 from serenity.view import present
 from serenity.view.controls import VIEWS, FlyCamera, Settings, TimeOfDay
@@ -49,10 +49,7 @@ class Viewer:
         self.wnd = open_window(self.width, self.height, f"Serenity — {scene.name}", visible=visible)
         self.ctx = self.wnd.ctx
         self.fly = FlyCamera.from_camera(scene.camera)
-        lat, lon = getattr(scene, "location", None) or DEFAULT_LOCATION
-        self.tod = TimeOfDay(latitude=float(lat), longitude=float(lon), utc_offset=float(round(lon / 15.0)))
-        if getattr(scene, "location", None) is not None:
-            self.tod.utc_offset = 1.0  # the built-in scenes' DEFAULT_TIME is given at +01:00
+        self.tod = TimeOfDay.for_scene(scene)
         self.view = "final"
         self.split = 0.5
         self.keys_down: set[str] = set()
@@ -78,6 +75,7 @@ class Viewer:
         self._rt_mask_tex = None
 
         self.renderer = None
+        self.builds = 0
         self._build_renderer()
         self.present = present.PresentPass(self.ctx)
         self.lines = present.LinesPass(self.ctx)
@@ -93,15 +91,16 @@ class Viewer:
             _release_gl(old)
         self.renderer = Renderer(self.scene, self.width, self.height, device=self.device,
                                  config=self.settings.config())
+        self.builds += 1
 
     def _init_imgui(self) -> None:
-        from imgui_bundle import imgui
-        from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
+        imgui = require("imgui_bundle", "serenity view's panel").imgui
+        integration = require("moderngl_window.integrations.imgui_bundle", "serenity view's panel")
 
         imgui.create_context()
         imgui.get_io().set_ini_filename("")
         self.imgui = imgui
-        self.gui = ModernglWindowRenderer(self.wnd)
+        self.gui = integration.ModernglWindowRenderer(self.wnd)
 
     def _bind_events(self) -> None:
         w = self.wnd
@@ -239,6 +238,8 @@ class Viewer:
                     self.set_value(k, v)
             elif s.action == "screenshot":
                 shots.append(s.value)
+            elif s.action == "wait":
+                self.wait_for_reference()
             elif s.action == "exit":
                 self._quit = True
         return shots
@@ -297,6 +298,7 @@ class Viewer:
         return 0
 
     def _frame(self, shots: list[str], real_dt: float) -> None:
+        self._loop_ms = real_dt * 1e3  # the previous frame's full period: input, render, draw, panel, swap
         r = self.renderer
         save = self._save_requested
         self._save_requested = False
@@ -411,20 +413,20 @@ class Viewer:
 
     # ------------------------------------------------------------------------------ refinement
 
-    def sky_state(self) -> tuple[int, int] | None:
-        """(stale layers, layers) of the sky volume, None when it is off. The sweep integrates
-        layers 0..Y-1 in order, so the stale ones are the last ``stale``."""
+    def sky_stale(self) -> np.ndarray | None:
+        """(Y,) bool: the sky volume's layers not yet integrated against the current sky (always
+        none with the "transfer" method, which re-lights every probe at once); None when it is off."""
         sv = self.renderer.sky_volume
         if sv is None:
             return None
-        return int(sv.pending_layers), int(sv.resolution[1])
+        return np.asarray(sv.layer_versions != sv.sky_version)
 
     @property
     def converged(self) -> bool:
         """Nothing moved this frame and nothing temporal is left to refine (the sky volume's layer
         sweep is the pipeline's only progressive state)."""
-        s = self.sky_state()
-        return self.still_frames > 0 and (s is None or s[0] == 0)
+        s = self.sky_stale()
+        return self.still_frames > 0 and (s is None or not s.any())
 
     # ----------------------------------------------------------------------- save / screenshots
 
@@ -459,12 +461,14 @@ class Viewer:
         if self.trace_path is None:
             return
         cam, sun = self.scene.camera, self.scene.sun
-        s = self.sky_state()
+        s = self.sky_stale()
         self.trace.append({
             "frame": self.frame_index, "camera_position": cam.position.tolist(), "camera_forward": cam.forward.tolist(),
             "sun_direction": sun.direction.tolist(), "sun_elevation_deg": sun.elevation_deg, "hour": self.tod.hour,
-            "view": self.view, "still_frames": self.still_frames, "converged": self.converged,
-            "sky_stale_layers": None if s is None else s[0], "timings_ms": frame.timings, "wall_ms": frame.wall_ms,
+            "view": self.view, "still_frames": self.still_frames, "renderer_builds": self.builds,
+            "loop_ms": self._loop_ms, "ssao": self.renderer.config.ssao.enabled, "converged": self.converged,
+            "sky_stale_layers": None if s is None else int(s.sum()), "timings_ms": frame.timings,
+            "wall_ms": frame.wall_ms,
             "read_back": frame.hdr is not None, "reference_progress": None if self.job is None else self.job.progress,
             "comparison": None if self.comparison is None else {k: self.comparison[k] for k in ("flip", "rel_mse")},
         })
@@ -507,9 +511,13 @@ class Viewer:
             self.view = "reference split"
 
     def wait_for_reference(self, timeout: float | None = None) -> None:
-        if self.job is not None:
-            self.job.wait(timeout)
+        """Block until the running reference is done (a script's ``wait``); its failure is an error."""
+        job = self.job
+        if job is not None:
+            job.wait(timeout)
             self._poll_reference()
+            if job.error is not None:
+                raise SerenityError(f"the reference failed: {job.error}")
 
     # ------------------------------------------------------------------------------------ close
 

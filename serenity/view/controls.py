@@ -16,16 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from serenity.config import DEFAULT_EXPOSURE, RenderConfig, ShadowConfig, SSAOConfig
+from serenity.config import DEFAULT_EXPOSURE, DEFAULT_QUALITY, RenderConfig
 from serenity.errors import SerenityError
-from serenity.scene.sun import DEFAULT_LOCATION, sun_from_time
+from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, parse_time, sun_from_time
 
-QUALITY_PRESETS = ("low", "medium", "high")
 #: the techniques the panel switches; "live" ones change per frame, the others rebuild the Renderer
 LIVE_TOGGLES = ("ssao",)
 REBUILD_TOGGLES = ("sky_lighting", "lpv", "ray_tracing")
 SHADOW_FILTERS = ("hard", "pcf", "pcss")
-#: view name -> what it shows (the panel's combo, ``set = { view = ... }``, V cycles)
+#: view name -> what it shows (the panel's combo, a script's ``set = { view = ... }``, V cycles)
 VIEWS = {
     "final": "the tone-mapped frame",
     "albedo": "G-buffer albedo",
@@ -36,29 +35,15 @@ VIEWS = {
     "ao": "SSAO (1 = open; at the indirect light's resolution)",
     "rt mask": "pixels with ray-traced reflection/refraction",
     "lpv cascades": "the frame with the LPV cascades' bounds",
-    "reference split": "ours (left) | path-traced reference (right)",
-    "flip error": "FLIP error map against the reference",
+    "reference split": "ours when R was pressed (left) | its path-traced reference (right)",
+    "flip error": "FLIP error map of that comparison",
 }
 
 
-def quality_config(name: str, base: RenderConfig | None = None) -> RenderConfig:
-    """The ``RenderConfig`` of a ``--quality`` preset. ``RenderConfig.preset(name)`` when the
-    config has presets; until then "high" is the default config, "medium" halves the shadow maps
-    and SSAO directions, "low" also drops to two cascades, 6 SSAO directions and a 128² RSM."""
-    if name not in QUALITY_PRESETS and not hasattr(RenderConfig, "preset"):
-        raise SerenityError(f"--quality must be one of {', '.join(QUALITY_PRESETS)}, got {name!r}")
-    if hasattr(RenderConfig, "preset"):
-        cfg = RenderConfig.preset(name)
-    elif name == "high":
-        cfg = RenderConfig()
-    elif name == "medium":
-        cfg = RenderConfig(shadow=ShadowConfig(size=1024), ssao=SSAOConfig(directions=6))
-    else:
-        cfg = RenderConfig(shadow=ShadowConfig(size=1024, cascades=2, filter_samples=16, blocker_samples=8),
-                           ssao=SSAOConfig(directions=6, steps=3), rsm_size=128)
-    if base is not None:
-        cfg = dataclasses.replace(cfg, exposure=base.exposure, overlap=base.overlap)
-    return cfg
+def quality_config(name: str) -> RenderConfig:
+    """The ``RenderConfig`` of a quality preset (``RenderConfig.preset``, as ``serenity render
+    --quality``); an unknown name is a one-line ``ConfigError``."""
+    return RenderConfig.preset(name)
 
 
 @dataclass
@@ -129,6 +114,18 @@ class TimeOfDay:
     utc_offset: float = 1.0
     """Hours from UTC of the local time."""
 
+    @classmethod
+    def for_scene(cls, scene) -> TimeOfDay:
+        """The slider's start: the scene's place (Lisbon when it has none) on the built-in scenes'
+        default date and hour (``serenity.scene.sun.DEFAULT_TIME``), in that time's zone at Lisbon and
+        in the nautical zone of the longitude elsewhere. It moves the sun only once it is changed."""
+        when = parse_time(DEFAULT_TIME)
+        lat, lon = getattr(scene, "location", None) or DEFAULT_LOCATION
+        at_default = np.allclose((lat, lon), DEFAULT_LOCATION)
+        offset = when.utcoffset().total_seconds() / 3600.0 if at_default else float(round(lon / 15.0))
+        return cls(date=when.strftime("%Y-%m-%d"), hour=when.hour + when.minute / 60.0, latitude=float(lat),
+                   longitude=float(lon), utc_offset=offset)
+
     def text(self) -> str:
         minutes = int(round(max(0.0, min(23.999, self.hour)) * 60.0))
         sign = "+" if self.utc_offset >= 0 else "-"
@@ -147,7 +144,7 @@ class Settings:
     """What the panel edits: the quality preset, the technique switches, the shadow filter and the
     exposure. ``config()`` is the ``RenderConfig`` they give."""
 
-    quality: str = "high"
+    quality: str = DEFAULT_QUALITY
     exposure: float = DEFAULT_EXPOSURE
     ssao: bool = True
     sky_lighting: bool = True

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import moderngl
 
+from serenity.config import QUALITY_PRESETS
 from serenity.errors import SerenityError
-from serenity.view.controls import QUALITY_PRESETS, SHADOW_FILTERS, VIEWS
+from serenity.optional import require
+from serenity.view.controls import SHADOW_FILTERS, VIEWS
 
 _STALE = (0.95, 0.45, 0.2, 1.0)
 _FRESH = (0.3, 0.8, 0.4, 1.0)
@@ -23,37 +25,47 @@ def _set(viewer, name, value) -> None:
 
 
 def draw_panel(viewer, real_dt: float) -> None:
-    from imgui_bundle import imgui
-
+    imgui = require("imgui_bundle", "serenity view's panel").imgui
     io = imgui.get_io()
     io.delta_time = max(1e-3, float(real_dt))
     imgui.new_frame()
-    imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
-    imgui.set_next_window_size(imgui.ImVec2(330, 0), imgui.Cond_.first_use_ever)
-    imgui.set_next_window_bg_alpha(0.82)
-    imgui.begin("Serenity")
+    _frame_window(viewer, imgui)
+    _controls_window(viewer, imgui, VIEWS)
+    imgui.render()
+    viewer.wnd.fbo.use()
+    viewer.wnd.fbo.viewport = (0, 0, *viewer.wnd.buffer_size)
+    viewer.gui.render(imgui.get_draw_data())
+    viewer.ctx.enable_only(moderngl.NOTHING)
+    viewer.ctx.scissor = None
+
+
+def _frame_window(viewer, imgui) -> None:
+    """Right: FPS, the stages' milliseconds as bars, the sky volume's layers, convergence."""
+    bw = viewer.wnd.size[0]
+    imgui.set_next_window_pos(imgui.ImVec2(max(8, bw - 298), 8), imgui.Cond_.first_use_ever)
+    imgui.set_next_window_size(imgui.ImVec2(290, 0), imgui.Cond_.first_use_ever)
+    imgui.set_next_window_bg_alpha(0.8)
+    imgui.begin("Frame")
     r = viewer.renderer
-    imgui.text(f"{viewer.fps:5.1f} FPS  {viewer.frame_ms:7.1f} ms/frame  {viewer.width}x{viewer.height}")
-    imgui.text(f"device {r.device}, {viewer.settings.quality} quality")
+    imgui.text(f"{viewer.fps:5.2f} FPS {viewer.frame_ms:8.1f} ms/frame")
+    imgui.text(f"{viewer.width}x{viewer.height}, {r.device}, {viewer.settings.quality} quality")
+    top = max([1.0] + list(viewer.ms.values()))
+    for name, ms in viewer.ms.items():
+        imgui.progress_bar(min(1.0, ms / top), imgui.ImVec2(-1, 13), f"{name} {ms:.1f}")
+    total = sum(v for k, v in viewer.ms.items() if k != "cpu ray tracing")
+    imgui.text(f"stages on the main thread: {total:.1f} ms")
 
-    if imgui.collapsing_header("Stages (ms)", imgui.TreeNodeFlags_.default_open):
-        top = max([1.0] + list(viewer.ms.values()))
-        for name, ms in viewer.ms.items():
-            imgui.progress_bar(min(1.0, ms / top), imgui.ImVec2(-1, 14), f"{name}  {ms:.1f}")
-        total = sum(v for k, v in viewer.ms.items() if k != "cpu ray tracing")
-        imgui.text(f"main thread sum {total:.1f} ms")
-
-    s = viewer.sky_state()
+    s = viewer.sky_stale()
     if s is None:
         imgui.text("sky volume: off")
     else:
-        stale, layers = s
-        imgui.text(f"sky volume: {stale}/{layers} layers stale")
+        layers = len(s)
+        imgui.text(f"sky volume ({viewer.renderer.config.sky.method}): {int(s.sum())}/{layers} layers stale")
         dl = imgui.get_window_draw_list()
         p = imgui.get_cursor_screen_pos()
-        w = max(2.0, min(14.0, 300.0 / layers))
+        w = max(2.0, min(14.0, 260.0 / layers))
         for i in range(layers):
-            col = imgui.get_color_u32(imgui.ImVec4(*(_STALE if i >= layers - stale else _FRESH)))
+            col = imgui.get_color_u32(imgui.ImVec4(*(_STALE if s[i] else _FRESH)))
             dl.add_rect_filled(imgui.ImVec2(p.x + i * w, p.y), imgui.ImVec2(p.x + (i + 1) * w - 1, p.y + 8), col)
         imgui.dummy(imgui.ImVec2(layers * w, 10))
     if viewer.converged:
@@ -62,7 +74,16 @@ def draw_panel(viewer, real_dt: float) -> None:
         imgui.text_colored(imgui.ImVec4(*_STALE), f"refining: still for {viewer.still_frames} frames")
     else:
         imgui.text("moving")
+    imgui.end()
 
+
+def _controls_window(viewer, imgui, VIEWS) -> None:
+    """Left: camera, sun, techniques, view, save and reference."""
+    imgui.set_next_window_pos(imgui.ImVec2(8, 8), imgui.Cond_.first_use_ever)
+    imgui.set_next_window_size(imgui.ImVec2(290, 0), imgui.Cond_.first_use_ever)
+    imgui.set_next_window_bg_alpha(0.8)
+    imgui.begin("Controls")
+    imgui.push_item_width(-100)
     if imgui.collapsing_header("Camera"):
         pos = viewer.scene.camera.position
         imgui.text(f"at ({pos[0]:.2f}, {pos[1]:.2f}, {pos[2]:.2f}) m, yaw {viewer.fly.yaw_deg:.0f}, "
@@ -126,10 +147,5 @@ def draw_panel(viewer, real_dt: float) -> None:
             imgui.text(f"vs reference ({c['spp']} spp): FLIP {c['flip']:.4f}  relMSE {c['rel_mse']:.4f}")
     for msg in viewer.messages[-3:]:
         imgui.text_wrapped(msg)
+    imgui.pop_item_width()
     imgui.end()
-    imgui.render()
-    viewer.wnd.fbo.use()
-    viewer.wnd.fbo.viewport = (0, 0, *viewer.wnd.buffer_size)
-    viewer.gui.render(imgui.get_draw_data())
-    viewer.ctx.enable_only(moderngl.NOTHING)
-    viewer.ctx.scissor = None

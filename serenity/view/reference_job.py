@@ -22,13 +22,18 @@ import numpy as np
 from serenity.eval.reference import render_reference
 
 
+def chunk_plan(spp: int, chunks: int) -> list[tuple[int, int]]:
+    """(spp, seed) of each pass: ``spp`` split over ``min(chunks, spp)`` passes, seeds 0, 1, ..."""
+    chunks = max(1, min(int(chunks), int(spp)))
+    return [(spp // chunks + (1 if i < spp % chunks else 0), i) for i in range(chunks)]
+
+
 def _worker(scene, width: int, height: int, spp: int, chunks: int, out) -> None:
     try:
-        per = [spp // chunks + (1 if i < spp % chunks else 0) for i in range(chunks)]
         acc = np.zeros((height, width, 3), np.float64)
         done = 0
-        for k, n in enumerate(p for p in per if p > 0):
-            acc += render_reference(scene, width, height, spp=n, seed=k, progress=False) * n
+        for n, seed in chunk_plan(spp, chunks):
+            acc += render_reference(scene, width, height, spp=n, seed=seed, progress=False) * n
             done += n
             out.put(("progress", done / spp))
         out.put(("done", (acc / spp).astype(np.float32)))
@@ -49,8 +54,7 @@ class ReferenceJob:
         self.error: str | None = None
         ctx = mp.get_context("spawn")
         self._queue = ctx.Queue()
-        self._proc = ctx.Process(target=_worker, args=(snap, self.width, self.height, self.spp,
-                                                        max(1, min(int(chunks), self.spp)), self._queue),
+        self._proc = ctx.Process(target=_worker, args=(snap, self.width, self.height, self.spp, chunks, self._queue),
                                  daemon=True, name="serenity-reference")
         self._proc.start()
 

@@ -21,6 +21,9 @@ count from 0; the first frame builds everything) and holding exactly one action:
     screenshot = "shot.png"   # the window as shown (panel included unless hidden), path from the cwd
     [[step]]
     frame = 15
+    wait = "reference"   # block until the reference started by R is done (scripts only; frames pause)
+    [[step]]
+    frame = 16
     exit = true
 
 Frames advance the fly camera by a fixed 1/30 s in scripted mode, so a script moves the camera
@@ -38,7 +41,7 @@ except ImportError:  # Python 3.10
 
 from serenity.errors import SerenityError
 
-ACTIONS = ("key", "mouse", "set", "press", "screenshot", "exit")
+ACTIONS = ("key", "mouse", "set", "press", "screenshot", "wait", "exit")
 SETTABLE = {"hour": float, "date": str, "latitude": float, "longitude": float, "utc_offset": float,
             "exposure": float, "speed": float, "view": str, "quality": str, "shadow_filter": str,
             "ssao": bool, "sky_lighting": bool, "lpv": bool, "ray_tracing": bool, "panel": bool,
@@ -129,6 +132,8 @@ def load_script(path: str) -> Script:
         elif act == "screenshot":
             if not isinstance(value, str) or not value.lower().endswith(".png"):
                 raise SerenityError(f"{where}: screenshot must be a .png path, got {value!r}")
+        elif act == "wait" and value != "reference":
+            raise SerenityError(f"{where}: wait must be \"reference\" (block until the reference started by R is done)")
         elif act == "exit" and value is not True:
             raise SerenityError(f"{where}: exit must be true")
         steps.append(Step(frame, act, value, hold))

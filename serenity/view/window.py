@@ -7,9 +7,8 @@ from __future__ import annotations
 import os
 
 from serenity.errors import SerenityError
+from serenity.optional import require
 from serenity.raster.context import use_context
-
-_NEEDS = "serenity view needs moderngl-window, glfw and imgui-bundle: pip install -e '.[view]'"
 
 
 def _first_line(e: BaseException) -> str:
@@ -20,11 +19,9 @@ def _first_line(e: BaseException) -> str:
 def open_window(width: int, height: int, title: str, visible: bool = True):
     """A moderngl-window GLFW window of ``width`` × ``height`` pixels, its context installed as
     the renderer's."""
-    try:
-        import glfw
-        from moderngl_window.context.glfw import Window
-    except ImportError as e:
-        raise SerenityError(f"{_NEEDS} ({_first_line(e)})") from None
+    glfw = require("glfw", "serenity view")
+    require("imgui_bundle", "serenity view's panel")  # checked before a window opens
+    Window = require("moderngl_window.context.glfw", "serenity view").Window
     display = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
     if not display:
         raise SerenityError("cannot open a window: no display (DISPLAY is not set); on a machine without "
@@ -35,5 +32,6 @@ def open_window(width: int, height: int, title: str, visible: bool = True):
                      vsync=False, visible=visible)
     except Exception as e:
         raise SerenityError(f"cannot open a window with OpenGL 4.3 on display {display!r}: {_first_line(e)}") from None
+    glfw.ERROR_REPORTING = "warn"  # from here on a GLFW hiccup (clipboard, focus) is not fatal
     use_context(wnd.ctx)
     return wnd

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from serenity.cli import main
+from serenity.config import DEFAULT_EXPOSURE
 from serenity.errors import SerenityError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -65,6 +66,11 @@ def test_time_of_day_gives_the_noaa_sun():
     assert np.allclose(sun.direction, sun_from_time("2024-06-21 09:30 +01:00", 38.72, -9.14).direction)
     tod.hour = 12.0
     assert sun.elevation_deg < tod.sun(sun).elevation_deg
+    # the slider starts where the built-in scenes' sun is
+    from serenity.scene import load
+
+    scene = load("courtyard")
+    assert np.allclose(TimeOfDay.for_scene(scene).sun(scene.sun).direction, scene.sun.direction, atol=1e-9)
 
 
 def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
@@ -77,8 +83,8 @@ def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
         assert not Settings.needs_rebuild(base, t.config()), name
     for name, value in (("lpv", False), ("sky_lighting", False), ("ray_tracing", False), ("quality", "low")):
         assert Settings.needs_rebuild(base, Settings(**{name: value}).config()), name
-    assert quality_config("low").shadow.size < quality_config("high").shadow.size
-    with pytest.raises(SerenityError, match="--quality"):
+    assert quality_config("medium") == Settings().config(), "the viewer starts at serenity render's quality"
+    with pytest.raises(SerenityError, match="quality preset"):
         quality_config("ultra")
 
 
@@ -109,6 +115,15 @@ def test_script_errors_name_the_step(tmp_path):
 def test_view_missing_scene_file_is_one_line(capsys):
     code = main(["view", "no/such/scene.toml"])
     _one_line_error(code, capsys.readouterr().err, "no/such/scene.toml", "not found")
+
+
+def test_view_bad_options_are_one_line(tmp_path, capsys):
+    for args, words in ((["--script", str(tmp_path / "none.toml")], ("none.toml", "not found")),
+                        (["--exit-after", "0"], ("--exit-after",)),
+                        (["--screenshot", "a.jpg"], (".png",)),
+                        (["--exposure", "-1"], ("exposure",))):
+        code = main(["view", "plane", "--size", "32x18", *args])
+        _one_line_error(code, capsys.readouterr().err, *words)
 
 
 def test_view_without_a_display_is_one_line(monkeypatch, capsys):
@@ -143,17 +158,22 @@ frame = 6
 mouse = [40, 10]
 [[step]]
 frame = 7
-set = { panel = false }
+set = { panel = false, ssao = false }
+[[step]]
+frame = 8
+set = { lpv = false, ssao = true }
+[[step]]
+frame = 9
+set = { lpv = true }
 [[step]]
 frame = {still}
 press = "F12"
 [[step]]
 frame = {still}
 screenshot = "still.png"
-[[step]]
-frame = {still_plus}
-exit = true
+{views}
 """
+VIEW_STEPS = ("albedo", "normal", "direct", "ao", "rt mask", "sky light", "lpv indirect", "lpv cascades")
 
 
 def _xvfb_prefix() -> list[str]:
@@ -175,8 +195,12 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     from serenity.scene.sun import sun_from_time
 
     scene = load("courtyard")
-    still = 12  # frame 7 on nothing moves; the sky volume's 6-layer sweep after the sun step ends by frame 7
-    (tmp_path / "s.toml").write_text(SCRIPT.replace("{still}", str(still)).replace("{still_plus}", str(still + 1)))
+    still = 12  # from frame 10 nothing changes (the sky volume is current again by then)
+    views = "".join(f'[[step]]\nframe = {still + 1 + i}\nset = {{ view = "{v}" }}\n'
+                    f'[[step]]\nframe = {still + 1 + i}\nscreenshot = "view_{i}.png"\n'
+                    for i, v in enumerate(VIEW_STEPS))
+    views += f"[[step]]\nframe = {still + 1 + len(VIEW_STEPS)}\nexit = true\n"
+    (tmp_path / "s.toml").write_text(SCRIPT.replace("{still}", str(still)).replace("{views}", views))
     env = {**os.environ, "PYTHONPATH": ROOT}
     cmd = _xvfb_prefix() + [sys.executable, "-m", "serenity", "view", "courtyard", "--size", f"{SIZE[0]}x{SIZE[1]}",
                             "--script", "s.toml", "--trace", "trace.json", "--out-dir", "saved"]
@@ -187,7 +211,8 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     trace = json.loads((tmp_path / "trace.json").read_text())
     assert trace["window_buffer_size"] == list(SIZE)
     f = {fr["frame"]: fr for fr in trace["frames"]}
-    assert max(f) == still and not any(fr["read_back"] for fr in trace["frames"] if fr["frame"] != still)
+    assert max(f) == still + len(VIEW_STEPS)
+    assert not any(fr["read_back"] for fr in trace["frames"] if fr["frame"] != still)
 
     # the time slider moved the sun to the NOAA position of 10:00 at the scene's place
     want = sun_from_time("2024-06-21 10:00 +01:00", *scene.location).direction
@@ -203,7 +228,10 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     assert f6[1] < f5[1] and np.cross(f5, f6)[1] < 0
     # still and converged when saved
     assert f[still]["converged"] and f[still]["sky_stale_layers"] == 0
-    assert f[8]["still_frames"] >= 1
+    # SSAO switched live, the LPV off and on again by rebuilding the renderer (its GL objects released)
+    assert [f[i]["ssao"] for i in (6, 7, 8)] == [True, False, True]
+    assert [f[i]["renderer_builds"] for i in (7, 8, 9, still)] == [1, 2, 3, 3]
+    assert f[still]["still_frames"] == still - 9
 
     # the still view's screenshot = the F12 PNG = `serenity render` of the F12 TOML
     shot = np.asarray(Image.open(tmp_path / "still.png").convert("RGB")).astype(np.int16)
@@ -218,3 +246,141 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     assert diff.mean() < 0.5 and np.percentile(diff, 99) <= 4, (diff.mean(), np.percentile(diff, 99), diff.max())
     # and it is a picture, not a blank window
     assert shot.std() > 10
+
+    # each AOV view shows what `serenity render` writes in that EXR layer (same still camera)
+    from serenity.colour import linear_to_srgb, reinhard_srgb
+    from serenity.io.exr import read_exr
+
+    layers = read_exr(str(saved) + ".exr")
+    shots = {v: np.asarray(Image.open(tmp_path / f"view_{i}.png").convert("RGB")).astype(np.int16)
+             for i, v in enumerate(VIEW_STEPS)}
+    expect = {
+        "albedo": np.round(linear_to_srgb(layers["albedo"]) * 255),
+        "normal": np.round(np.clip(0.5 + 0.5 * layers["normal"], 0, 1) * 255),
+        "direct": reinhard_srgb(layers["direct"], DEFAULT_EXPOSURE),
+        "ao": np.repeat(np.round(np.clip(layers["ao"], 0, 1) * 255), 3, axis=-1),
+        "rt mask": np.repeat(layers["rt_mask"] * 255, 3, axis=-1),
+    }
+    for v, e in expect.items():
+        d = np.abs(shots[v] - e.astype(np.int16))
+        assert d.max() <= 1, (v, d.max(), d.mean())
+    assert shots["rt mask"].max() == 255, "the courtyard's water is ray traced"
+    for v in ("sky light", "lpv indirect"):
+        assert shots[v].mean() > 5 and np.abs(shots[v] - shot).mean() > 5, v
+    lines = np.any(shots["lpv cascades"] != shot, axis=-1)
+    assert 0 < lines.mean() < 0.2, "the cascades' edges are drawn over the unchanged frame"
+
+
+REF_SCRIPT = """
+[[step]]
+frame = 1
+press = "R"
+[[step]]
+frame = 2
+wait = "reference"
+[[step]]
+frame = 2
+screenshot = "split.png"
+[[step]]
+frame = 3
+set = { view = "flip error" }
+[[step]]
+frame = 3
+press = "F12"
+[[step]]
+frame = 3
+screenshot = "flip.png"
+[[step]]
+frame = 4
+exit = true
+"""
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_scripted_reference_split_view_and_numbers(tmp_path):
+    """R path-traces the view in the background; the split view shows our frame left of the line and
+    the reference right of it, and the panel's FLIP / relMSE are those of `serenity compare`."""
+    pytest.importorskip("moderngl_window")
+    pytest.importorskip("mitsuba")
+    from PIL import Image
+
+    from serenity.colour import reinhard_srgb
+    from serenity.eval.metrics import compare, flip_png
+    from serenity.eval.reference import render_reference
+    from serenity.io.exr import read_exr
+    from serenity.scene import load
+    from serenity.view.reference_job import chunk_plan
+
+    w, h, spp = 64, 36, 4
+    (tmp_path / "s.toml").write_text(REF_SCRIPT)
+    env = {**os.environ, "PYTHONPATH": ROOT, "SERENITY_CACHE": str(tmp_path / "cache")}
+    cmd = _xvfb_prefix() + [sys.executable, "-m", "serenity", "view", "courtyard", "--size", f"{w}x{h}", "--no-panel",
+                            "--spp", str(spp), "--script", "s.toml", "--trace", "trace.json", "--out-dir", "saved"]
+    p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=1200, cwd=tmp_path)
+    if p.returncode != 0 and "cannot open a window" in p.stderr:
+        pytest.skip(f"no X server could be had: {p.stderr.strip().splitlines()[-1]}")
+    assert p.returncode == 0, p.stderr[-3000:]
+    frames = json.loads((tmp_path / "trace.json").read_text())["frames"]
+    got = frames[-1]["comparison"]
+    assert got is not None and frames[2]["view"] == "reference split"
+
+    # the same reference again, from the cache the viewer's worker filled (same scene, seeds, chunks)
+    os.environ["SERENITY_CACHE"] = str(tmp_path / "cache")
+    try:
+        ours = read_exr(str(tmp_path / "saved" / "courtyard_000.exr"))["beauty"]
+        scene = load(str(tmp_path / "saved" / "courtyard_000.toml"))
+        ref = sum(render_reference(scene, w, h, spp=n, seed=s, progress=False).astype(np.float64) * n
+                  for n, s in chunk_plan(spp, 8)) / spp
+    finally:
+        os.environ.pop("SERENITY_CACHE")
+    m = compare(ours, ref.astype(np.float32))
+    assert got["flip"] == pytest.approx(m["flip"], abs=1e-6) and got["rel_mse"] == pytest.approx(m["rel_mse"], rel=1e-5)
+
+    split = np.asarray(Image.open(tmp_path / "split.png").convert("RGB")).astype(int)
+    left = reinhard_srgb(ours, DEFAULT_EXPOSURE).astype(int)
+    right = reinhard_srgb(ref.astype(np.float32), DEFAULT_EXPOSURE).astype(int)
+    x = w // 2
+    assert np.abs(split[:, : x - 2] - left[:, : x - 2]).max() <= 1
+    assert np.abs(split[:, x + 2:] - right[:, x + 2:]).max() <= 1
+    flip = np.asarray(Image.open(tmp_path / "flip.png").convert("RGB")).astype(int)
+    assert np.abs(flip - flip_png(m["flip_map"]).astype(int)).max() <= 1
+
+
+DRIVE = r"""
+set -e
+"$PY" -m serenity view plane --size 96x54 --no-panel --script ready.toml --exit-after 100000 --trace trace.json &
+pid=$!
+for i in $(seq 1 600); do [ -f ready.png ] && break; sleep 0.5; done
+[ -f ready.png ] || { kill $pid; echo "viewer never got to frame 3" >&2; exit 3; }
+wid=$(xdotool search --sync --name "Serenity")
+xdotool windowfocus --sync "$wid"
+xdotool keydown w; sleep 3; xdotool keyup w
+sleep 1
+xdotool mousemove --window "$wid" 48 27 mousedown 3; sleep 0.5
+xdotool mousemove_relative --sync 30 0; sleep 1.5; xdotool mouseup 3
+sleep 1
+xdotool key Escape
+wait $pid
+"""
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_real_x_input_moves_the_camera_and_escape_quits(tmp_path):
+    """Key and mouse events from the X server (xdotool), through GLFW's callbacks, not the script."""
+    pytest.importorskip("moderngl_window")
+    if not shutil.which("xdotool") or not shutil.which("xvfb-run"):
+        pytest.skip("needs xvfb-run and xdotool (tools/check_sysdeps.sh installs them)")
+    (tmp_path / "ready.toml").write_text('[[step]]\nframe = 3\nscreenshot = "ready.png"\n')
+    (tmp_path / "drive.sh").write_text(DRIVE)
+    env = {**os.environ, "PYTHONPATH": ROOT, "PY": sys.executable}
+    p = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 640x480x24", "sh", "drive.sh"], env=env,
+                       capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr[-3000:]
+    frames = json.loads((tmp_path / "trace.json").read_text())["frames"]
+    first, last = frames[3], frames[-1]
+    moved = np.array(last["camera_position"]) - np.array(first["camera_position"])
+    assert np.dot(moved, first["camera_forward"]) > 0.05, moved
+    # a rightward drag turned the view right: forward rotated clockwise seen from above
+    assert np.cross(first["camera_forward"], last["camera_forward"])[1] < -1e-3
