@@ -10,11 +10,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from serenity.commands import bench, compare, reference, render, scenes, view
+from serenity.commands import bench, compare, reference, render, scenes, sweep, view
 from serenity.commands.common import report_error
 from serenity.errors import SerenityError
 
-COMMANDS = (render, scenes, bench, view, reference, compare)
+COMMANDS = (render, scenes, bench, view, reference, compare, sweep)
 """The subcommands in ``--help`` order. Each is a module of ``serenity/commands/`` whose
 ``register(subparsers)`` adds its parser; a new command is one more module here."""
 

@@ -1,0 +1,28 @@
+"""``serenity sweep SPEC.toml [--scheduler ADDRESS] [--workers N] [--out DIR]`` (see :mod:`serenity.sweep`)."""
+
+from __future__ import annotations
+
+
+def cmd_sweep(args) -> int:
+    from serenity.sweep import load_spec, run_sweep
+
+    spec = load_spec(args.spec)
+    result = run_sweep(spec, args.out, scheduler=args.scheduler, workers=args.workers, cache=args.cache,
+                       retry_errors=args.retry_errors, progress=not args.quiet)
+    return 1 if result.failed else 0
+
+
+def register(subparsers) -> None:
+    """Add ``sweep`` to the CLI's subparsers."""
+    s = subparsers.add_parser("sweep", help="render a sweep file's frames, references and comparisons on Dask "
+                                            "(resumable; contact sheet, time-of-day GIF, metrics CSV/JSON)")
+    s.add_argument("spec", help="sweep file (TOML; see examples/sweep_day.toml)")
+    s.add_argument("--out", help="results directory (default: [sweep].out, else serenity_out/sweep/<name>)")
+    s.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 "
+                                       "(default: an embedded LocalCluster)")
+    s.add_argument("--workers", type=int, help="worker processes of the embedded cluster (default: one per core)")
+    s.add_argument("--cache", help="reference cache directory shared by the workers (default: SERENITY_CACHE "
+                                   "or ~/.cache/serenity/reference)")
+    s.add_argument("--retry-errors", action="store_true", help="run again the tasks that failed last time")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    s.set_defaults(func=cmd_sweep)
