@@ -2,10 +2,12 @@
 
 - ``metrics.csv`` / ``metrics.json``: one row per point (scene, size, time, quality) — the sun's
   elevation, our last frame's wall time (ms) and its task's time (s), the reference's task time and
-  whether it came from the cache, relMSE and FLIP against the reference, the files, and the error
+  whether it came from the cache, relMSE (also without the worst 0.1% of pixels, ``rel_mse_trim``)
+  and FLIP against the reference, the files, and the error
   when a task of the point failed.
-- ``contact_sheet.png``: per (scene, size) a block with one row per quality (our frames, FLIP under
-  each) and a row of references; one column per time (at most :data:`MAX_COLUMNS`, evenly chosen).
+- ``contact_sheet.png``: per (scene, size) a block with one row per quality (our frames, FLIP and
+  relMSE under each, the trimmed relMSE in brackets) and a row of references; one column per time
+  (at most :data:`MAX_COLUMNS`, evenly chosen).
 - ``time_of_day_<scene>_<size>_<quality>.gif``: our frames in time order (beside the reference when
   the sweep has one), through Pillow, when the sweep has more than one time.
 Timings measured while several workers share a machine are what that sweep saw, not benchmarks.
@@ -28,8 +30,8 @@ GIF_MIN_W = 320
 GIF_FRAME_MS = 250
 
 COLUMNS = ["scene", "size", "time", "quality", "status", "error", "sun_elevation_deg", "frame_wall_ms", "frame_task_s",
-           "reference_spp", "reference_task_s", "reference_cached", "rel_mse", "flip", "frame_png", "reference_png",
-           "flip_png", "frame_key", "reference_key", "compare_key"]
+           "reference_spp", "reference_task_s", "reference_cached", "rel_mse", "rel_mse_trim", "flip", "frame_png",
+           "reference_png", "flip_png", "frame_key", "reference_key", "compare_key"]
 
 
 def _point_key(inputs: dict) -> tuple:
@@ -61,7 +63,8 @@ def points(spec: SweepSpec, tasks: list[Task], manifest: dict) -> list[dict]:
             "frame_task_s": f.get("timings", {}).get("task_s"),
             "reference_spp": ref.inputs["spp"] if ref else None,
             "reference_task_s": r.get("timings", {}).get("task_s"), "reference_cached": r.get("cached"),
-            "rel_mse": c.get("metrics", {}).get("rel_mse"), "flip": c.get("metrics", {}).get("flip"),
+            "rel_mse": c.get("metrics", {}).get("rel_mse"), "rel_mse_trim": c.get("metrics", {}).get("rel_mse_trim"),
+            "flip": c.get("metrics", {}).get("flip"),
             "frame_png": f.get("outputs", {}).get("png"), "reference_png": r.get("outputs", {}).get("png"),
             "flip_png": c.get("outputs", {}).get("flip_png"),
             "frame_key": main.key if main.kind == "frame" else None, "reference_key": ref.key if ref else None,
@@ -216,7 +219,8 @@ def _caption(r: dict | None) -> str:
     if not r:
         return ""
     if r["flip"] is not None:
-        return f"FLIP {r['flip']:.3f}  relMSE {r['rel_mse']:.3f}"
+        trim = f" ({r['rel_mse_trim']:.3g})" if r["rel_mse_trim"] is not None else ""
+        return f"FLIP {r['flip']:.3f} relMSE {r['rel_mse']:.3g}{trim}"
     if r["frame_wall_ms"] is not None:
         return f"{r['frame_wall_ms']:.0f} ms"
     return r["status"]

@@ -137,7 +137,7 @@ def _start_client(scheduler: str | None, workers: int | None, cache: str | None)
         env["SERENITY_CACHE"] = cache
     import logging
 
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR, env=env)
     return Client(cluster), cluster
 
@@ -219,7 +219,7 @@ def _record(task: Task, result: dict, out: str, exposure: float) -> dict:
     else:
         paths = {"flip_png": f"compare/{task.key}_flip.png"}
         atomic_write(os.path.join(out, paths["flip_png"]), lambda p: write_png(p, result["flip_png"]))
-        rec["metrics"] = {"rel_mse": result["rel_mse"], "rel_mse_rgb": result["rel_mse_rgb"], "flip": result["flip"]}
+        rec["metrics"] = {k: result[k] for k in ("rel_mse", "rel_mse_rgb", "rel_mse_trim", "flip")}
     rec["outputs"] = paths
     return rec
 

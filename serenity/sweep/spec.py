@@ -51,6 +51,8 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 TASK_FORMAT = 1
 """Bump when a task's outputs change meaning (invalidates every key)."""
+COMPARE_FORMAT = 2
+"""Bump when the comparison's metrics change (invalidates the compare tasks only). 2: trimmed relMSE."""
 PRODUCTS = ("frame", "reference", "compare")
 MAX_TASKS = 100_000
 
@@ -359,7 +361,8 @@ def expand(spec: SweepSpec) -> list[Task]:
                     tasks.setdefault(fkey, Task("frame", fkey, inp))
                     if "compare" in spec.produce:
                         ckey = _key("compare", [scene_label(scene), f"{w}x{h}", _time_tag(t), q],
-                                    {"frame": fkey, "reference": ref_key, "exposure": spec.exposure})
+                                    {"frame": fkey, "reference": ref_key, "exposure": spec.exposure,
+                                     "metrics": COMPARE_FORMAT})
                         tasks.setdefault(ckey, Task("compare", ckey, {"exposure": spec.exposure, **common,
                                                                        "quality": q}, deps=(fkey, ref_key)))
     order = {"reference": 0, "frame": 1, "compare": 2}

@@ -23,6 +23,10 @@ import numpy as np
 
 from serenity.errors import SerenityError
 
+REL_MSE_TRIM = 1e-3
+"""Fraction of the worst pixels left out of ``rel_mse_trim`` (one pixel where only one renderer shows
+the sun's disc can otherwise outweigh the whole image)."""
+
 
 def one_line(e: BaseException) -> str:
     """A one-line message: a ``SerenityError``'s own text, else ``Type: first line``."""
@@ -166,19 +170,22 @@ def run_reference(inputs: dict, cache: str | None = None) -> dict:
 
 
 def run_compare(frame, reference, exposure: float) -> dict:
-    """relMSE and FLIP of our frame against the reference (``serenity.eval.metrics.compare``), and the
-    FLIP map as a magma PNG. ``frame``/``reference``: a task's result, or its (H, W, 3) HDR array."""
+    """relMSE and FLIP of our frame against the reference (``serenity.eval.metrics.compare``), relMSE
+    without the :data:`REL_MSE_TRIM` worst pixels, and the FLIP map as a magma PNG.
+    ``frame``/``reference``: a task's result, or its (H, W, 3) HDR array."""
     t0 = time.perf_counter()
     for name, r in (("frame", frame), ("reference", reference)):
         if isinstance(r, dict) and r.get("status") != "done":
             return {"status": "error", "error": f"no {name} to compare: {r.get('error', 'it failed')}", **_where()}
     try:
-        from serenity.eval.metrics import compare, flip_png
+        from serenity.eval.metrics import compare, flip_png, rel_mse
 
         ours = frame["hdr"] if isinstance(frame, dict) else np.asarray(frame)
         ref = reference["hdr"] if isinstance(reference, dict) else np.asarray(reference)
         r = compare(ours, ref, exposure=exposure)
-        return {"status": "done", "rel_mse": r["rel_mse"], "rel_mse_rgb": r["rel_mse_rgb"], "flip": r["flip"],
+        trimmed = rel_mse(ours, ref, trim=REL_MSE_TRIM)
+        return {"status": "done", "rel_mse": r["rel_mse"], "rel_mse_rgb": r["rel_mse_rgb"], "rel_mse_trim": trimmed,
+                "flip": r["flip"],
                 "flip_png": flip_png(r["flip_map"]), "task_s": time.perf_counter() - t0, **_where()}
     except Exception as e:
         return {"status": "error", "error": one_line(e), "task_s": time.perf_counter() - t0, **_where()}

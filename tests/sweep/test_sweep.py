@@ -49,7 +49,7 @@ def client(tmp_path_factory):
 
     from distributed import Client, LocalCluster
 
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.CRITICAL, env={"SERENITY_THREADS": "1"})
     c = Client(cluster)
     yield c
@@ -191,3 +191,22 @@ def test_a_worker_killed_mid_task_has_its_task_retried_elsewhere(client, tmp_pat
     for r in m["tasks"].values():
         for rel in r["outputs"].values():
             assert os.path.exists(os.path.join(out, rel))
+
+
+def test_cli_on_a_running_scheduler(client, tmp_path, capsys):
+    from serenity.cli import main
+
+    (tmp_path / "one.toml").write_text('[sweep]\nscenes = ["plane"]\nsizes = ["16x9"]\nquality = ["baseline"]\n'
+                                       '[render]\nframes = 1\n')
+    out = tmp_path / "out"
+    address = client.scheduler.address
+    assert main(["sweep", str(tmp_path / "one.toml"), "--scheduler", address, "--out", str(out), "-q"]) == 0
+    (rec,) = read_manifest(str(out))["tasks"].values()
+    assert rec["status"] == "done" and rec["worker"] in client.scheduler_info()["workers"]
+    assert os.path.exists(out / rec["outputs"]["png"]) and os.path.exists(out / "contact_sheet.png")
+    capsys.readouterr()
+    # --workers sizes only the embedded cluster: one line, exit status 2
+    assert main(["sweep", str(tmp_path / "one.toml"), "--scheduler", address, "--workers", "2",
+                 "--out", str(tmp_path / "other")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("serenity: error: --workers sizes the embedded cluster") and err.count("\n") == 1
