@@ -111,6 +111,13 @@ def default_out(spec: SweepSpec) -> str:
     return spec.out or os.path.join("serenity_out", "sweep", spec.name)
 
 
+def _check_cluster_args(scheduler: str | None, workers: int | None) -> None:
+    if scheduler and workers is not None:
+        raise SerenityError("--workers sizes the embedded cluster; a running scheduler has its own workers")
+    if workers is not None and not 1 <= int(workers) <= 1024:
+        raise SerenityError(f"--workers must be in 1..1024, got {workers}")
+
+
 def _start_client(scheduler: str | None, workers: int | None, cache: str | None):
     """(client, cluster or None): a Client of ``scheduler``, or of a new LocalCluster of ``workers``
     single-threaded worker processes (default: one per core)."""
@@ -118,9 +125,8 @@ def _start_client(scheduler: str | None, workers: int | None, cache: str | None)
         from distributed import Client, LocalCluster
     except ImportError:
         raise SerenityError("serenity sweep needs Dask: pip install 'dask[distributed]'") from None
+    _check_cluster_args(scheduler, workers)
     if scheduler:
-        if workers is not None:
-            raise SerenityError("--workers sizes the embedded cluster; a running scheduler has its own workers")
         try:
             return Client(scheduler, timeout="20s"), None
         except (OSError, TimeoutError) as e:
@@ -129,8 +135,6 @@ def _start_client(scheduler: str | None, workers: int | None, cache: str | None)
 
     cores = cpu_threads()
     n = int(workers) if workers is not None else cores
-    if not 1 <= n <= 1024:
-        raise SerenityError(f"--workers must be in 1..1024, got {workers}")
     # one task per process at a time; the cores split between the workers' CPU launches
     env = {"SERENITY_THREADS": str(max(1, cores // n))}
     if cache:
@@ -237,6 +241,8 @@ def run_sweep(spec: SweepSpec, out: str | None = None, *, client=None, scheduler
     """
     from serenity.sweep import outputs
 
+    if client is None:
+        _check_cluster_args(scheduler, workers)
     out = os.path.abspath(out or default_out(spec))
     manifest = read_manifest(out)
     tasks = expand(spec)

@@ -2,7 +2,9 @@
 
 One cluster serves the module. The first sweep (built-in ``plane`` at 32×18, two times of day, our
 frame + a 4-spp reference + the comparison, and a broken scene file) is shared by the tests that
-check its files, its manifest and that a second run does nothing; the killed-worker test runs its own.
+check its files, its manifest and that a second run does nothing; the killed-worker test (slow) runs
+its own. The cluster's start and the workers' first tasks (imports, Warp and Mitsuba start-up) are
+most of the module's time.
 """
 
 from __future__ import annotations
@@ -155,6 +157,7 @@ def _executing(dask_worker):
     return [str(ts.key) for ts in dask_worker.state.executing]
 
 
+@pytest.mark.slow  # a 1024-spp reference to be sure to kill it mid-task, rendered twice, and a worker restart
 def test_a_worker_killed_mid_task_has_its_task_retried_elsewhere(client, tmp_path):
     # one point; its reference (1024 spp: seconds, even on a warm worker) is the task to kill
     spec_text = (SPEC.replace('"plane", "broken.toml"', '"plane"').replace("spp = 4", "spp = 1024")
