@@ -24,6 +24,7 @@ PACKAGES: dict[str, tuple[str, str]] = {
     "glfw": ("glfw", "view"),
     "moderngl_window": ("moderngl-window", "view"),
     "imgui_bundle": ("imgui-bundle", "view"),
+    "distributed": ("Dask (dask[distributed])", "eval"),
 }
 """Import name → (what to call it in a message, the extra that installs it)."""
 

@@ -19,10 +19,12 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from tqdm import tqdm
 
 from serenity.errors import SerenityError
-from serenity.sweep.runner import SweepResult, read_manifest, run_sweep
+from serenity.sweep.runner import SweepResult, _start_client, read_manifest, run_sweep
 from serenity.sweep.spec import SweepSpec, Task, expand, load_spec, quality_config, spec_from_dict
+from serenity.sweep.tasks import one_line, run_reference
 
 __all__ = ["ReferenceJob", "SweepResult", "SweepSpec", "Task", "expand", "load_spec", "quality_config",
            "read_manifest", "render_references", "run_sweep", "spec_from_dict"]
@@ -59,9 +61,6 @@ def render_references(jobs, client=None, *, scheduler: str | None = None, worker
     client / scheduler / workers: as in :func:`run_sweep` (default: an embedded LocalCluster, closed
         on return).
     Raises ``SerenityError`` naming the first job that failed (after all have finished)."""
-    from serenity.sweep.runner import _start_client
-    from serenity.sweep.tasks import run_reference
-
     jobs = [j if isinstance(j, ReferenceJob) else ReferenceJob(**j) for j in jobs]
     if not jobs:
         return []
@@ -80,7 +79,6 @@ def render_references(jobs, client=None, *, scheduler: str | None = None, worker
                 futures[ident] = client.submit(run_reference, inputs, cache, pure=False)
             order.append(ident)
         from distributed import wait
-        from tqdm import tqdm
 
         with tqdm(total=len(futures), unit="ref", desc="references", disable=not progress) as bar:
             pending = set(futures.values())
@@ -92,8 +90,6 @@ def render_references(jobs, client=None, *, scheduler: str | None = None, worker
             try:
                 results[k] = f.result()
             except Exception as e:  # KilledWorker: the job took down worker after worker
-                from serenity.sweep.tasks import one_line
-
                 results[k] = {"status": "error", "error": one_line(e)}
     finally:
         if own:

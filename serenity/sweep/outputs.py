@@ -20,7 +20,9 @@ import io
 import os
 
 import numpy as np
+from PIL import Image, ImageDraw
 
+from serenity.sweep.files import atomic_write, write_json
 from serenity.sweep.spec import SweepSpec, Task, scene_label
 
 MAX_COLUMNS = 12
@@ -83,8 +85,6 @@ def summaries_exist(out: str, spec: SweepSpec) -> bool:
 
 def write_summaries(spec: SweepSpec, tasks: list[Task], manifest: dict, out: str) -> list[str]:
     """Write metrics.csv/json, the contact sheet and the animations; return their paths."""
-    from serenity.sweep.runner import atomic_write, write_json
-
     rows = points(spec, tasks, manifest)
     written = []
     buf = io.StringIO()
@@ -119,8 +119,6 @@ def write_summaries(spec: SweepSpec, tasks: list[Task], manifest: dict, out: str
 
 
 def _open(out: str, rel: str | None):
-    from PIL import Image
-
     if not rel or not os.path.exists(os.path.join(out, rel)):
         return None
     with Image.open(os.path.join(out, rel)) as im:
@@ -128,15 +126,11 @@ def _open(out: str, rel: str | None):
 
 
 def _fit(im, width: int):
-    from PIL import Image
-
     h = max(1, round(im.height * width / im.width))
     return im.resize((width, h), Image.Resampling.NEAREST if width >= im.width else Image.Resampling.LANCZOS)
 
 
 def _placeholder(w: int, h: int, text: str):
-    from PIL import Image, ImageDraw
-
     im = Image.new("RGB", (w, h), (90, 90, 90))
     d = ImageDraw.Draw(im)
     for i in range(0, len(text), max(1, w // 7)):
@@ -153,8 +147,6 @@ def _columns(times: list) -> list:
 
 def contact_sheet(spec: SweepSpec, rows: list[dict], out: str):
     """The contact sheet as a Pillow image (see the module docstring)."""
-    from PIL import Image, ImageDraw
-
     label_w, cap_h, head_h, pad = 120, 26, 22, 6
     blocks = []  # (title, [(row label, [(tile image, caption)])])
     groups: dict[tuple, list[dict]] = {}
@@ -228,8 +220,6 @@ def _caption(r: dict | None) -> str:
 
 def animations(spec: SweepSpec, rows: list[dict], out: str) -> dict:
     """{file name: [Pillow frames]} for each (scene, size, quality) with more than one time."""
-    from PIL import Image, ImageDraw
-
     if len(spec.times) < 2:
         return {}
     seqs: dict[tuple, list[dict]] = {}

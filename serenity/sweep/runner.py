@@ -22,16 +22,25 @@ writes here; workers return arrays.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 
 import numpy as np
+from tqdm import tqdm
 
+from serenity.device import cpu_threads
 from serenity.errors import SerenityError
+from serenity.eval.metrics import tonemap
+from serenity.io.exr import read_exr, write_exr
+from serenity.io.png import write_png
+from serenity.optional import require
+from serenity.sweep import outputs
+from serenity.sweep import tasks as T
+from serenity.sweep.files import atomic_write, write_json
 from serenity.sweep.spec import SweepSpec, Task, expand
 from serenity.sweep.tasks import one_line
 
@@ -55,35 +64,6 @@ class SweepResult:
     """Keys whose entry says error (this run's or an earlier one's)."""
     outputs: list[str] = field(default_factory=list)
     """The summary files (CSV, JSON, contact sheet, animations) written this run."""
-
-
-def atomic_write(path: str, write) -> None:
-    """``write(tmp)`` to a temporary file beside ``path`` (same extension), then rename it over ``path``."""
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    stem, ext = os.path.splitext(os.path.basename(path))
-    tmp = os.path.join(d, f".{stem}.tmp{os.getpid()}-{threading.get_ident()}{ext}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
-def write_json(path: str, data) -> None:
-    def w(tmp):
-        with open(tmp, "w") as f:
-            json.dump(data, f, indent=1, sort_keys=False, allow_nan=False, default=_json_default)
-            f.write("\n")
-
-    atomic_write(path, w)
-
-
-def _json_default(x):
-    if isinstance(x, np.generic):
-        return x.item()
-    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
 
 
 def read_manifest(out: str) -> dict:
@@ -121,34 +101,26 @@ def _check_cluster_args(scheduler: str | None, workers: int | None) -> None:
 def _start_client(scheduler: str | None, workers: int | None, cache: str | None):
     """(client, cluster or None): a Client of ``scheduler``, or of a new LocalCluster of ``workers``
     single-threaded worker processes (default: one per core)."""
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise SerenityError("serenity sweep needs Dask: pip install 'dask[distributed]'") from None
+    distributed = require("distributed", "a sweep on Dask")
+    Client, LocalCluster = distributed.Client, distributed.LocalCluster
     _check_cluster_args(scheduler, workers)
     if scheduler:
         try:
             return Client(scheduler, timeout="20s"), None
         except (OSError, TimeoutError) as e:
             raise SerenityError(f"cannot reach the Dask scheduler at {scheduler} ({one_line(e)})") from None
-    from serenity.device import cpu_threads
-
     cores = cpu_threads()
     n = int(workers) if workers is not None else cores
     # one task per process at a time; the cores split between the workers' CPU launches
     env = {"SERENITY_THREADS": str(max(1, cores // n))}
     if cache:
         env["SERENITY_CACHE"] = cache
-    import logging
-
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR, env=env)
     return Client(cluster), cluster
 
 
 def _load_hdr(path: str) -> np.ndarray:
-    from serenity.io.exr import read_exr
-
     return np.asarray(read_exr(path)["beauty"], np.float32)[..., :3]
 
 
@@ -156,8 +128,6 @@ class _Progress:
     """The overall bar (tqdm) and one line per task started / finished."""
 
     def __init__(self, total: int, enabled: bool):
-        from tqdm import tqdm
-
         self.enabled = enabled
         self.bar = tqdm(total=total, unit="task", desc="sweep", disable=not enabled, file=sys.stderr,
                         dynamic_ncols=True)
@@ -192,9 +162,6 @@ class _Progress:
 
 def _record(task: Task, result: dict, out: str, exposure: float) -> dict:
     """Write a finished task's files (atomically) and return its manifest entry."""
-    from serenity.io.exr import write_exr
-    from serenity.io.png import write_png
-
     rec = {"kind": task.kind, "inputs": task.inputs, "deps": list(task.deps), "status": result.get("status", "error"),
            "error": result.get("error"), "outputs": {}, "timings": {}, "metrics": {},
            **{k: result.get(k) for k in ("worker", "host", "pid")},
@@ -213,8 +180,6 @@ def _record(task: Task, result: dict, out: str, exposure: float) -> dict:
         rec["timings"].update(frame_wall_ms=result["frame_wall_ms"], stages_ms=result["stages_ms"])
         rec["device"] = result.get("device")
     elif task.kind == "reference":
-        from serenity.eval.metrics import tonemap
-
         ldr = (tonemap(result["hdr"], exposure) * 255.0 + 0.5).astype(np.uint8)
         paths = {"exr": f"references/{task.key}.exr", "png": f"references/{task.key}.png"}
         atomic_write(os.path.join(out, paths["exr"]), lambda p: write_exr(p, {"beauty": result["hdr"]}))
@@ -239,8 +204,6 @@ def run_sweep(spec: SweepSpec, out: str | None = None, *, client=None, scheduler
     cache: the reference cache directory the workers share (default: theirs, ``SERENITY_CACHE`` or
         ``~/.cache/serenity/reference``; an embedded cluster inherits this process's).
     """
-    from serenity.sweep import outputs
-
     if client is None:
         _check_cluster_args(scheduler, workers)
     out = os.path.abspath(out or default_out(spec))
@@ -278,10 +241,7 @@ def run_sweep(spec: SweepSpec, out: str | None = None, *, client=None, scheduler
 
 def _run(todo: list[Task], by_key: dict, spec: SweepSpec, out: str, manifest: dict, result: SweepResult,
          client, scheduler, workers, cache, progress) -> None:
-    from distributed import as_completed
-
-    from serenity.sweep import tasks as T
-
+    as_completed = require("distributed", "a sweep on Dask").as_completed
     recs = manifest["tasks"]
     own = client is None
     cluster = None

@@ -6,7 +6,7 @@ A sweep file is TOML::
     name = "courtyard-day"                 # optional (default: the file's stem)
     scenes = ["courtyard", "my/scene.toml"]  # built-in names or files (relative to this file)
     sizes = ["160x90", "320x180"]          # WxH, pixels
-    quality = ["default", "baseline"]      # quality presets (see :func:`quality_config`)
+    quality = ["medium", "baseline"]       # presets low | medium | high | paper, or "baseline"
     produce = ["frame", "reference", "compare"]   # any of these; "compare" implies the other two
 
     [time]                                 # optional: without it every scene keeps its own sun
@@ -42,7 +42,11 @@ import os
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timedelta
 
+from serenity.config import DEFAULT_QUALITY, QUALITY_PRESETS, LPVConfig, RenderConfig, SkyConfig, check_image_size
 from serenity.errors import SerenityError
+from serenity.eval.reference import COMPONENTS
+from serenity.scene.procedural import scene_names
+from serenity.scene.sun import parse_time
 
 try:  # Python 3.11+
     import tomllib
@@ -71,7 +75,7 @@ class SweepSpec:
     name: str
     scenes: tuple[str, ...]
     sizes: tuple[tuple[int, int], ...]
-    qualities: tuple[str, ...] = ("default",)
+    qualities: tuple[str, ...] = (DEFAULT_QUALITY,)
     produce: tuple[str, ...] = ("frame",)
     times: tuple[str | None, ...] = (None,)
     """parse_time strings, or (None,) for each scene's own sun."""
@@ -146,14 +150,10 @@ def _parse_size(text: str, where: str) -> tuple[int, int]:
         w, h = (int(x) for x in text.lower().split("x"))
     except ValueError:
         raise _err(where, f"size must look like 320x180, got {text!r}") from None
-    if not (1 <= w <= 8192 and 1 <= h <= 8192):
-        raise _err(where, f"size must be within 1..8192 pixels per side, got {text!r}")
-    return w, h
+    return _parse(lambda _: check_image_size(w, h, "size"), text, where)
 
 
 def _expand_times(t: dict, where: str) -> list[str]:
-    from serenity.scene.sun import parse_time
-
     if "times" in t:
         if {"start", "end", "step_minutes"} & set(t):
             raise _err(f"{where} [time]", "give either times = [...] or start/end/step_minutes, not both")
@@ -213,8 +213,6 @@ def load_spec(path: str) -> SweepSpec:
 def spec_from_dict(data: dict, path: str = "<sweep>") -> SweepSpec:
     """A :class:`SweepSpec` from the tables of a sweep file (``path`` names it in errors and anchors
     relative scene paths)."""
-    from serenity.eval.reference import COMPONENTS
-
     for table, value in data.items():
         if table not in _ALLOWED:
             raise _err(path, f"unknown table [{table}] (known: {', '.join(f'[{k}]' for k in _ALLOWED)})")
@@ -232,7 +230,7 @@ def spec_from_dict(data: dict, path: str = "<sweep>") -> SweepSpec:
             raise _err(f"{path} [sweep]", f"needs {k} = [...]")
     scenes = tuple(_resolve_scene(s, base) for s in _str_list(sw["scenes"], f"{path} [sweep].scenes"))
     sizes = tuple(_parse_size(s, f"{path} [sweep].sizes") for s in _str_list(sw["sizes"], f"{path} [sweep].sizes"))
-    qualities = tuple(_str_list(sw.get("quality", ["default"]), f"{path} [sweep].quality"))
+    qualities = tuple(_str_list(sw.get("quality", [DEFAULT_QUALITY]), f"{path} [sweep].quality"))
     for q in qualities:
         _parse(quality_config, q, f"{path} [sweep].quality")
     produce = _str_list(sw.get("produce", ["frame"]), f"{path} [sweep].produce")
@@ -288,28 +286,27 @@ def spec_from_dict(data: dict, path: str = "<sweep>") -> SweepSpec:
 
 def _resolve_scene(s: str, base: str) -> str:
     """A built-in name stays a name; anything else is a path relative to the sweep file."""
-    from serenity.scene.procedural import scene_names
-
     candidate = os.path.join(base, s)
     if s in scene_names() and not os.path.exists(candidate):
         return s
     return os.path.normpath(candidate)
 
 
-def quality_config(name: str):
-    """The ``RenderConfig`` of a quality preset: ``RenderConfig.preset(name)`` where the config
-    has presets; besides, "default" (``RenderConfig()``) and "baseline" (the constant-ambient
-    baseline without sky lighting or LPV, the one the GI must beat)."""
-    from serenity.config import RenderConfig
+BASELINE = "baseline"
+"""The quality name of the constant-ambient baseline (no sky volume, no LPV: the one the GI must beat)."""
+QUALITIES = (*QUALITY_PRESETS, BASELINE)
 
-    fallback = {"default": RenderConfig, "baseline": lambda: RenderConfig(ambient="constant", sky_lighting=False,
-                                                                           lpv=False)}
-    preset = getattr(RenderConfig, "preset", None)
-    if preset is not None and name not in fallback:
-        return preset(name)
-    if name not in fallback:
-        raise SerenityError(f"unknown quality preset {name!r} (known: {', '.join(fallback)})")
-    return fallback[name]()
+
+def quality_config(name: str) -> RenderConfig:
+    """The ``RenderConfig`` of a sweep's quality: a preset (``RenderConfig.preset``: low | medium |
+    high | paper), or "baseline": the default preset with a constant ambient term instead of the sky
+    volume and the LPV."""
+    if name == BASELINE:
+        return RenderConfig.preset(DEFAULT_QUALITY, ambient="constant", sky=SkyConfig(enabled=False),
+                                   lpv=LPVConfig(enabled=False))
+    if name not in QUALITY_PRESETS:
+        raise SerenityError(f"unknown quality {name!r} (known: {', '.join(QUALITIES)})")
+    return RenderConfig.preset(name)
 
 
 def scene_fingerprint(scene: str) -> str:

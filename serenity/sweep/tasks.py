@@ -14,14 +14,23 @@ that dies mid-task (killed, out of memory) is another matter: Dask reschedules i
 from __future__ import annotations
 
 import contextlib
+import copy
 import gc
 import os
 import socket
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from serenity.errors import SerenityError
+from serenity.eval.metrics import compare, flip_png, rel_mse
+from serenity.eval.reference import render_reference
+from serenity.frame import Renderer
+from serenity.raster.context import get_context
+from serenity.scene import load
+from serenity.scene.sun import DEFAULT_LOCATION, sun_from_time
+from serenity.sweep.spec import quality_config
 
 REL_MSE_TRIM = 1e-3
 """Fraction of the worst pixels left out of ``rel_mse_trim`` (one pixel where only one renderer shows
@@ -77,14 +86,9 @@ def _cache_env(cache: str | None):
 def load_scene_at(inputs: dict):
     """The task's scene, its sun moved to ``inputs["time"]`` (when given) at the sweep's place, else
     the scene's location, else Lisbon; the sun's angular size is kept."""
-    from serenity.scene import load
-    from serenity.scene.sun import DEFAULT_LOCATION, sun_from_time
-
     scene = load(inputs["scene"])
     if inputs.get("time") is not None:
         if scene is inputs["scene"]:  # a Scene object given in-process: leave the caller's alone
-            import copy
-
             scene = copy.copy(scene)
         if inputs.get("latitude") is not None:
             lat, lon = inputs["latitude"], inputs["longitude"]
@@ -106,8 +110,6 @@ def _release_gl() -> None:
     moderngl frees an object only on ``release()``; in ``context_gc`` mode a collected wrapper
     queues its GL object on the context instead, and this releases the queue (skipping objects that
     were released already: moderngl queues those as ``InvalidObject``)."""
-    from serenity.raster.context import get_context
-
     ctx = get_context()
     if ctx.gc_mode != "context_gc":
         ctx.gc_mode = "context_gc"
@@ -126,11 +128,6 @@ def run_frame(inputs: dict) -> dict:
     t0 = time.perf_counter()
     renderer = None
     try:
-        from dataclasses import replace
-
-        from serenity.frame import Renderer
-        from serenity.sweep.spec import quality_config
-
         config = replace(quality_config(inputs["quality"]), exposure=inputs["exposure"])
         scene = load_scene_at(inputs)
         renderer = Renderer(scene, inputs["width"], inputs["height"], device=inputs.get("device"), config=config)
@@ -155,8 +152,6 @@ def run_reference(inputs: dict, cache: str | None = None) -> dict:
     _announce()
     t0 = time.perf_counter()
     try:
-        from serenity.eval.reference import render_reference
-
         scene = load_scene_at(inputs)
         info: dict = {}
         with _cache_env(cache):
@@ -178,8 +173,6 @@ def run_compare(frame, reference, exposure: float) -> dict:
         if isinstance(r, dict) and r.get("status") != "done":
             return {"status": "error", "error": f"no {name} to compare: {r.get('error', 'it failed')}", **_where()}
     try:
-        from serenity.eval.metrics import compare, flip_png, rel_mse
-
         ours = frame["hdr"] if isinstance(frame, dict) else np.asarray(frame)
         ref = reference["hdr"] if isinstance(reference, dict) else np.asarray(reference)
         r = compare(ours, ref, exposure=exposure)

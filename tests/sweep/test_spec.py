@@ -6,6 +6,7 @@ import os
 
 import pytest
 
+from serenity.config import DEFAULT_QUALITY, QUALITY_PRESETS, RenderConfig
 from serenity.errors import SerenityError
 from serenity.sweep import expand, load_spec, quality_config, spec_from_dict
 from serenity.sweep.runner import atomic_write
@@ -22,7 +23,7 @@ BASE = """
 [sweep]
 scenes = ["plane", "my.toml"]
 sizes = ["32x18", "64x36"]
-quality = ["default", "baseline"]
+quality = ["medium", "baseline"]
 produce = ["compare"]
 [time]
 start = "2024-06-21 06:00 +01:00"
@@ -76,7 +77,7 @@ def test_task_keys_are_stable_and_follow_scene_file_content(tmp_path):
 
 def test_no_time_table_keeps_the_scene_sun(tmp_path):
     spec = load_spec(_write(tmp_path, '[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\n'))
-    assert spec.times == (None,) and spec.produce == ("frame",) and spec.qualities == ("default",)
+    assert spec.times == (None,) and spec.produce == ("frame",) and spec.qualities == (DEFAULT_QUALITY,)
     (task,) = expand(spec)
     assert task.kind == "frame" and task.inputs["time"] is None
 
@@ -84,8 +85,10 @@ def test_no_time_table_keeps_the_scene_sun(tmp_path):
 @pytest.mark.parametrize("text, message", [
     ('[sweep]\nsizes = ["8x8"]\n', "[sweep]: needs scenes"),
     ('[sweep]\nscenes = ["plane"]\nsizes = ["8by8"]\n', "[sweep].sizes: size must look like 320x180, got '8by8'"),
+    ('[sweep]\nscenes = ["plane"]\nsizes = ["9000x8"]\n', "[sweep].sizes: size must be within 1..8192 pixels"),
     ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\nproduce = ["movie"]\n', "[sweep].produce: unknown product 'movie'"),
-    ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\nquality = ["ultra"]\n', "[sweep].quality: unknown quality preset"),
+    ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\nquality = ["ultra"]\n',
+     "[sweep].quality: unknown quality 'ultra' (known: paper, high, medium, low, baseline)"),
     ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\ncolour = 1\n', "[sweep]: unknown key 'colour'"),
     ('[sweep]\nscenes = []\nsizes = ["8x8"]\n', "[sweep].scenes: must not be empty"),
     ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\n[time]\nstart = "2024-06-21 06:00"\n', "[time]: needs start, end"),
@@ -114,10 +117,12 @@ def test_missing_sweep_file(tmp_path):
         load_spec(str(tmp_path / "nope.toml"))
 
 
-def test_quality_presets():
-    assert quality_config("default").lpv and quality_config("default").sky_lighting
+def test_qualities_are_the_presets_and_the_baseline():
+    for name in QUALITY_PRESETS:
+        assert quality_config(name) == RenderConfig.preset(name)
     base = quality_config("baseline")
-    assert (base.ambient, base.lpv, base.sky_lighting) == ("constant", False, False)
+    assert (base.ambient, base.lpv.enabled, base.sky.enabled) == ("constant", False, False)
+    assert base.shadow == RenderConfig.preset(DEFAULT_QUALITY).shadow
 
 
 def test_atomic_write_keeps_the_old_file_when_the_writer_fails(tmp_path):
