@@ -140,7 +140,7 @@ def test_second_run_does_nothing(sweep, client):
     assert after == before  # not a file written
 
 
-def test_render_references_api_shares_the_cache_with_the_sweep(sweep, client):
+def test_render_references_api_shares_the_cache_with_the_sweep(sweep, client, monkeypatch):
     spec, out, cache, _ = sweep
     m = read_manifest(out)
     refs = [r for r in m["tasks"].values() if r["kind"] == "reference" and r["status"] == "done"]
@@ -151,6 +151,16 @@ def test_render_references_api_shares_the_cache_with_the_sweep(sweep, client):
     for r, img in zip(refs, images, strict=False):
         np.testing.assert_array_equal(img, read_exr(os.path.join(out, r["outputs"]["exr"]))["beauty"])
     assert len([f for f in os.listdir(cache) if f.endswith(".npy")]) == 2  # nothing new was rendered
+    # a benchmark's own render_reference(...) with the same arguments now reads the cache
+    from serenity.eval.reference import render_reference
+    from serenity.sweep.tasks import load_scene_at
+
+    monkeypatch.setenv("SERENITY_CACHE", cache)
+    info: dict = {}
+    scene = load_scene_at({"scene": "plane", "time": jobs[0].time})
+    img = render_reference(scene, 32, 18, spp=4, progress=False, info=info)
+    assert info["cached"] is True
+    np.testing.assert_array_equal(img, images[0])
 
 
 def _executing(dask_worker):
