@@ -139,3 +139,16 @@ def test_atomic_write_keeps_the_old_file_when_the_writer_fails(tmp_path):
         atomic_write(path, broken)
     assert open(path).read() == "first"
     assert os.listdir(tmp_path / "sub") == ["x.txt"]  # no temporary left behind
+
+
+def test_without_dask_the_command_names_the_extra(tmp_path, capsys, monkeypatch):
+    import sys
+
+    from serenity.cli import main
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
+    path = _write(tmp_path, '[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\n')
+    assert main(["sweep", path, "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("serenity: error: a sweep on Dask needs the optional package Dask (dask[distributed]): "
+                   "pip install 'serenity[eval]'\n")
