@@ -6,7 +6,8 @@
 The results directory::
 
     manifest.json            spec hash + spec, and per task key: kind, inputs, status (done | error),
-                             error (one line), outputs (relative paths), timings, metrics, worker/host/pid
+                             error (one line), outputs (relative paths), timings, metrics, worker/host/pid,
+                             worker_deaths (workers that died running it before it finished)
     frames/<key>.png|.exr    our frame (PNG at the sweep's exposure; EXR layer "beauty", linear radiance)
     references/<key>.exr|.png
     compare/<key>_flip.png   FLIP error map (magma)
@@ -268,9 +269,11 @@ def _run(todo: list[Task], by_key: dict, spec: SweepSpec, out: str, manifest: di
                 res = fut.result()
             except Exception as e:  # a worker died too often (KilledWorker), or the cluster went away
                 res = {"status": "error", "error": one_line(e)}
+            deaths = _worker_deaths(client, fut.key)
             fut.release()
             futures.pop(key, None)
             rec = _record(by_key[key], res, out, spec.exposure)
+            rec["worker_deaths"] = deaths
             recs[key] = rec
             result.ran.append(key)
             bar.finished(key, rec)
@@ -289,6 +292,20 @@ def _run(todo: list[Task], by_key: dict, spec: SweepSpec, out: str, manifest: di
             client.close()
             if cluster is not None:
                 cluster.close()
+
+
+def _suspicious(key, dask_scheduler=None) -> int | None:
+    ts = dask_scheduler.tasks.get(key)
+    return None if ts is None else int(ts.suspicious)
+
+
+def _worker_deaths(client, key) -> int | None:
+    """How many workers died while running ``key`` (Dask reran it each time; after
+    ``distributed.scheduler.allowed-failures`` it gives up with ``KilledWorker``). None if unknown."""
+    try:
+        return client.run_on_scheduler(_suspicious, key)
+    except Exception:  # noqa: BLE001 - a scheduler that refuses run_on_scheduler: not worth failing the task
+        return None
 
 
 def _dependency(key: str, recs: dict, out: str):

@@ -82,6 +82,7 @@ def test_small_sweep_completes_with_the_expected_files(sweep):
         for rel in r["outputs"].values():
             assert os.path.getsize(os.path.join(out, rel)) > 0
         assert r["worker"] and r["pid"] != os.getpid()  # ran on a worker process, not here
+        assert r["worker_deaths"] == 0
     frames = [r for r in plane.values() if r["kind"] == "frame"]
     assert {r["inputs"]["time"] for r in frames} == {"2024-06-21 09:00 +01:00", "2024-06-21 15:00 +01:00"}
     assert frames[0]["sun_elevation_deg"] != frames[1]["sun_elevation_deg"]
@@ -201,6 +202,8 @@ def test_a_worker_killed_mid_task_has_its_task_retried_elsewhere(client, tmp_pat
     assert result.failed == []
     rec = m["tasks"][victim[2]]
     assert rec["pid"] != victim[1]  # finished by another (or the restarted) worker process
+    assert rec["worker_deaths"] == 1
+    assert all(r["worker_deaths"] == 0 for k, r in m["tasks"].items() if k != victim[2])
     for r in m["tasks"].values():
         for rel in r["outputs"].values():
             assert os.path.exists(os.path.join(out, rel))
