@@ -146,9 +146,14 @@ def test_render_references_api_shares_the_cache_with_the_sweep(sweep, client, mo
     m = read_manifest(out)
     refs = [r for r in m["tasks"].values() if r["kind"] == "reference" and r["status"] == "done"]
     jobs = [ReferenceJob(scene="plane", width=32, height=18, spp=4, time=r["inputs"]["time"]) for r in refs]
-    images = render_references(jobs + jobs[:1], client=client, cache=cache, progress=False)
-    assert len(images) == 3
+    # a Scene object travels to the worker too (and is the same scene, so the same cache entry)
+    from serenity.scene import load
+
+    as_object = ReferenceJob(scene=load("plane"), width=32, height=18, spp=4, time=jobs[0].time)
+    images = render_references(jobs + jobs[:1] + [as_object], client=client, cache=cache, progress=False)
+    assert len(images) == 4
     np.testing.assert_array_equal(images[2], images[0])
+    np.testing.assert_array_equal(images[3], images[0])
     for r, img in zip(refs, images, strict=False):
         np.testing.assert_array_equal(img, read_exr(os.path.join(out, r["outputs"]["exr"]))["beauty"])
     assert len([f for f in os.listdir(cache) if f.endswith(".npy")]) == 2  # nothing new was rendered
