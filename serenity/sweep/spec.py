@@ -30,7 +30,9 @@ A sweep file is TOML::
 A *point* is one (scene, size, time, quality). Per point the sweep runs a ``frame`` task (ours, per
 quality) and shares one ``reference`` task between the qualities of a (scene, size, time); a
 ``compare`` task then needs both. Each task has a key: a readable prefix and a hash of everything
-that changes its result (for scene files: their bytes), so an edited scene file is a new task.
+that changes its result (for scene files: their bytes; for a quality: the preset's settings), so an
+edited scene file or preset is a new task. The renderer's and the exporter's code are not in the key
+(the reference cache has its own version): after changing them, use a new results directory.
 """
 
 from __future__ import annotations
@@ -337,6 +339,8 @@ def _time_tag(t: str | None) -> str:
 def expand(spec: SweepSpec) -> list[Task]:
     """Every task of the sweep, references before frames before comparisons (no duplicates)."""
     tasks: dict[str, Task] = {}
+    # a preset is a name; its settings go into the key, so a preset that changes means new frames
+    configs = {q: hashlib.sha256(repr(quality_config(q)).encode()).hexdigest() for q in spec.qualities}
     for scene in spec.scenes:
         fp = scene_fingerprint(scene)
         for w, h in spec.sizes:
@@ -354,7 +358,8 @@ def expand(spec: SweepSpec) -> list[Task]:
                         continue
                     inp = {**common, "quality": q, "frames": spec.frames, "exposure": spec.exposure,
                            "device": spec.device}
-                    fkey = _key("frame", [scene_label(scene), f"{w}x{h}", _time_tag(t), q], {**inp, "scene": None})
+                    fkey = _key("frame", [scene_label(scene), f"{w}x{h}", _time_tag(t), q],
+                                {**inp, "scene": None, "config": configs[q]})
                     tasks.setdefault(fkey, Task("frame", fkey, inp))
                     if "compare" in spec.produce:
                         ckey = _key("compare", [scene_label(scene), f"{w}x{h}", _time_tag(t), q],

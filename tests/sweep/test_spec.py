@@ -152,3 +152,20 @@ def test_without_dask_the_command_names_the_extra(tmp_path, capsys, monkeypatch)
     err = capsys.readouterr().err
     assert err == ("serenity: error: a sweep on Dask needs the optional package Dask (dask[distributed]): "
                    "pip install 'serenity[eval]'\n")
+
+
+def test_a_changed_preset_means_new_frame_keys_but_the_same_references(tmp_path, monkeypatch):
+    from dataclasses import replace
+
+    import serenity.sweep.spec as spec_module
+
+    spec = load_spec(_write(tmp_path, BASE))
+    before = {t.key: t.kind for t in expand(spec)}
+    real = spec_module.quality_config
+    monkeypatch.setattr(spec_module, "quality_config",
+                        lambda q: replace(real(q), exposure=0.5) if q == "medium" else real(q))
+    after = {t.key: t.kind for t in expand(spec)}
+    gone = set(before) - set(after)
+    assert {before[k] for k in gone} == {"frame", "compare"}
+    assert all("-medium-" in k for k in gone)
+    assert {k for k, kind in before.items() if kind == "reference"} <= set(after)
