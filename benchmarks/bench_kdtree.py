@@ -25,7 +25,9 @@ Figures (ratios of this run's own measurements; incoherent rays unless ``_cohere
   this reads ~1 there; ``machine.load_average`` says how busy the machine was.
   ``thread_scaling_cpu_bound``: the same split's Σ thread CPU-s / the busiest thread's CPU-s inside
   the kernel launches — their speed-up on 2 threads when each has a core to itself (imbalance and
-  overheads, not the load; the serial Python before and after the launches is not in it);
+  overheads, not the load; the serial Python before and after the launches is not in it); per ray
+  set also ``thread_scaling_cpu_bound_one_chunk_per_thread``, the same for one contiguous chunk per
+  thread (the split before ``chunks_per_thread``: uneven, sky above and ground below);
 - ``build_1m_s``: wall seconds of one build of 1 M triangles (no cache), measured;
   ``build_1m_cpu_s`` its CPU seconds (all threads). The sweep over ``--build-sizes`` builds random
   subsets (seeded) of the subdivision-8 scene (2.6 M triangles), with an N log N least-squares fit.
@@ -49,7 +51,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from serenity.device import cpu_threads, init_warp
-from serenity.kernels.kdtree import KdTree
+from serenity.kernels.kdtree import KdTree, intersect_rays
 from serenity.kernels.launch import launch
 from serenity.scene.procedural import lumpy_mesh
 
@@ -279,6 +281,13 @@ def main(argv=None) -> dict:
         n = len(o)
         rates = measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts, args.repeats)
         cpu_bound = thread_cpu_split(wp, lambda o=o, d=d: tree.intersect(o, d, device="cpu", threads=2))
+        # the same with one contiguous chunk per thread (the split before chunks_per_thread)
+        args_1 = [tree.device_data("cpu"), wp.array(o, dtype=wp.vec3, device="cpu"),
+                  wp.array(d, dtype=wp.vec3, device="cpu"), 0.0,
+                  wp.array(np.full(n, np.inf, np.float32), dtype=float, device="cpu")]
+        outs_1 = [wp.empty(n, dtype=t, device="cpu") for t in (float, wp.int32, float, float)]
+        cpu_bound_halves = thread_cpu_split(
+            wp, lambda n=n, a=[*args_1, *outs_1]: launch(intersect_rays, n, a, device="cpu", threads=2))
         ours = tree.intersect(o, d, device="cpu")
         res = escene.run(o, d, output=1)
         e_prim = res["primID"]
@@ -290,7 +299,8 @@ def main(argv=None) -> dict:
         suffix = "" if name == "incoherent" else "_coherent"
         embree_best = max(rates["embree_1t"], rates.get(f"embree_{threads}t", 0.0))
         figures[name] = {"rays": n, "hit_fraction": float(ours.hit.mean()), "mrays_per_s": rates,
-                         "agreement_with_embree": agree, "thread_scaling_cpu_bound": cpu_bound}
+                         "agreement_with_embree": agree, "thread_scaling_cpu_bound": cpu_bound,
+                         "thread_scaling_cpu_bound_one_chunk_per_thread": cpu_bound_halves}
         figures[f"ratio_vs_embree_1t{suffix}"] = rates["ours_1t"] / rates["embree_1t"]
         figures[f"ratio_vs_embree_all_threads{suffix}"] = rates[f"ours_{threads}t"] / embree_best
         figures[f"speedup_vs_warp_bvh_1t{suffix}"] = rates["ours_1t"] / rates["warp_bvh_1t"]
@@ -341,7 +351,9 @@ def main(argv=None) -> dict:
               "speedup_vs_warp_bvh_all_threads"):
         print(f"{k:<34} incoherent {figures[k]:5.2f}   coherent {figures[k + '_coherent']:5.2f}")
     print(f"thread_scaling (2 threads / 1, worse of the two) {figures['thread_scaling']:.2f}; "
-          f"CPU-bound (Σ thread CPU / busiest thread) {figures['thread_scaling_cpu_bound']:.2f}")
+          f"CPU-bound (Σ thread CPU / busiest thread) {figures['thread_scaling_cpu_bound']:.2f}; "
+          "one chunk per thread: " + ", ".join(
+              f"{k} {figures[k]['thread_scaling_cpu_bound_one_chunk_per_thread']:.2f}" for k in ray_sets))
     print(f"agreement with Embree: coherent {figures['coherent']['agreement_with_embree']:.6f}, "
           f"incoherent {figures['incoherent']['agreement_with_embree']:.6f}")
     if one_m:
