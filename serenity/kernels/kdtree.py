@@ -83,7 +83,7 @@ BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest ext
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
 #: CPU launches of rays are cut into this many chunks per thread, handed out as threads free up:
 #: rays differ a lot in cost (sky vs geometry), and one contiguous chunk per thread left 2 threads
-#: at 1.4-1.5x one on the benchmark's rays (``serenity.kernels.launch``)
+#: at 1.45-1.48x one on the benchmark's rays, 1.95-1.99x with 16 (``serenity.kernels.launch``)
 CHUNKS_PER_THREAD = 16
 
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)

@@ -19,8 +19,9 @@ device: those two differences live here.
 
 Balance (``chunks_per_thread`` > 1): when items cost very different amounts — rays into the sky
 beside rays into geometry, the upper half of a camera's image beside the lower — one chunk per
-thread leaves a thread idle while the other finishes: on the kd-tree benchmark's camera rays the
-two halves cost 0.12 and 0.29 CPU-s, which caps 2 threads at 1.42× one. With k chunks per thread
+thread leaves a thread idle while the other finishes: on the kd-tree benchmark's rays that caps 2
+threads at 1.45× one (``bench_kdtree``: Σ thread CPU / busiest thread), 1.95–1.99× with 16 chunks
+per thread. With k chunks per thread
 the workers take the next chunk as they finish one (dynamic scheduling), so they end together.
 Chunks stay contiguous and thousands of items long, so outputs share a cache line only at chunk
 borders (no false sharing to speak of), and each chunk costs one ``wp.launch`` (~0.1 ms of Python
