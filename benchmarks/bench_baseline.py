@@ -9,7 +9,10 @@ different seeds (256 spp in all for the courtyard, 1024 for the Cornell box); th
 reference, and mean((a − b)²/4 / (ref² + ε)) — the variance of the average over the same denominator —
 estimates how much of a relMSE figure is the reference's own noise ("ref_noise_rel_mse"). "rel_mse_downward" is
 relMSE over the pixels whose normal points down (n.y < -0.5: ceilings, overhangs, the undersides the LPV's
-sky-light VPLs are for, paper Fig. 11). Metrics: relMSE (ε = 1e-2) on
+sky-light VPLs are for, paper Fig. 11). "regions": the per-region / per-material report of
+``serenity.eval.regions`` (FLIP, relMSE, their shares of the total and luminance ours/reference for
+sky, up-/down-facing, vertical surfaces, edges and each material; printed for the full technique).
+Metrics: relMSE (ε = 1e-2) on
 linear HDR (also with the worst 0.1% of pixels left out: "rel_mse_trimmed", charted) and FLIP on the
 tone-mapped images (our exposure, Reinhard, sRGB), over all pixels.
 Our frames use the default ``RenderConfig`` otherwise (ray-traced reflections/refractions where the
@@ -32,6 +35,7 @@ from serenity.config import LPVConfig, RenderConfig, SkyConfig
 from serenity.eval.charts import save_speed_accuracy_chart
 from serenity.eval.metrics import REL_MSE_EPS, compare, rel_mse
 from serenity.eval.reference import render_reference
+from serenity.eval.regions import format_region_report, region_report
 from serenity.frame import Renderer
 from serenity.scene import load
 
@@ -87,6 +91,9 @@ def main(argv=None) -> int:
         for label, cfg in CONFIGS.items():
             frame, ms = our_frame(scene, width, height, args.frames, **cfg)
             m = compare(frame.hdr, ref, exposure=frame.exposure)
+            regions = region_report(frame.hdr, ref, frame.aovs["normal"], frame.aovs["depth"],
+                                    frame.aovs["material"], [mat.name for mat in scene.materials],
+                                    exposure=frame.exposure, fmap=m["flip_map"])
             trimmed = rel_mse(frame.hdr, ref, trim=TRIM)
             down = frame.aovs["normal"][..., 1] < -0.5  # ceilings, overhangs: lit only indirectly (paper Fig. 11)
             down_err = rel_mse(frame.hdr, ref, mask=down) if down.any() else None
@@ -94,12 +101,14 @@ def main(argv=None) -> int:
                    "rel_mse_trimmed": trimmed, "rel_mse_downward": down_err, "downward_pixels": int(down.sum()),
                    "rel_mse_rgb": m["rel_mse_rgb"], "flip": m["flip"], "ref_noise_rel_mse": noise,
                    "ref_spp": 2 * half, "mean_ours": frame.hdr.reshape(-1, 3).mean(0).tolist(),
-                   "mean_ref": ref.reshape(-1, 3).mean(0).tolist()}
+                   "mean_ref": ref.reshape(-1, 3).mean(0).tolist(), "regions": regions}
             results.append(row)
             points.append({"technique": label, "label": f"{label} ({name})", "ms": ms, "error": trimmed})
             print(f"  {label:<27} {ms:8.1f} ms  relMSE {m['rel_mse']:.4f} (0.1% trimmed {trimmed:.4f}, "
                   f"downward-facing px {down_err if down_err is None else round(down_err, 4)})"
                   f"  FLIP {m['flip']:.4f}", flush=True)
+            if label == list(CONFIGS)[-1]:
+                print(format_region_report(regions), flush=True)
         chart = os.path.join(args.chart_dir, f"baseline_{name}.png")
         save_speed_accuracy_chart(points, chart, error_name="relMSE vs full reference (0.1% trimmed)",
                                   title=f"baseline, {name} {width}x{height}")
@@ -117,7 +126,9 @@ def main(argv=None) -> int:
         "ray_tracing": True,
         "metrics": {"rel_mse": "mean (ours-ref)^2/(ref^2+1e-2), linear HDR, all pixels, mean of RGB",
                     "rel_mse_trimmed": "the same without the 0.1% of pixels with the largest error",
-                    "flip": "mean FLIP (LDR) after exposure + Reinhard + sRGB (reinhard_srgb), all pixels"},
+                    "flip": "mean FLIP (LDR) after exposure + Reinhard + sRGB (reinhard_srgb), all pixels",
+                    "regions": "serenity.eval.regions.region_report: per region/material flip, rel_mse, "
+                               "*_share of the all-pixel sum, luminance_ratio = mean Y ours / mean Y ref"},
         "results": results,
     }
     os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)

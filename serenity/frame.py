@@ -88,7 +88,8 @@ class Frame:
     hdr: (H, W, 3) float32 linear radiance, W·m⁻²·sr⁻¹ (row 0 = top).
     ldr: (H, W, 3) uint8 sRGB after exposure + Reinhard.
     aovs: named (H, W, C) float32 layers: albedo, normal (world), position (world, m),
-        depth (H, W, 1; view-space distance along the camera axis, m; inf = background), direct,
+        depth (H, W, 1; view-space distance along the camera axis, m; inf = background),
+        material (H, W, 1; index into ``scene.materials``, -1 = background), direct,
         ao (H, W, 1; SSAO, 1 = open; when enabled), rt_mask (H, W, 1; 1 where rays were traced).
     timings: stage name → milliseconds, in pipeline order (the worker's stages included).
     wall_ms: the frame's duration; below ``sum(timings)`` when ray tracing overlapped GL work.
@@ -526,8 +527,11 @@ class Renderer:
         pos = self._gbuffer_image(gbuf, "position")
         covered = pos[..., 3] > 0
         depth = np.where(covered, (pos[..., :3] - cam.position) @ cam.forward, np.inf).astype(np.float32)
+        albedo = self._gbuffer_image(gbuf, "albedo")
         return {
-            "albedo": np.ascontiguousarray(self._gbuffer_image(gbuf, "albedo")[..., :3]),
+            "albedo": np.ascontiguousarray(albedo[..., :3]),
+            # the G-buffer keeps the material index in albedo.a (exact in f16); -1 = background
+            "material": np.where(covered, albedo[..., 3], -1.0).astype(np.float32)[..., None],
             "normal": np.ascontiguousarray(self._gbuffer_image(gbuf, "normal")[..., :3]),
             "position": np.where(covered[..., None], pos[..., :3], 0.0).astype(np.float32),
             "depth": depth[..., None],

@@ -70,3 +70,8 @@ def test_frame_layout(gl_ctx):
     # row 0 is the top of the image: the camera looks down, so the bottom rows are nearer
     d = frame.aovs["depth"][..., 0]
     assert d[-1, 20] < d[5, 20]
+    # material index per pixel (the plane's material), -1 on the background
+    mat = frame.aovs["material"][..., 0]
+    plane = [m.name for m in scene.materials].index("plane")
+    assert np.all(mat[np.isfinite(d)] == plane) and np.all(mat[~np.isfinite(d)] == -1)
+    assert np.isfinite(d).any() and (~np.isfinite(d)).any()
