@@ -87,6 +87,31 @@ def test_sh_irradiance_vs_brute_force(elevation):
     assert rel.mean() <= SH_MEAN_TOL[elevation]
 
 
+def test_uniform_ground_hemisphere_is_exact_in_l2():
+    # the irradiance of a uniform lower hemisphere, π·L·(1 − n.y)/2, is linear in n (bands 0–1), so the
+    # ground never adds L2 error: the sky SH's error is the sky's own (benchmarks/bench_sky_sh.py)
+    below = fibonacci_sphere(200000)
+    below = below[below[:, 1] < 0]
+    lsh = S.sh_basis(below).sum(0)[:, None] * (2 * math.pi / len(below))
+    normals = fibonacci_sphere(500)
+    e = S.eval_irradiance(S.irradiance_coefficients(lsh), normals)[:, 0]
+    assert np.allclose(e, math.pi * (1 - normals[:, 1]) / 2, atol=2e-3 * math.pi)
+
+
+@pytest.mark.parametrize("elevation", [45.0, 10.0])
+def test_windowing_only_adds_error_on_an_unoccluded_sky(elevation):
+    # the unwindowed projection is the best L2 fit of the (already smooth) irradiance; a window blurs it
+    _, m, d, w, ground = _sky_and_ground(elevation, size=128)
+    normals = fibonacci_sphere(500)
+    brute = (np.maximum(normals @ d.T, 0) * w) @ m + ground[None] * math.pi * (1 - normals[:, 1:2]) / 2
+    lsky = (S.sh_basis(d) * w[:, None]).T @ m
+    ground_e = ground[None] * math.pi * (1 - normals[:, 1:2]) / 2
+    errs = {win: float((np.abs(S.eval_irradiance(S.irradiance_coefficients(lsky, win, size), normals) + ground_e
+                               - brute) / brute).mean())
+            for win, size in (("none", 4.0), ("hanning", 8.0), ("lanczos", 8.0), ("nonneg", 4.0))}
+    assert min(errs, key=errs.get) == "none", errs
+
+
 @pytest.mark.parametrize("elevation", [60.0, 30.0, 10.0, 2.0])
 @pytest.mark.parametrize("window", [("nonneg", 0.0), ("hanning", 4.75), ("lanczos", 4.0)])
 def test_window_removes_negative_irradiance_with_sun_disc(elevation, window):
