@@ -315,6 +315,11 @@ class RenderConfig:
     indirect_scale: int = 2
     """The main view's SSAO and indirect light (sky volume, LPV) are computed at 1/scale of the
     view per axis and joint-bilaterally upsampled (1 = full resolution, the paper's)."""
+    antialiasing: str = "none"
+    """Edge anti-aliasing of the final HDR frame: "none" or "fxaa" (``serenity.raster.fxaa``, one post
+    pass before the tone map). Off by default: against the reference it gains little FLIP and fills
+    1-pixel black gaps (``benchmarks/bench_aa.py``); ``Renderer.render_accumulated`` (jittered
+    temporal accumulation on a static camera) is the measured better option."""
 
     def __post_init__(self):
         if not (self.exposure > 0):
@@ -327,6 +332,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
         if self.ambient not in ("none", "constant"):
             raise ConfigError(f"RenderConfig.ambient must be 'none' or 'constant', got {self.ambient!r}")
+        if self.antialiasing not in ("none", "fxaa"):
+            raise ConfigError(f"RenderConfig.antialiasing must be 'none' or 'fxaa', got {self.antialiasing!r}")
         for name, kind in (("shadow", ShadowConfig), ("ssao", SSAOConfig), ("sky", SkyConfig), ("lpv", LPVConfig)):
             value = getattr(self, name)
             if not isinstance(value, kind):

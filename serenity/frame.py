@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from serenity.colour import reinhard_srgb
 from serenity.config import RenderConfig, check_image_size
 from serenity.device import resolve_device
 from serenity.errors import SerenityError
@@ -46,6 +47,7 @@ from serenity.kernels.tracer_process import TracerProcess
 from serenity.raster.composite import CompositePass
 from serenity.raster.context import get_context
 from serenity.raster.deferred import DeferredPass, LightingInputs
+from serenity.raster.fxaa import FXAAPass
 from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.indirect import IndirectPass, LowResIndirect
 from serenity.raster.interop import read_texture
@@ -69,7 +71,7 @@ STAGES = (
     "direct lighting", "sky lighting", "lpv lighting", "indirect upsample",
     "wait for ray tracing", "rt g-buffer upload", "shadow maps (OSM)",  # sync 2, paper §9
     "rt direct lighting", "rt sky lighting", "rt lpv lighting", "composite",
-    "tone map", "readback",
+    "anti-aliasing", "tone map", "readback",
 )
 """Every stage a frame can time, in pipeline order (``Frame.timings`` keys are a subsequence)."""
 LPV_UPDATE_STAGES = ("rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload")
@@ -180,6 +182,9 @@ class Renderer:
             self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect_scale)
             for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass):
                 p.resize(self.width, self.height)
+            self.fxaa_pass = FXAAPass(self.ctx) if cfg.antialiasing == "fxaa" else None
+            if self.fxaa_pass is not None:
+                self.fxaa_pass.resize(self.width, self.height)
             # ray tracing only where a material needs it (paper §9); the kd-tree waits for the
             # first frame that actually shows such a pixel
             self.traces = cfg.ray_tracing and any(m.needs_ray_tracing for m in scene.materials)
@@ -250,24 +255,32 @@ class Renderer:
 
     # ------------------------------------------------------------------------------------ frame
 
-    def render(self, read_back: bool | Iterable[str] = True) -> Frame:
+    def render(self, read_back: bool | Iterable[str] = True, jitter: tuple[float, float] = (0.0, 0.0)) -> Frame:
         """Render the scene's current camera and sun: the diagram of docs/architecture.md ("The
         frame"), one method per box. ``read_back`` says what comes back to the host: True =
         everything (hdr, ldr and the AOVs), False = nothing (for a caller that draws
         ``self.outputs`` itself, e.g. the viewer's window), or a subset of {"hdr", "ldr", "aovs"}
-        (``serenity bench`` reads only the HDR image: every read stalls the GL pipeline)."""
+        (``serenity bench`` reads only the HDR image: every read stalls the GL pipeline). ``jitter``:
+        sub-pixel offset (x right, y up; pixels) of the projection, for :meth:`render_accumulated`."""
         wanted = set(READ_BACK) if read_back is True else set(read_back or ())
         if not wanted <= set(READ_BACK):
             raise SerenityError(f"read_back must be a bool or a subset of {READ_BACK}, got {read_back!r}")
         self._begin_frame()
         cam = self.scene.camera
-        view_proj = cam.projection_matrix(self.width / self.height) @ cam.view_matrix()
+        proj = cam.projection_matrix(self.width / self.height)
+        if jitter[0] or jitter[1]:  # shift NDC by 2·jitter/size: x_ndc += m[0,2]·z/(−z) = −m[0,2]
+            proj[0, 2] -= 2.0 * float(jitter[0]) / self.width
+            proj[1, 2] -= 2.0 * float(jitter[1]) / self.height
+        view_proj = proj @ cam.view_matrix()
         light = lighting_inputs(self.scene, self.config, view_proj)
         rcb, join = self._start_ray_tracing(view_proj)                  # sync 1
         shadow, gbuf, ao = self._main_view(view_proj)
         self._update_volumes(gbuf, light)
         lit = self._light_main_view(gbuf, shadow, light, ao)
         out_hdr = self._ray_traced_views(rcb, join, gbuf, lit, light)  # sync 2
+        if self.fxaa_pass is not None:
+            with self._stage("anti-aliasing"):
+                out_hdr = self.fxaa_pass.render(out_hdr, self.config.exposure)
         with self._stage("tone map"):
             self.tonemap_pass.render(out_hdr, self.config.exposure)
         #: this frame's GL textures: hdr (lit + composited, RGBA32F), ldr (tone-mapped sRGB, RGBA8),
@@ -277,6 +290,26 @@ class Renderer:
                         "gbuffer": gbuf, "rcb": rcb}
         hdr, ldr, aovs = self._read_back(wanted, out_hdr, gbuf, lit, ao, rcb, cam)
         return self._end_frame(hdr, ldr, aovs, rcb)
+
+    def render_accumulated(self, samples: int) -> Frame:
+        """Temporal accumulation on a static camera: the mean linear HDR of ``samples`` frames whose
+        projections are jittered by the Halton(2, 3) sequence within the pixel (the first unjittered),
+        i.e. ``samples`` sub-pixel positions box-filtered as the reference's pixel filter does. An
+        interactive viewer shows the running mean after each frame, so the extra cost per displayed
+        frame is one average; the image converges over ``samples`` frames. The AOVs are those of the
+        unjittered first frame; timings are the last frame's, ``wall_ms`` the sum."""
+        if not (isinstance(samples, int) and 1 <= samples <= 1024):
+            raise SerenityError(f"samples must be an int in 1..1024, got {samples!r}")
+        first, acc, wall = None, None, 0.0
+        for i in range(samples):
+            f = self.render(read_back=("hdr",) if i else ("hdr", "aovs"),
+                            jitter=(halton(i, 2) - 0.5, halton(i, 3) - 0.5) if i else (0.0, 0.0))
+            wall += f.wall_ms
+            first = first or f
+            acc = f.hdr.astype(np.float64) if acc is None else acc + f.hdr
+        hdr = (acc / samples).astype(np.float32)
+        return Frame(hdr=hdr, ldr=reinhard_srgb(hdr, f.exposure), aovs=first.aovs, timings=f.timings,
+                     exposure=f.exposure, wall_ms=wall, events=f.events, rays=f.rays)
 
     def _begin_frame(self) -> None:
         self._timings, self._events = {}, []
@@ -560,6 +593,16 @@ class Renderer:
         proc = getattr(self, "_tracer_proc", None)
         if proc is not None:
             proc.close()
+
+
+def halton(index: int, base: int) -> float:
+    """The ``index``-th (from 0) element of the van der Corput / Halton sequence in ``base``, in [0, 1)."""
+    f, r, i = 1.0, 0.0, index + 1
+    while i > 0:
+        f /= base
+        r += f * (i % base)
+        i //= base
+    return r
 
 
 def format_timings(timings: dict[str, float], wall_ms: float | None = None) -> str:

@@ -1,0 +1,84 @@
+"""Anti-aliasing for the deferred renderer (issue #14 item 5): FXAA post pass vs jittered temporal
+accumulation on a static camera, against the cached Mitsuba references of ``bench_baseline.py``.
+
+    python benchmarks/bench_aa.py [--size 320x180] [--json FILE]
+
+Per scene and method: FLIP and relMSE over all pixels and over the edge pixels (``edges`` region of
+``serenity.eval.regions``: depth discontinuities of the unjittered frame), the FXAA pass's ms (its
+stage timing, llvmpipe) and, for accumulation, the wall ms of all its frames (a viewer pays them over
+successive frames, one ordinary frame each). Default ``RenderConfig`` otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+from serenity.config import RenderConfig
+from serenity.eval.metrics import compare
+from serenity.eval.reference import render_reference
+from serenity.eval.regions import region_report
+from serenity.frame import Renderer
+from serenity.scene import load
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SCENES = {"courtyard": 256, "cornell": 1024}  # reference spp, as bench_baseline.py (same cache entries)
+SAMPLES = (4, 8, 16)
+
+
+def score(frame, ref):
+    m = compare(frame.hdr, ref, exposure=frame.exposure)
+    rep = region_report(frame.hdr, ref, frame.aovs["normal"], frame.aovs["depth"], exposure=frame.exposure,
+                        fmap=m["flip_map"])
+    e = rep["regions"]["edges"]
+    return {"flip": m["flip"], "rel_mse": m["rel_mse"], "edge_flip": e["flip"], "edge_rel_mse": e["rel_mse"],
+            "edge_pixels": e["pixels"]}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--size", default="320x180")
+    ap.add_argument("--json", default=os.path.join(HERE, "results", "aa.json"))
+    args = ap.parse_args(argv)
+    width, height = (int(x) for x in args.size.split("x"))
+    rows = []
+    for name, spp in SCENES.items():
+        scene = load(name)
+        ref = (render_reference(scene, width, height, spp=spp // 2, component="full", seed=0, progress=False)
+               + render_reference(scene, width, height, spp=spp // 2, component="full", seed=1,
+                                  progress=False)) / 2
+        for aa in ("none", "fxaa"):
+            r = Renderer(scene, width, height, config=RenderConfig(antialiasing=aa))
+            frames = [r.render() for _ in range(4)]
+            ms = float(np.median([f.timings.get("anti-aliasing", 0.0) for f in frames[1:]]))
+            total = float(np.median([f.total_ms for f in frames[1:]]))
+            rows.append({"scene": name, "method": aa, "aa_ms": ms, "frame_ms": total, **score(frames[-1], ref)})
+            if aa == "none":
+                for n in SAMPLES:
+                    t = time.perf_counter()
+                    f = r.render_accumulated(n)
+                    rows.append({"scene": name, "method": f"accumulate {n}", "aa_ms": 0.0, "frame_ms": total,
+                                 "all_frames_ms": (time.perf_counter() - t) * 1e3, **score(f, ref)})
+        for row in rows:
+            if row["scene"] == name:
+                print(f"{name:<10} {row['method']:<14} FLIP {row['flip']:.4f} relMSE {row['rel_mse']:.4f}  edges "
+                      f"({row['edge_pixels']} px) FLIP {row['edge_flip']:.4f} relMSE {row['edge_rel_mse']:.4f}  "
+                      f"AA pass {row['aa_ms']:.1f} ms", flush=True)
+    out = {"benchmark": "aa", "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
+                                          "python": sys.version.split()[0]},
+           "size": [width, height], "reference_spp": SCENES, "results": rows}
+    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
+    with open(args.json, "w") as f:
+        json.dump(out, f, indent=2)
+    print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
