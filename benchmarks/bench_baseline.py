@@ -23,6 +23,7 @@ costs only our frames. Writes JSON and one speed-vs-error chart per scene.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -54,6 +55,12 @@ CONFIGS = {
     "direct + sky volume": {"lpv": LPVConfig(enabled=False)},
     "direct + sky volume + LPV (all)": {},
 }
+
+
+def _jsonable(cfg: dict) -> dict:
+    """The row's RenderConfig overrides with config dataclasses (SkyConfig, LPVConfig) as dicts."""
+    return {k: ({"type": type(v).__name__, **dataclasses.asdict(v)} if dataclasses.is_dataclass(v) else v)
+            for k, v in cfg.items()}
 
 
 def our_frame(scene, width, height, frames, **config):
@@ -97,7 +104,7 @@ def main(argv=None) -> int:
             trimmed = rel_mse(frame.hdr, ref, trim=TRIM)
             down = frame.aovs["normal"][..., 1] < -0.5  # ceilings, overhangs: lit only indirectly (paper Fig. 11)
             down_err = rel_mse(frame.hdr, ref, mask=down) if down.any() else None
-            row = {"scene": name, "config": label, "render_config": cfg, "ms": ms, "rel_mse": m["rel_mse"],
+            row = {"scene": name, "config": label, "render_config": _jsonable(cfg), "ms": ms, "rel_mse": m["rel_mse"],
                    "rel_mse_trimmed": trimmed, "rel_mse_downward": down_err, "downward_pixels": int(down.sum()),
                    "rel_mse_rgb": m["rel_mse_rgb"], "flip": m["flip"], "ref_noise_rel_mse": noise,
                    "ref_spp": 2 * half, "mean_ours": frame.hdr.reshape(-1, 3).mean(0).tolist(),

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from serenity.config import RenderConfig
+from serenity.config import LPVConfig, RenderConfig, SkyConfig
 from serenity.errors import SerenityError
 from serenity.frame import Renderer, halton
 
@@ -11,7 +11,7 @@ from .scenes import plane_scene
 
 W, H = 64, 36
 #: direct light only on a bare plane: every covered pixel has the same radiance, the background 0
-QUICK = dict(lpv=False, sky_lighting=False, ray_tracing=False)
+QUICK = dict(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ray_tracing=False)
 
 
 def _plane_frame(**config):
