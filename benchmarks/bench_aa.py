@@ -1,12 +1,15 @@
-"""Anti-aliasing for the deferred renderer (issue #14 item 5): FXAA post pass vs jittered temporal
-accumulation on a static camera, against the cached Mitsuba references of ``bench_baseline.py``.
+"""Edges and textures (issue #14 item 5): FXAA post pass vs jittered temporal accumulation on a static
+camera, and the G-buffer's in-shader anisotropic texture filtering (``RenderConfig.texture_taps``),
+against the cached Mitsuba references of ``bench_baseline.py``.
 
     python benchmarks/bench_aa.py [--size 320x180] [--json FILE]
 
 Per scene and method: FLIP and relMSE over all pixels and over the edge pixels (``edges`` region of
 ``serenity.eval.regions``: depth discontinuities of the unjittered frame), the FXAA pass's ms (its
 stage timing, llvmpipe) and, for accumulation, the wall ms of all its frames (a viewer pays them over
-successive frames, one ordinary frame each). Default ``RenderConfig`` otherwise.
+successive frames, one ordinary frame each). ``texture_taps`` (courtyard: its ground is the textured
+material): FLIP / relMSE over all pixels and over the ground's pixels, and the G-buffer stage's median ms.
+Default ``RenderConfig`` otherwise.
 """
 
 from __future__ import annotations
@@ -70,9 +73,27 @@ def main(argv=None) -> int:
                 print(f"{name:<10} {row['method']:<14} FLIP {row['flip']:.4f} relMSE {row['rel_mse']:.4f}  edges "
                       f"({row['edge_pixels']} px) FLIP {row['edge_flip']:.4f} relMSE {row['edge_rel_mse']:.4f}  "
                       f"AA pass {row['aa_ms']:.1f} ms", flush=True)
+    taps_rows = []
+    scene = load("courtyard")
+    ref = (render_reference(scene, width, height, spp=128, component="full", seed=0, progress=False)
+           + render_reference(scene, width, height, spp=128, component="full", seed=1, progress=False)) / 2
+    names = [m.name for m in scene.materials]
+    for taps in (1, 2, 4, 8):
+        r = Renderer(scene, width, height, config=RenderConfig(texture_taps=taps))
+        frames = [r.render() for _ in range(5)]
+        f = frames[-1]
+        m = compare(f.hdr, ref, exposure=f.exposure)
+        g = region_report(f.hdr, ref, f.aovs["normal"], f.aovs["depth"], f.aovs["material"], names,
+                          exposure=f.exposure, fmap=m["flip_map"])["materials"]["ground"]
+        taps_rows.append({"texture_taps": taps, "flip": m["flip"], "rel_mse": m["rel_mse"], "ground_flip": g["flip"],
+                          "ground_rel_mse": g["rel_mse"],
+                          "gbuffer_ms": float(np.median([x.timings["g-buffer"] for x in frames[1:]]))})
+        t = taps_rows[-1]
+        print(f"courtyard texture_taps {taps}: FLIP {t['flip']:.4f} relMSE {t['rel_mse']:.4f}  ground FLIP "
+              f"{t['ground_flip']:.4f} relMSE {t['ground_rel_mse']:.4f}  g-buffer {t['gbuffer_ms']:.1f} ms", flush=True)
     out = {"benchmark": "aa", "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                                           "python": sys.version.split()[0]},
-           "size": [width, height], "reference_spp": SCENES, "results": rows}
+           "size": [width, height], "reference_spp": SCENES, "results": rows, "texture_taps": taps_rows}
     os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
     with open(args.json, "w") as f:
         json.dump(out, f, indent=2)

@@ -176,7 +176,7 @@ class Renderer:
             cfg = self.config
             self.scene_gl = SceneGL(self.ctx, scene)
             self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, cfg.shadow.size, cfg.shadow.cascades)
-            self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl)
+            self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl, cfg.texture_taps)
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
             self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect_scale)

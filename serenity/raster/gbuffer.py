@@ -27,9 +27,11 @@ class GBuffer:
 
 
 class GBufferPass:
-    def __init__(self, ctx, scene_gl):
+    def __init__(self, ctx, scene_gl, texture_taps: int = 1):
         self.ctx = ctx
         self.scene_gl = scene_gl
+        self.texture_taps = int(texture_taps)
+        """Trilinear taps per textured fragment along the footprint's major axis (1 = plain GL)."""
         self.program = load_program(ctx, "gbuffer.glsl")
         self.vao = scene_gl.vao(self.program)
         self.size = None
@@ -78,6 +80,8 @@ class GBufferPass:
                 p["u_albedo"].value = tuple(float(x) for x in m.albedo)
                 tex = self.scene_gl.textures.get(r.material)
                 p["u_has_texture"].value = tex is not None
+                if "u_texture_taps" in p:
+                    p["u_texture_taps"].value = self.texture_taps
                 if tex is not None:
                     tex.use(location=0)
                     p["u_albedo_tex"].value = 0
