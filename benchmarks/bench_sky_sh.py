@@ -31,7 +31,14 @@ import platform
 import sys
 
 import numpy as np
-from scipy.special import sph_harm_y
+
+try:
+    from scipy.special import sph_harm_y
+except ImportError:  # scipy < 1.15: the older name, with (m, n) and the angles swapped
+    from scipy.special import sph_harm
+
+    def sph_harm_y(n, m, theta, phi):
+        return sph_harm(m, n, phi, theta)
 
 from serenity.device import resolve_device
 from serenity.kernels import atmosphere as A

@@ -318,7 +318,7 @@ class RenderConfig:
     texture_taps: int = 4
     """Trilinear taps per textured G-buffer fragment along its footprint's long axis: anisotropic
     texture filtering in the shader (``glsl/gbuffer.glsl``); 1 = GL's isotropic trilinear, which
-    blurs textures seen at grazing angles (courtyard ground FLIP 0.149 -> 0.126 with 4 taps,
+    blurs textures seen at grazing angles (courtyard ground FLIP 0.148 -> 0.124 with 4 taps,
     ``benchmarks/bench_aa.py``)."""
     antialiasing: str = "none"
     """Edge anti-aliasing of the final HDR frame: "none" or "fxaa" (``serenity.raster.fxaa``, one post
