@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import moderngl
+
 from serenity.errors import SerenityError
 from serenity.raster.context import FullscreenPass
 
@@ -40,8 +42,6 @@ class FXAAPass(FullscreenPass):
 
     def render(self, hdr_texture, exposure: float):
         """The anti-aliased copy of ``hdr_texture`` (same size), in this pass's own ``hdr`` target."""
-        import moderngl
-
         cfg, p = self.config, self.program
         with self.ctx.debug_scope("fxaa"):
             old = hdr_texture.filter
