@@ -115,7 +115,7 @@ def test_layer_sweep_equals_rebuild(device, courtyard):
     # a small sun move keeps the volume, a big one restarts the sweep
     sun = courtyard.sun.direction
     el, az = math.degrees(math.asin(sun[1])), courtyard.sun.azimuth_deg
-    assert not a.update(sun_direction=direction_from_angles(el + 0.2, az))
+    assert not a.update(sun_direction=direction_from_angles(el + 0.05, az))
     assert a.update(sun_direction=direction_from_angles(el + 5.0, az))
     assert a.pending_layers == a.resolution[1] - 1
 
@@ -150,7 +150,7 @@ def test_transfer_follows_the_sky_and_skips_when_unchanged(device, courtyard):
     el, az = math.degrees(math.asin(sun[1])), courtyard.sun.azimuth_deg
     assert vol.update(sun_direction=direction_from_angles(el, az)) and vol.pending_layers == 0
     c0 = vol.coefficients().copy()
-    assert not vol.update(sun_direction=direction_from_angles(el + 0.2, az))
+    assert not vol.update(sun_direction=direction_from_angles(el + 0.05, az))
     assert vol.update(sun_direction=direction_from_angles(el - 20.0, az)) and vol.pending_layers == 0
     assert not np.allclose(vol.coefficients(), c0)
 
