@@ -241,7 +241,8 @@ def frontier_figure(panels: list[dict], goal: float = GOAL_SPEEDUP, metrics=CHAR
             ax.set_ylabel(f"{name} (log, lower is better)", fontsize=9)
             extra = ""
             if r is not None:
-                extra = f" — equal {name.split(' ')[0].split(',')[0]}: {describe(r)}"
+                who = f" ({panel['headline']})" if len(our_names) > 1 and panel.get("headline") else ""
+                extra = f" — equal {name.split(' ')[0].split(',')[0]}{who}: {describe(r)}"
             ax.set_title(f"{panel['title']}{extra}", fontsize=9.5)
     fig.legend(list(handles.values()), list(handles.keys()), loc="lower center", ncol=min(4, len(handles)),
                fontsize=8.5, frameon=False,
