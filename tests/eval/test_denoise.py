@@ -74,14 +74,14 @@ def test_denoising_a_noisy_path_traced_image_reduces_its_error(tmp_path, monkeyp
     # looking down so that the plane fills the frame: no black pixels, on which relMSE (absolute ε)
     # would count the denoiser's slight bleed across the plane's far edge as a huge error
     s.camera = Camera(position=(0.0, 12.0, 6.0), target=(0.0, 0.0, -1.0), fov_y_deg=50.0)
-    w, h = 64, 36
-    ref = R.render_reference(s, w, h, spp=256, progress=False)
+    w, h = 48, 27
+    ref = R.render_reference(s, w, h, spp=128, progress=False)
     noisy = R.render_reference(s, w, h, spp=2, seed=7, progress=False)
     # noise-free guides from Mitsuba's own AOVs (our renderer's need GL; the bench uses those)
     mi = R.mitsuba()
     d = R.mitsuba_scene_dict(R.with_effective_sun(s), w, h, -1, R.sky_map(s))
     d["integrator"] = {"type": "aov", "aovs": "a:albedo,n:sh_normal"}
-    aov = np.array(mi.render(mi.load_dict(d), spp=64), np.float32)
+    aov = np.array(mi.render(mi.load_dict(d), spp=16), np.float32)
     albedo, normal = aov[..., :3], aov[..., 3:6]
 
     raw = rel_mse(noisy, ref), flip(noisy, ref)
