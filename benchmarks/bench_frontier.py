@@ -11,8 +11,9 @@ For each scene and size, all in one process on one machine:
 - the reference: Mitsuba 3 ``path`` at ``--ref-spp`` (1024) spp, unlimited depth
   (``serenity.eval.reference.render_reference``, cached: only the first run pays for it);
 - ours: for each of our quality configs (:func:`our_configs`), the median wall time of
-  ``renderer.render()`` over ``--frames`` frames with the static camera and sun, after ``--warmup``
-  frames, and the FLIP and relMSE of the last frame;
+  ``renderer.render()`` over ``--frames`` frames with the static camera and sun after ``--warmup``
+  frames, and as many again after the peer's sweep (the load of a shared machine drifts); the
+  FLIP and relMSE of the last frame before the sweep;
 - the peer: Mitsuba 3 ``path`` at each of ``--spp`` (1 … 64), timed (wall time of ``mi.render``,
   the scene loaded beforehand, one warm-up render), raw and denoised by OIDN at each of
   ``--oidn`` qualities (time = render + the OIDN call), with albedo and normal guides from our
@@ -94,22 +95,14 @@ def timed(fn, repeat_below_s: float = TIMING_REPEATS_BELOW_S):
     return out, float(np.median(times))
 
 
-def measure_ours(scene, width, height, config, frames, warmup):
-    """(last Frame, median wall ms of ``frames`` renders after ``warmup``, every wall ms)."""
-    from serenity.frame import Renderer
-
-    renderer = Renderer(scene, width, height, config=config)
-    try:
-        for _ in range(warmup):
-            renderer.render()
-        walls, frame = [], None
-        for _ in range(frames):
-            t0 = time.perf_counter()
-            frame = renderer.render()
-            walls.append((time.perf_counter() - t0) * 1e3)
-    finally:
-        renderer.close()
-    return frame, float(np.median(walls)), walls
+def timed_frames(renderer, frames):
+    """(last Frame, wall ms of each of ``frames`` renders)."""
+    walls, frame = [], None
+    for _ in range(frames):
+        t0 = time.perf_counter()
+        frame = renderer.render()
+        walls.append((time.perf_counter() - t0) * 1e3)
+    return frame, walls
 
 
 def guides(scene, width, height, config):
@@ -150,11 +143,18 @@ def run_case(name, width, height, args, bar):
         m = compare(img, ref, exposure=exposure)
         return {"flip": m["flip"], "rel_mse": m["rel_mse"], "rel_mse_trimmed": rel_mse(img, ref, trim=TRIM)}
 
-    ours = []
+    # ours: timed before and again after the peer's sweep (this machine's load drifts over minutes);
+    # the image is the last frame before it
+    from serenity.frame import Renderer
+
+    ours, renderers = [], {}
     for cname, cfg in configs.items():
         bar.set_description(f"{tag}: ours ({cname})")
-        frame, ms, walls = measure_ours(scene, width, height, cfg, args.frames, args.warmup)
-        ours.append({"name": cname, "ms": ms, "wall_ms": walls, **metrics(frame.hdr)})
+        renderers[cname] = r = Renderer(scene, width, height, config=cfg)
+        for _ in range(args.warmup):
+            r.render()
+        frame, walls = timed_frames(r, args.frames)
+        ours.append({"name": cname, "wall_ms_before": walls, **metrics(frame.hdr)})
         bar.update(1)
 
     bar.set_description(f"{tag}: guides")
@@ -173,6 +173,12 @@ def run_case(name, width, height, args, bar):
             curves[q].append({"spp": spp, "ms": (render_s + oidn_s) * 1e3, "render_ms": render_s * 1e3,
                               "oidn_ms": oidn_s * 1e3, **metrics(out)})
         bar.update(1)
+
+    bar.set_description(f"{tag}: ours again")
+    for o in ours:
+        _, o["wall_ms_after"] = timed_frames(renderers[o["name"]], args.frames)
+        renderers.pop(o["name"]).close()
+        o["ms"] = float(np.median(o["wall_ms_before"] + o["wall_ms_after"]))
 
     speedups = {}
     for metric in SPEEDUP_METRICS:
@@ -298,7 +304,7 @@ def main(argv=None) -> int:
                           f"{'cached' if info.get('cached') else 'rendered'} in {time.perf_counter() - t0:.0f} s")
             return 0
         n_cfg = len(our_configs())
-        total = len(args.scenes) * len(sizes) * (1 + n_cfg + len(args.spp))
+        total = len(args.scenes) * len(sizes) * (1 + n_cfg + len(args.spp))  # reference, ours, each spp
         cases = []
         with tqdm(total=total, unit="step", disable=args.no_progress) as bar:
             for name in args.scenes:
@@ -331,7 +337,8 @@ def main(argv=None) -> int:
                  "guides": f"albedo + normal from our G-buffer at {GUIDE_SUPERSAMPLE}x the size, box-filtered down; "
                            "albedo 1 on the sky and where we trace rays; cleanAux"},
         "ours": {"configs": list(our_configs()), "frames": args.frames, "warmup": args.warmup,
-                 "time": "median wall time of Renderer.render() with a static camera and sun, after the warm-up"},
+                 "time": "median wall time of Renderer.render() with a static camera and sun, after the warm-up: "
+                         "frames frames before the peer's sweep and frames after it"},
         "reference": {"renderer": "Mitsuba path, unlimited depth (serenity.eval.reference.render_reference)",
                       "spp": args.ref_spp},
         "metrics": {"flip": "mean FLIP (LDR) after exposure + Reinhard + sRGB, all pixels",
