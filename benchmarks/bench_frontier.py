@@ -122,11 +122,14 @@ def guides(scene, width, height, config):
     return guides_from_aovs(frame.aovs, supersample=s)
 
 
-def run_case(scene, width, height, args, bar):
+def run_case(scene, width, height, args, bar) -> dict:
+    """Everything measured for one scene and size (one entry of the JSON's "cases")."""
     from serenity.eval.denoise import denoise
     from serenity.eval.frontier import PathTracerPeer, combine, equal_error_speedup
     from serenity.eval.metrics import compare, rel_mse
     from serenity.eval.reference import render_reference
+    from serenity.frame import Renderer
+
     name = scene.name
     configs = our_configs()
     exposure = next(iter(configs.values())).exposure
@@ -146,8 +149,6 @@ def run_case(scene, width, height, args, bar):
 
     # ours: timed before and again after the peer's sweep (this machine's load drifts over minutes);
     # the image is the last frame before it
-    from serenity.frame import Renderer
-
     ours, renderers = [], {}
     for cname, cfg in configs.items():
         bar.set_description(f"{tag}: ours ({cname})")
