@@ -14,8 +14,9 @@ For each scene and size, all in one process on one machine:
   ``renderer.render()`` over ``--frames`` frames with the static camera and sun after ``--warmup``
   frames, and as many again after the peer's sweep (the load of a shared machine drifts); the
   FLIP and relMSE of the last frame before the sweep;
-- the peer: Mitsuba 3 ``path`` at each of ``--spp`` (1 … 64), timed (wall time of ``mi.render``,
-  the scene loaded beforehand, one warm-up render), raw and denoised by OIDN at each of
+- the peer: Mitsuba 3 ``path`` at each of ``--spp`` (1 … 64), rendered progressively (each count
+  adds a chunk of samples to the one before; its time is the sum of the chunks' ``mi.render`` wall
+  times, the scene loaded beforehand, one warm-up render), raw and denoised by OIDN at each of
   ``--oidn`` qualities (time = render + the OIDN call), with albedo and normal guides from our
   noise-free AOVs (a 2×-supersampled G-buffer box-filtered down: ``guides_from_aovs``);
 - the equal-FLIP speed-up (``serenity.eval.frontier.equal_error_speedup``): the time the fastest
@@ -85,19 +86,6 @@ def csv(text: str) -> list[str]:
     return [x.strip() for x in text.split(",") if x.strip()]
 
 
-def timed(fn, repeat_below_s: float = TIMING_REPEATS_BELOW_S):
-    """(result of the first call, median wall seconds): calls taking < ``repeat_below_s`` run 3 times."""
-    t0 = time.perf_counter()
-    out = fn()
-    times = [time.perf_counter() - t0]
-    if times[0] < repeat_below_s:
-        for _ in range(2):
-            t0 = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t0)
-    return out, float(np.median(times))
-
-
 def timed_frames(renderer, frames):
     """(last Frame, wall ms of each of ``frames`` renders)."""
     walls, frame = [], None
@@ -125,7 +113,7 @@ def guides(scene, width, height, config):
 def run_case(scene, width, height, args, bar) -> dict:
     """Everything measured for one scene and size (one entry of the JSON's "cases")."""
     from serenity.eval.denoise import denoise
-    from serenity.eval.frontier import PathTracerPeer, combine, equal_error_speedup
+    from serenity.eval.frontier import PathTracerPeer, combine, equal_error_speedup, timed
     from serenity.eval.metrics import compare, rel_mse
     from serenity.eval.reference import render_reference
     from serenity.frame import Renderer
@@ -166,15 +154,16 @@ def run_case(scene, width, height, args, bar) -> dict:
 
     peer = PathTracerPeer(scene, width, height)
     curves: dict[str, list[dict]] = {"raw": [], **{q: [] for q in args.oidn}}
-    for spp in args.spp:
-        bar.set_description(f"{tag}: Mitsuba {spp} spp")
-        (img, _), render_s = timed(lambda spp=spp: peer.render(spp))
+    bar.set_description(f"{tag}: Mitsuba {args.spp[0]} spp")
+    for k, (spp, img, render_s) in enumerate(peer.progressive(args.spp, TIMING_REPEATS_BELOW_S)):
         curves["raw"].append({"spp": spp, "ms": render_s * 1e3, "render_ms": render_s * 1e3, **metrics(img)})
         for q in args.oidn:
-            out, oidn_s = timed(lambda q=q, img=img: denoise(img, albedo, normal, quality=q))
+            out, oidn_s = timed(lambda q=q, img=img: denoise(img, albedo, normal, quality=q), TIMING_REPEATS_BELOW_S)
             curves[q].append({"spp": spp, "ms": (render_s + oidn_s) * 1e3, "render_ms": render_s * 1e3,
                               "oidn_ms": oidn_s * 1e3, **metrics(out)})
         bar.update(1)
+        if k + 1 < len(args.spp):
+            bar.set_description(f"{tag}: Mitsuba {args.spp[k + 1]} spp")
 
     bar.set_description(f"{tag}: ours again")
     for o in ours:
@@ -340,7 +329,8 @@ def main(argv=None) -> int:
                  "denoiser": f"Intel Open Image Denoise via pyoidn {getattr(pyoidn.version, '__version__', '')}"
                              .strip(),
                  "oidn_qualities": args.oidn, "spp": args.spp,
-                 "time": "wall time of mi.render (scene loaded beforehand, one warm-up render) + the OIDN call; "
+                 "time": "progressive: sum of the wall times of the mi.render chunks up to this spp (scene loaded "
+                         "beforehand, one warm-up render) + the OIDN call; "
                          f"calls under {TIMING_REPEATS_BELOW_S:g} s timed 3 times, median",
                  "guides": f"albedo + normal from our G-buffer at {GUIDE_SUPERSAMPLE}x the size, box-filtered down; "
                            "albedo 1 on the sky and where we trace rays; cleanAux"},

@@ -86,3 +86,25 @@ def test_chart_png_is_written(tmp_path):
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(SerenityError, match="at least one panel"):
         save_frontier_chart([], str(tmp_path / "g.png"))
+
+
+def test_progressive_peer_accumulates_chunks(tmp_path, monkeypatch):
+    pytest.importorskip("mitsuba")
+    import numpy as np
+
+    from serenity.eval.frontier import PEER_SEED_BASE, PathTracerPeer
+    from serenity.scene.model import Sky
+    from tests.raster.scenes import plane_scene
+
+    s = plane_scene(with_box=True)
+    s.sky = Sky(radiance=(20.0, 25.0, 30.0), model="constant")
+    peer = PathTracerPeer(s, 24, 14, warmup=False)
+    got = list(peer.progressive([1, 2, 4], repeat_below_s=0.0))
+    assert [n for n, _, _ in got] == [1, 2, 4]
+    assert got[0][2] < got[1][2] < got[2][2]  # time accumulates
+    # 4 spp = (1 spp + 1 more + 2 more) / 4, each chunk with its own seed
+    chunks = [peer.render(c, seed=PEER_SEED_BASE + n)[0] for c, n in ((1, 1), (1, 2), (2, 4))]
+    np.testing.assert_allclose(got[2][1], (chunks[0] + chunks[1] + 2 * chunks[2]) / 4, rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(got[0][1], chunks[0])
+    with pytest.raises(SerenityError, match="must rise"):
+        list(peer.progressive([2, 2]))
