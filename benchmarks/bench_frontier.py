@@ -189,16 +189,10 @@ def run_case(scene, width, height, args, bar) -> dict:
 
 
 def headline(case: dict, metric: str = "flip") -> tuple[str, dict]:
-    """(config name, result) of our config with the best equal-``metric`` standing: not dominated before
-    dominated, then the largest speed-up (or bound)."""
-    per = case["equal_error"][metric]
-    order = {"dominated": 0, "reached": 1, "not_reached": 2}
+    """(config name, result) of our config with the best equal-``metric`` standing (:func:`strongest`)."""
+    from serenity.eval.frontier import strongest
 
-    def strength(item):
-        r = item[1]
-        return (order[r["status"]], r["speedup"] if r["speedup"] is not None else r["bound"])
-
-    return max(per.items(), key=strength)
+    return strongest(case["equal_error"][metric])
 
 
 def summarise(cases: list[dict], goal: float) -> list[dict]:

@@ -114,6 +114,20 @@ def combine(results: dict) -> dict:
     return {"status": "reached", "peer_ms": r["peer_ms"], "speedup": ratio, "bound": None, "curve": name}
 
 
+def strongest(results: dict) -> tuple[str, dict]:
+    """(name, result) of the entry of ``results`` (name → :func:`combine` or :func:`equal_error_speedup`
+    result, one per config of ours) that stands best against the peer: any that is not dominated before
+    those that are, then the largest speed-up (a not-reached lower bound counts as its bound)."""
+    if not results:
+        raise SerenityError("strongest needs at least one result")
+
+    def key(item):
+        r = item[1]
+        return (r["status"] != "dominated", r["speedup"] if r["speedup"] is not None else r["bound"])
+
+    return max(results.items(), key=key)
+
+
 def describe(r: dict) -> str:
     """A short human reading of an :func:`equal_error_speedup` result: "3.2×", "dominated (≤ 1.7×)",
     "> 40× (not reached)"."""

@@ -5,7 +5,7 @@ import math
 import pytest
 
 from serenity.errors import SerenityError
-from serenity.eval.frontier import combine, describe, equal_error_speedup, goal_met, time_to_reach
+from serenity.eval.frontier import combine, describe, equal_error_speedup, goal_met, strongest, time_to_reach
 
 # a power-law curve: error ∝ spp^-1/2 and time ∝ spp, so log-log interpolation is exact on it
 SPP = (1, 2, 4, 8, 16)
@@ -57,6 +57,18 @@ def test_combine_takes_the_peer_s_fastest_way():
     assert 1.0 < r["bound"] < 2.0 and r["speedup"] is None
     r = combine({"slow": equal_error_speedup(slow, 50.0, 0.01), "fast": equal_error_speedup(fast, 50.0, 0.01)})
     assert r["status"] == "not_reached" and r["curve"] == "fast" and r["bound"] == pytest.approx(32.0)
+
+
+def test_strongest_of_our_configs():
+    results = {"low": equal_error_speedup(CURVE, 20.0, 0.45),  # dominated, bound 5
+               "medium": equal_error_speedup(CURVE, 100.0, 0.2),  # reached: 4×
+               "high": equal_error_speedup(CURVE, 500.0, 0.01)}  # not reached: > 3.2×
+    assert strongest(results)[0] == "medium"
+    del results["medium"]
+    assert strongest(results)[0] == "high"  # a dominated config never leads while another is not
+    assert strongest({"low": results["low"]})[0] == "low"
+    with pytest.raises(SerenityError, match="at least one"):
+        strongest({})
 
 
 def test_bad_curves():
