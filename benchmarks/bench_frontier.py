@@ -11,9 +11,10 @@ For each scene and size, all in one process on one machine:
 - the reference: Mitsuba 3 ``path`` at ``--ref-spp`` (1024) spp, unlimited depth
   (``serenity.eval.reference.render_reference``, cached: only the first run pays for it);
 - ours: for each of our quality configs (:func:`our_configs`), the median wall time of
-  ``renderer.render()`` over ``--frames`` frames with the static camera and sun after ``--warmup``
-  frames, and as many again after the peer's sweep (the load of a shared machine drifts); the
-  FLIP and relMSE of the last frame before the sweep;
+  ``renderer.render(read_back=False)`` (the interactive frame: nothing read back, GL finished) over
+  ``--frames`` frames with the static camera and sun after ``--warmup`` frames, and as many again
+  after the peer's sweep (the load of a shared machine drifts); the FLIP and relMSE of one more
+  frame, read back, before the sweep;
 - the peer: Mitsuba 3 ``path`` at each of ``--spp`` (1 … 64), rendered progressively (each count
   adds a chunk of samples to the one before; its time is the sum of the chunks' ``mi.render`` wall
   times, the scene loaded beforehand, one warm-up render), raw and denoised by OIDN at each of
@@ -86,14 +87,16 @@ def csv(text: str) -> list[str]:
     return [x.strip() for x in text.split(",") if x.strip()]
 
 
-def timed_frames(renderer, frames):
-    """(last Frame, wall ms of each of ``frames`` renders)."""
-    walls, frame = [], None
+def timed_frames(renderer, frames) -> list[float]:
+    """Wall ms of each of ``frames`` renders as an interactive caller makes them: nothing read back to
+    the host (the image stays in the GL texture it is displayed from), the GL queue finished."""
+    walls = []
     for _ in range(frames):
         t0 = time.perf_counter()
-        frame = renderer.render()
+        renderer.render(read_back=False)
+        renderer.ctx.finish()
         walls.append((time.perf_counter() - t0) * 1e3)
-    return frame, walls
+    return walls
 
 
 def guides(scene, width, height, config):
@@ -136,15 +139,15 @@ def run_case(scene, width, height, args, bar) -> dict:
         return {"flip": m["flip"], "rel_mse": m["rel_mse"], "rel_mse_trimmed": rel_mse(img, ref, trim=TRIM)}
 
     # ours: timed before and again after the peer's sweep (this machine's load drifts over minutes);
-    # the image is the last frame before it
+    # the image is one more frame, read back, before it
     ours, renderers = [], {}
     for cname, cfg in configs.items():
         bar.set_description(f"{tag}: ours ({cname})")
         renderers[cname] = r = Renderer(scene, width, height, config=cfg)
         for _ in range(args.warmup):
             r.render()
-        frame, walls = timed_frames(r, args.frames)
-        ours.append({"name": cname, "wall_ms_before": walls, **metrics(frame.hdr)})
+        walls = timed_frames(r, args.frames)
+        ours.append({"name": cname, "wall_ms_before": walls, **metrics(r.render().hdr)})
         bar.update(1)
 
     bar.set_description(f"{tag}: guides")
@@ -167,7 +170,7 @@ def run_case(scene, width, height, args, bar) -> dict:
 
     bar.set_description(f"{tag}: ours again")
     for o in ours:
-        _, o["wall_ms_after"] = timed_frames(renderers[o["name"]], args.frames)
+        o["wall_ms_after"] = timed_frames(renderers[o["name"]], args.frames)
         renderers.pop(o["name"]).close()
         o["ms"] = float(np.median(o["wall_ms_before"] + o["wall_ms_after"]))
 
@@ -329,8 +332,8 @@ def main(argv=None) -> int:
                  "guides": f"albedo + normal from our G-buffer at {GUIDE_SUPERSAMPLE}x the size, box-filtered down; "
                            "albedo 1 on the sky and where we trace rays; cleanAux"},
         "ours": {"configs": list(our_configs()), "frames": args.frames, "warmup": args.warmup,
-                 "time": "median wall time of Renderer.render() with a static camera and sun, after the warm-up: "
-                         "frames frames before the peer's sweep and frames after it"},
+                 "time": "median wall time of Renderer.render(read_back=False) + GL finish, static camera and "
+                         "sun, after the warm-up: frames frames before the peer's sweep and frames after it"},
         "reference": {"renderer": "Mitsuba path, unlimited depth (serenity.eval.reference.render_reference)",
                       "spp": args.ref_spp},
         "metrics": {"flip": "mean FLIP (LDR) after exposure + Reinhard + sRGB, all pixels",
