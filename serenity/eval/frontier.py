@@ -33,6 +33,7 @@ import time
 import numpy as np
 
 from serenity.errors import SerenityError
+from serenity.eval.reference import load_mitsuba_scene, mitsuba, with_effective_sun
 
 GOAL_SPEEDUP = 10.0
 """The speed-up at equal FLIP the approximation must reach to be worth running (issue 12)."""
@@ -169,8 +170,6 @@ class PathTracerPeer:
     renderer's sun); loading is not timed, like our renderer's upload. One warm-up render runs first."""
 
     def __init__(self, scene, width: int, height: int, warmup: bool = True):
-        from serenity.eval.reference import load_mitsuba_scene, mitsuba, with_effective_sun
-
         self.mi = mitsuba()
         self.width, self.height = int(width), int(height)
         self.mscene = load_mitsuba_scene(with_effective_sun(scene), self.width, self.height, -1)
