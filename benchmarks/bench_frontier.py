@@ -62,13 +62,11 @@ TIMING_REPEATS_BELOW_S = 1.0
 
 
 def our_configs() -> dict:
-    """Our quality settings, name → RenderConfig: the single place the charted presets come from."""
-    from serenity.config import RenderConfig
+    """Our quality settings, name → RenderConfig: the single place the charted points come from (the
+    quality presets, cheapest first)."""
+    from serenity.config import QUALITY_PRESETS, RenderConfig
 
-    preset = getattr(RenderConfig, "preset", None)
-    if preset is None:  # before the quality presets exist: the default settings only
-        return {"default": RenderConfig()}
-    return {name: preset(name) for name in ("low", "medium", "high", "paper")}
+    return {name: RenderConfig.preset(name) for name in reversed(QUALITY_PRESETS)}
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -107,7 +105,7 @@ def guides(scene, width, height, config):
     s = GUIDE_SUPERSAMPLE
     renderer = Renderer(scene, s * width, s * height, config=config)
     try:
-        frame = renderer.render()
+        frame = renderer.render(read_back=("aovs",))
     finally:
         renderer.close()
     return guides_from_aovs(frame.aovs, supersample=s)
@@ -147,7 +145,7 @@ def run_case(scene, width, height, args, bar) -> dict:
         for _ in range(args.warmup):
             r.render()
         walls = timed_frames(r, args.frames)
-        ours.append({"name": cname, "wall_ms_before": walls, **metrics(r.render().hdr)})
+        ours.append({"name": cname, "wall_ms_before": walls, **metrics(r.render(read_back=("hdr",)).hdr)})
         bar.update(1)
 
     bar.set_description(f"{tag}: guides")
@@ -312,6 +310,7 @@ def main(argv=None) -> int:
     import mitsuba
     import pyoidn
 
+    from serenity.config import PRESETS
     from serenity.eval.frontier import describe
 
     summary = summarise(cases, GOAL_SPEEDUP)
@@ -331,7 +330,8 @@ def main(argv=None) -> int:
                          f"calls under {TIMING_REPEATS_BELOW_S:g} s timed 3 times, median",
                  "guides": f"albedo + normal from our G-buffer at {GUIDE_SUPERSAMPLE}x the size, box-filtered down; "
                            "albedo 1 on the sky and where we trace rays; cleanAux"},
-        "ours": {"configs": list(our_configs()), "frames": args.frames, "warmup": args.warmup,
+        "ours": {"configs": list(our_configs()), "presets": {k: PRESETS[k] for k in our_configs()},
+                 "frames": args.frames, "warmup": args.warmup,
                  "time": "median wall time of Renderer.render(read_back=False) + GL finish, static camera and "
                          "sun, after the warm-up: frames frames before the peer's sweep and frames after it"},
         "reference": {"renderer": "Mitsuba path, unlimited depth (serenity.eval.reference.render_reference)",

@@ -263,7 +263,7 @@ def frontier_figure(panels: list[dict], goal: float = GOAL_SPEEDUP, metrics=CHAR
                                     ha="center", fontsize=7, color="0.35")
             for o in panel["ours"]:
                 k = our_names.index(o["name"])
-                h = ax.scatter([o["ms"]], [o[metric]], marker=_OUR_MARKERS[k % len(_OUR_MARKERS)], s=150,
+                h = ax.scatter([o["ms"]], [o[metric]], marker=_OUR_MARKERS[k % len(_OUR_MARKERS)], s=120, alpha=0.85,
                                color="tab:red", edgecolors="black", lw=0.6, zorder=5, label=f"Serenity: {o['name']}")
                 handles.setdefault(f"Serenity: {o['name']}", h)
                 xs.append(o["ms"])
