@@ -1,12 +1,11 @@
 """The frontier: our whole frame against a path tracer plus a denoiser, at equal error.
 
 For one scene and image size, the peer is Mitsuba 3 (``scalar_rgb`` ``path``, unlimited depth) at
-1, 2, 4, … spp, raw and denoised with OIDN (:mod:`serenity.eval.denoise`); its time is the wall time
-of ``mi.render`` (plus the OIDN call for denoised points). Each peer curve is a list of
-(milliseconds, error) points in rising spp. Ours is a frame time and an error.
-
-The peer renders progressively (:meth:`PathTracerPeer.progressive`): the image at 2^k spp adds a
-chunk of samples to the one before it, and its time is the sum of the chunks' render times.
+1, 2, 4, … spp, raw and denoised with OIDN (:mod:`serenity.eval.denoise`). It renders
+progressively (:meth:`PathTracerPeer.progressive`): the image at each count adds a chunk of
+samples to the one before it, and its time is the sum of the chunks' ``mi.render`` wall times
+(plus the OIDN call for denoised points). Each peer curve is a list of (milliseconds, error)
+points in rising spp. Ours is a frame time and an error.
 
 The equal-error speed-up (:func:`equal_error_speedup`) is the peer's time to reach our error ÷ our
 frame time. The time to reach it (:func:`time_to_reach`) is found on the first segment of the curve
@@ -19,6 +18,9 @@ and the last point's time ÷ ours is a lower bound.
 
     r = equal_error_speedup([(210, 0.10), (330, 0.08)], our_ms=125.0, our_error=0.13)
     r["status"]  # "dominated"; r["bound"] = 210/125 (upper bound of the speed-up)
+
+Several curves (raw, + OIDN at each quality) are merged by :func:`combine` (the peer's fastest way
+to our error), and :func:`strongest` picks which of our configs stands best.
 
 :func:`frontier_figure` draws the chart: one row per scene and size, FLIP and relMSE side by side,
 x = ms per frame, y = error, both log.
@@ -36,7 +38,7 @@ from serenity.errors import SerenityError
 from serenity.eval.reference import load_mitsuba_scene, mitsuba, with_effective_sun
 
 GOAL_SPEEDUP = 10.0
-"""The speed-up at equal FLIP the approximation must reach to be worth running (issue 12)."""
+"""The speed-up at equal FLIP the approximation must reach to be worth running instead of the peer."""
 PEER_SEED_BASE = 2**31
 """Mitsuba seeds of the peer renders: far from the reference's chunk seeds (0 … spp/chunk)."""
 
