@@ -10,14 +10,14 @@ path tracer's own noisy first hits. ``quality``: "fast" | "balanced" | "high" (O
 trade; "balanced" is its recommendation for interactive use, "high" its default).
 
 :func:`guides_from_aovs` turns our renderer's AOVs into OIDN guides the way OIDN's documentation
-asks: albedo in [0, 1] of the first diffuse hit; albedo 1 where we trace rays (mirrors and glass:
+asks: albedo in [0, 1] of the surface each pixel sees; albedo 1 where we trace rays (mirrors and glass:
 OIDN's advice for delta surfaces whose next hit is unknown) and for the sky (no surface); normals
 in [-1, 1] (world space; 0 for the sky). Our AOVs have one sample per pixel: an ``(s·H, s·W)``
 G-buffer is box-averaged down by ``s`` so that the guides are antialiased like the path-traced
 image (OIDN warns that aliased guides leave artefacts along edges).
 
-``pyoidn`` is in the ``eval`` extra; without it every function here raises a one-line
-:class:`SerenityError` naming the extra to install.
+``pyoidn`` is in the ``eval`` extra; without it :func:`denoise` raises a one-line
+:class:`SerenityError` naming the extra to install (:func:`available` tells beforehand).
 """
 
 from __future__ import annotations
