@@ -1,0 +1,372 @@
+"""The frontier (issue 12): our whole frame against Mitsuba 3 + Intel Open Image Denoise at equal error.
+
+    python benchmarks/bench_frontier.py                      # courtyard + cornell, 320x180 + 640x360
+    python benchmarks/bench_frontier.py --quick              # smoke run: courtyard 160x90, few spp
+    python benchmarks/bench_frontier.py --scenes cornell --sizes 320x180
+    python benchmarks/bench_frontier.py --table              # the README table from the JSON
+    python benchmarks/bench_frontier.py --references-only    # render and cache the references first
+
+For each scene and size, all in one process on one machine:
+
+- the reference: Mitsuba 3 ``path`` at ``--ref-spp`` (1024) spp, unlimited depth
+  (``serenity.eval.reference.render_reference``, cached: only the first run pays for it);
+- ours: for each of our quality configs (:func:`our_configs`), the median wall time of
+  ``renderer.render(read_back=False)`` (the interactive frame: nothing read back, GL finished) over
+  ``--frames`` frames with the static camera and sun after ``--warmup`` frames, and as many again
+  after the peer's sweep (the load of a shared machine drifts); the FLIP and relMSE of one more
+  frame, read back, before the sweep;
+- the peer: Mitsuba 3 ``path`` at each of ``--spp`` (1 … 64), rendered progressively (each count
+  adds a chunk of samples to the one before; its time is the sum of the chunks' ``mi.render`` wall
+  times, the scene loaded beforehand, one warm-up render), raw and denoised by OIDN at each of
+  ``--oidn`` qualities (time = render + the OIDN call), with albedo and normal guides from our
+  noise-free AOVs (a 2×-supersampled G-buffer box-filtered down: ``guides_from_aovs``);
+- the equal-FLIP speed-up (``serenity.eval.frontier.equal_error_speedup``): the time the fastest
+  peer curve needs to reach our FLIP (log-log interpolation between its spp points) ÷ our frame
+  time, or "dominated" when its 1-spp image is already at least as good as ours; the same at equal
+  relMSE. ``serenity.eval.frontier.combine`` takes the fastest of the curves: the denoised ones
+  and the raw one (which at times reaches a noisy scene's error sooner: the Cornell box's 1-spp
+  image can be as good as ours by FLIP); "denoised_only" in the JSON leaves the raw curve out.
+
+Metrics as in ``serenity.eval.metrics``: FLIP on the tone-mapped images (our exposure, Reinhard,
+sRGB), relMSE (ε = 1e-2) on linear HDR, all pixels ("rel_mse") and without the worst 0.1% of the
+pixels ("rel_mse_trimmed", the one charted and compared: see ``TRIM``). Writes ``results/frontier.json`` and
+``results/frontier.png`` (``--quick``: ``frontier_quick.*``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SCENES = ("courtyard", "cornell")
+SIZES = ("320x180", "640x360")
+SPP = (1, 2, 4, 8, 16, 32, 64)
+REF_SPP = 1024
+OIDN_QUALITIES = ("balanced", "high")
+QUICK = dict(scenes=("courtyard",), sizes=("160x90",), spp=(1, 4, 16), ref_spp=64, frames=3, warmup=2)
+GUIDE_SUPERSAMPLE = 2
+TRIM = 1e-3
+"""Fraction of the worst pixels left out of "rel_mse_trimmed" (as in bench_baseline): OIDN spreads a little
+light onto the few pixels whose reference is exactly black, and those alone decide the all-pixel relMSE."""
+SPEEDUP_METRICS = ("flip", "rel_mse_trimmed")
+TIMING_REPEATS_BELOW_S = 1.0
+"""Peer renders (and OIDN calls) faster than this are timed 3 times, median taken."""
+
+
+def our_configs() -> dict:
+    """Our quality settings, name → RenderConfig: the single place the charted points come from (the
+    quality presets, cheapest first)."""
+    from serenity.config import QUALITY_PRESETS, RenderConfig
+
+    return {name: RenderConfig.preset(name) for name in reversed(QUALITY_PRESETS)}
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    from serenity.errors import SerenityError
+
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise SerenityError(f"--sizes: {text!r} is not WIDTHxHEIGHT (e.g. 320x180)") from None
+    if not (16 <= w <= 4096 and 16 <= h <= 4096):
+        raise SerenityError(f"--sizes: {text!r} must be within 16..4096 pixels per side")
+    return w, h
+
+
+def csv(text: str) -> list[str]:
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def timed_frames(renderer, frames) -> list[float]:
+    """Wall ms of each of ``frames`` renders as an interactive caller makes them: nothing read back to
+    the host (the image stays in the GL texture it is displayed from), the GL queue finished."""
+    walls = []
+    for _ in range(frames):
+        t0 = time.perf_counter()
+        renderer.render(read_back=False)
+        renderer.ctx.finish()
+        walls.append((time.perf_counter() - t0) * 1e3)
+    return walls
+
+
+def guides(scene, width, height, config):
+    """OIDN guides (albedo, normal) at width×height from one frame of ours at GUIDE_SUPERSAMPLE× the size."""
+    from serenity.eval.denoise import guides_from_aovs
+    from serenity.frame import Renderer
+
+    s = GUIDE_SUPERSAMPLE
+    renderer = Renderer(scene, s * width, s * height, config=config)
+    try:
+        frame = renderer.render(read_back=("aovs",))
+    finally:
+        renderer.close()
+    return guides_from_aovs(frame.aovs, supersample=s)
+
+
+def run_case(scene, width, height, args, bar) -> dict:
+    """Everything measured for one scene and size (one entry of the JSON's "cases")."""
+    from serenity.eval.denoise import denoise
+    from serenity.eval.frontier import PathTracerPeer, combine, equal_error_speedup, timed
+    from serenity.eval.metrics import compare, rel_mse
+    from serenity.eval.reference import render_reference
+    from serenity.frame import Renderer
+
+    name = scene.name
+    configs = our_configs()
+    exposure = next(iter(configs.values())).exposure
+    tag = f"{name} {width}x{height}"
+
+    bar.set_description(f"{tag}: reference {args.ref_spp} spp")
+    info: dict = {}
+    t0 = time.perf_counter()
+    ref = render_reference(scene, width, height, spp=args.ref_spp, component="full", seed=0,
+                           progress=not args.no_progress, info=info)
+    ref_s = time.perf_counter() - t0
+    bar.update(1)
+
+    def metrics(img):
+        m = compare(img, ref, exposure=exposure)
+        return {"flip": m["flip"], "rel_mse": m["rel_mse"], "rel_mse_trimmed": rel_mse(img, ref, trim=TRIM)}
+
+    # ours: timed before and again after the peer's sweep (this machine's load drifts over minutes);
+    # the image is one more frame, read back, before it
+    ours, renderers = [], {}
+    for cname, cfg in configs.items():
+        bar.set_description(f"{tag}: ours ({cname})")
+        renderers[cname] = r = Renderer(scene, width, height, config=cfg)
+        for _ in range(args.warmup):
+            r.render()
+        walls = timed_frames(r, args.frames)
+        ours.append({"name": cname, "wall_ms_before": walls, **metrics(r.render(read_back=("hdr",)).hdr)})
+        bar.update(1)
+
+    bar.set_description(f"{tag}: guides")
+    albedo, normal = guides(scene, width, height, next(iter(configs.values())))
+    for q in args.oidn:  # OIDN's first call per size and quality builds its filter: not timed
+        denoise(np.ones((height, width, 3), np.float32), albedo, normal, quality=q)
+
+    peer = PathTracerPeer(scene, width, height)
+    curves: dict[str, list[dict]] = {"raw": [], **{q: [] for q in args.oidn}}
+    bar.set_description(f"{tag}: Mitsuba {args.spp[0]} spp")
+    for k, (spp, img, render_s) in enumerate(peer.progressive(args.spp, TIMING_REPEATS_BELOW_S)):
+        curves["raw"].append({"spp": spp, "ms": render_s * 1e3, "render_ms": render_s * 1e3, **metrics(img)})
+        for q in args.oidn:
+            out, oidn_s = timed(lambda q=q, img=img: denoise(img, albedo, normal, quality=q), TIMING_REPEATS_BELOW_S)
+            curves[q].append({"spp": spp, "ms": (render_s + oidn_s) * 1e3, "render_ms": render_s * 1e3,
+                              "oidn_ms": oidn_s * 1e3, **metrics(out)})
+        bar.update(1)
+        if k + 1 < len(args.spp):
+            bar.set_description(f"{tag}: Mitsuba {args.spp[k + 1]} spp")
+
+    bar.set_description(f"{tag}: ours again")
+    for o in ours:
+        o["wall_ms_after"] = timed_frames(renderers[o["name"]], args.frames)
+        renderers.pop(o["name"]).close()
+        o["ms"] = float(np.median(o["wall_ms_before"] + o["wall_ms_after"]))
+
+    speedups = {}
+    for metric in SPEEDUP_METRICS:
+        per_config = {}
+        for o in ours:
+            per_curve = {q: equal_error_speedup([(p["ms"], p[metric]) for p in pts], o["ms"], o[metric])
+                         for q, pts in curves.items()}
+            # the headline: the peer's fastest way to our error, raw or denoised (raw only ever makes it
+            # faster); "denoised_only" keeps the denoised curves alone
+            per_config[o["name"]] = {**combine(per_curve),
+                                     "denoised_only": combine({q: per_curve[q] for q in args.oidn}),
+                                     "per_curve": per_curve}
+        speedups[metric] = per_config
+    return {"scene": name, "size": [width, height], "reference": {"spp": args.ref_spp, "seconds": ref_s,
+                                                                   "cached": bool(info.get("cached"))},
+            "ours": ours, "peer": curves, "equal_error": speedups}
+
+
+def headline(case: dict, metric: str = "flip") -> tuple[str, dict]:
+    """(config name, result) of our config with the best equal-``metric`` standing (:func:`strongest`)."""
+    from serenity.eval.frontier import strongest
+
+    return strongest(case["equal_error"][metric])
+
+
+def summarise(cases: list[dict], goal: float) -> list[dict]:
+    from serenity.eval.frontier import describe, goal_met
+
+    out = []
+    for c in cases:
+        row = {"scene": c["scene"], "size": f"{c['size'][0]}x{c['size'][1]}"}
+        for metric in SPEEDUP_METRICS:
+            name, r = headline(c, metric)
+            row[metric] = {"config": name, "status": r["status"], "speedup": r["speedup"], "bound": r["bound"],
+                           "peer_ms": r["peer_ms"], "curve": r["curve"], "reads": describe(r),
+                           "goal_met": goal_met(r, goal)}
+        out.append(row)
+    return out
+
+
+def table(data: dict) -> str:
+    """The README's markdown table from a frontier JSON: one row per case and config of ours, the
+    config with the best equal-FLIP standing (the one the summary reports) in bold."""
+    from serenity.eval.frontier import describe, goal_met
+
+    goal = data["goal_speedup"]
+    lines = ["| scene | size | ours | ms | FLIP | relMSE* | path tracer at our FLIP: ms (curve) | "
+             f"equal-FLIP speed-up | equal-relMSE* speed-up | ≥ {goal:g}× |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for c, s in zip(data["cases"], data["summary"], strict=True):
+        for o in c["ours"]:
+            r = c["equal_error"]["flip"][o["name"]]
+            rm = c["equal_error"]["rel_mse_trimmed"][o["name"]]
+            name = f"**{o['name']}**" if o["name"] == s["flip"]["config"] else o["name"]
+            at = "—" if r["peer_ms"] is None else f"{r['peer_ms']:.0f} ({r['curve']})"
+            lines.append(f"| {c['scene']} | {s['size']} | {name} | {o['ms']:.0f} | {o['flip']:.3f} | "
+                         f"{o['rel_mse_trimmed']:.3f} | {at} | {describe(r)} | {describe(rm)} | "
+                         f"{'yes' if goal_met(r, goal) else 'no'} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--quick", action="store_true",
+                   help="smoke run: courtyard at 160x90, 1/4/16 spp, a 64-spp reference, 3 frames")
+    p.add_argument("--scenes", type=csv, help=f"comma-separated (default: {','.join(SCENES)})")
+    p.add_argument("--sizes", type=csv, help=f"comma-separated WxH (default: {','.join(SIZES)})")
+    p.add_argument("--spp", type=lambda t: [int(x) for x in csv(t)], help="peer spp list (default 1,2,4,...,64)")
+    p.add_argument("--ref-spp", type=int, help=f"reference spp (default {REF_SPP})")
+    p.add_argument("--oidn", type=csv, default=list(OIDN_QUALITIES),
+                   help=f"OIDN qualities of the denoised curves (default {','.join(OIDN_QUALITIES)})")
+    p.add_argument("--frames", type=int, help="our timed frames (default 5)")
+    p.add_argument("--warmup", type=int, help="our untimed frames first (default 3)")
+    p.add_argument("--json", help="output JSON (default results/frontier.json; --quick: frontier_quick.json)")
+    p.add_argument("--png", help="output chart (default results/frontier.png; --quick: frontier_quick.png)")
+    p.add_argument("--table", action="store_true", help="print the README table of the JSON and exit")
+    p.add_argument("--references-only", action="store_true",
+                   help="only render (and cache) the references of the selected scenes and sizes, then exit")
+    p.add_argument("--no-progress", action="store_true")
+    args = p.parse_args(argv)
+
+    from tqdm import tqdm
+
+    from serenity.errors import SerenityError
+    from serenity.eval.denoise import QUALITIES
+    from serenity.eval.frontier import GOAL_SPEEDUP, save_frontier_chart
+
+    stem = "frontier_quick" if args.quick else "frontier"
+    args.json = args.json or os.path.join(HERE, "results", f"{stem}.json")
+    args.png = args.png or os.path.join(HERE, "results", f"{stem}.png")
+    try:
+        if args.table:
+            with open(args.json) as f:
+                print(table(json.load(f)))
+            return 0
+        defaults = QUICK if args.quick else dict(scenes=SCENES, sizes=SIZES, spp=SPP, ref_spp=REF_SPP, frames=5,
+                                                 warmup=3)
+        for key, value in defaults.items():
+            if getattr(args, key) is None:
+                setattr(args, key, list(value) if isinstance(value, tuple) else value)
+        sizes = [parse_size(s) for s in args.sizes]
+        if sorted(set(args.spp)) != list(args.spp) or args.spp[0] < 1:
+            raise SerenityError(f"--spp must be rising positive counts, got {args.spp}")
+        bad = [q for q in args.oidn if q not in QUALITIES]
+        if bad or not args.oidn:
+            raise SerenityError(f"--oidn: qualities must be among {', '.join(QUALITIES)}, got {args.oidn}")
+        if args.frames < 1 or args.warmup < 0 or args.ref_spp < 1:
+            raise SerenityError("--frames must be >= 1, --warmup >= 0 and --ref-spp >= 1")
+
+        from serenity.scene import load
+
+        scenes = {name: load(name) for name in args.scenes}  # a bad name fails here, before any work
+        t_start = time.perf_counter()
+        if args.references_only:
+            from serenity.eval.reference import render_reference
+
+            for name in args.scenes:
+                for w, h in sizes:
+                    t0 = time.perf_counter()
+                    info: dict = {}
+                    render_reference(scenes[name], w, h, spp=args.ref_spp, component="full", seed=0,
+                                     progress=not args.no_progress, info=info)
+                    print(f"{name} {w}x{h}: reference {args.ref_spp} spp "
+                          f"{'cached' if info.get('cached') else 'rendered'} in {time.perf_counter() - t0:.0f} s")
+            return 0
+        n_cfg = len(our_configs())
+        total = len(args.scenes) * len(sizes) * (1 + n_cfg + len(args.spp))  # reference, ours, each spp
+        cases = []
+        with tqdm(total=total, unit="step", disable=args.no_progress) as bar:
+            for name in args.scenes:
+                for w, h in sizes:
+                    cases.append(run_case(copy.deepcopy(scenes[name]), w, h, args, bar))
+        elapsed = time.perf_counter() - t_start
+    except SerenityError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+    import mitsuba
+    import pyoidn
+
+    from serenity.config import PRESETS
+    from serenity.eval.frontier import describe
+
+    summary = summarise(cases, GOAL_SPEEDUP)
+    out = {
+        "benchmark": "frontier",
+        "quick": bool(args.quick),
+        "command": "python benchmarks/bench_frontier.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        "seconds": elapsed,
+        "machine": {"platform": platform.platform(), "processor": platform.processor(), "cpus": os.cpu_count(),
+                    "python": sys.version.split()[0]},
+        "peer": {"renderer": f"Mitsuba {mitsuba.__version__} scalar_rgb path (unlimited depth)",
+                 "denoiser": f"Intel Open Image Denoise via pyoidn {getattr(pyoidn.version, '__version__', '')}"
+                             .strip(),
+                 "oidn_qualities": args.oidn, "spp": args.spp,
+                 "time": "progressive: sum of the wall times of the mi.render chunks up to this spp (scene loaded "
+                         "beforehand, one warm-up render) + the OIDN call; "
+                         f"calls under {TIMING_REPEATS_BELOW_S:g} s timed 3 times, median",
+                 "guides": f"albedo + normal from our G-buffer at {GUIDE_SUPERSAMPLE}x the size, box-filtered down; "
+                           "albedo 1 on the sky and where we trace rays; cleanAux"},
+        "ours": {"configs": list(our_configs()), "presets": {k: PRESETS[k] for k in our_configs()},
+                 "frames": args.frames, "warmup": args.warmup,
+                 "time": "median wall time of Renderer.render(read_back=False) + GL finish, static camera and "
+                         "sun, after the warm-up: frames frames before the peer's sweep and frames after it"},
+        "reference": {"renderer": "Mitsuba path, unlimited depth (serenity.eval.reference.render_reference)",
+                      "spp": args.ref_spp},
+        "metrics": {"flip": "mean FLIP (LDR) after exposure + Reinhard + sRGB, all pixels",
+                    "rel_mse": "mean (x-ref)^2/(ref^2+1e-2), linear HDR, all pixels",
+                    "rel_mse_trimmed": f"the same without the {TRIM:.1%} of pixels with the largest error (charted: "
+                                       "a few pixels whose reference is black outweigh all others)"},
+        "speedup": "peer time to reach our error (the fastest curve, raw or denoised, log-log interpolation "
+                   "between spp) / our frame time; 'dominated' when its 1-spp image is already as good (bound = "
+                   "upper bound); 'not_reached' when 64 spp is not (bound = lower bound); 'denoised_only': the "
+                   "same over the denoised curves alone",
+        "goal_speedup": GOAL_SPEEDUP,
+        "summary": summary,
+        "cases": cases,
+    }
+    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
+    with open(args.json, "w") as f:
+        json.dump(out, f, indent=2)
+    panels = []
+    for c, s in zip(cases, summary, strict=True):
+        panels.append({"title": f"{c['scene']} {c['size'][0]}×{c['size'][1]}",
+                       "peer": c["peer"],
+                       "ours": c["ours"], "headline": s["flip"]["config"],
+                       "speedup": {m: c["equal_error"][m][s["flip"]["config"]] for m in SPEEDUP_METRICS}})
+    save_frontier_chart(panels, args.png, GOAL_SPEEDUP,
+                        metrics=(("flip", "FLIP"), ("rel_mse_trimmed", "relMSE, worst 0.1% of pixels left out")))
+    for s in summary:
+        print(f"{s['scene']} {s['size']}: equal-FLIP {describe(s['flip'])} ({s['flip']['config']}), "
+              f"equal-relMSE (trimmed) {describe(s['rel_mse_trimmed'])}; goal >= {GOAL_SPEEDUP:g}x "
+              f"{'met' if s['flip']['goal_met'] else 'not met'}")
+    print(f"{elapsed:.0f} s; wrote {args.json} and {args.png}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
