@@ -109,31 +109,30 @@ def summarise(records: list[dict], skip_first: int = 1) -> dict:
 
 
 def timeline_chart(frame, path: str, title: str) -> None:
-    """Lanes of one frame's stages over time (paper Fig. 21)."""
+    """One frame's stages over time (paper Fig. 21), one row per stage (named on the axis, so no
+    label can overlap another), coloured by lane: the main thread (GL passes and volume kernels)
+    and the ray-tracing worker, whose bar lies under the main thread's GL stages it overlapped."""
     plt = pyplot("the timeline chart")
-    lanes = []
-    for lane, *_ in frame.events:
-        if lane not in lanes:
-            lanes.append(lane)
-    names = []
-    for _, n, *_ in frame.events:
-        if n not in names:
-            names.append(n)
-    cmap = plt.get_cmap("tab20")
-    colours = {n: cmap(i % 20) for i, n in enumerate(names)}
-    fig, ax = plt.subplots(figsize=(12, 1.2 + 0.9 * len(lanes)))
-    for lane, name, t0, t1 in frame.events:
-        y = len(lanes) - 1 - lanes.index(lane)
-        ax.barh(y, t1 - t0, left=t0, height=0.6, color=colours[name], edgecolor="black", linewidth=0.4)
-        if t1 - t0 > 0.03 * max(e[3] for e in frame.events):
-            ax.text((t0 + t1) / 2, y, name, ha="center", va="center", fontsize=7, rotation=0, clip_on=True)
-    ax.set_yticks(range(len(lanes)), list(reversed(lanes)))
+    events = sorted(frame.events, key=lambda e: e[2])
+    rows: list[str] = []
+    for _, name, *_ in events:
+        if name not in rows:
+            rows.append(name)
+    lanes = list(dict.fromkeys(lane for lane, *_ in events))
+    colours = dict(zip(lanes, ("tab:blue", "tab:orange", "tab:green"), strict=False))
+    fig, ax = plt.subplots(figsize=(11, 1.0 + 0.27 * len(rows)))
+    for lane, name, t0, t1 in events:
+        ax.barh(rows.index(name), t1 - t0, left=t0, height=0.7, color=colours[lane], edgecolor="black",
+                linewidth=0.3)
+    ax.set_yticks(range(len(rows)), rows, fontsize=8)
+    ax.invert_yaxis()
     ax.set_xlabel("ms from the frame's start")
-    ax.set_title(title)
-    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[n]) for n in names]
-    ax.legend(handles, names, fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.35 - 0.05 * len(lanes)))
+    ax.set_title(title, fontsize=10)
+    ax.grid(axis="x", alpha=0.3)
+    ax.legend([plt.Rectangle((0, 0), 1, 1, color=colours[lane]) for lane in lanes], lanes, fontsize=8,
+              loc="upper right")
     fig.tight_layout()
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+    fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
