@@ -16,7 +16,6 @@ Default ``RenderConfig`` otherwise.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -29,6 +28,7 @@ from serenity.eval.metrics import compare
 from serenity.eval.reference import render_reference
 from serenity.eval.regions import region_report
 from serenity.frame import Renderer
+from serenity.io.results import write_results
 from serenity.scene import load
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -106,10 +106,7 @@ def main(argv=None) -> int:
     out = {"benchmark": "aa", "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                                           "python": sys.version.split()[0]},
            "size": [width, height], "reference_spp": SCENES, "results": rows, "texture_taps": taps_rows}
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as f:
-        json.dump(out, f, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, out)
     return 0
 
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import platform
 import sys
@@ -38,6 +37,7 @@ from serenity.eval.metrics import REL_MSE_EPS, compare, rel_mse
 from serenity.eval.reference import render_reference
 from serenity.eval.regions import format_region_report, region_report
 from serenity.frame import Renderer
+from serenity.io.results import write_results
 from serenity.scene import load
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -138,10 +138,7 @@ def main(argv=None) -> int:
                                "*_share of the all-pixel sum, luminance_ratio = mean Y ours / mean Y ref"},
         "results": results,
     }
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as f:
-        json.dump(out, f, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, out)
     return 0
 
 

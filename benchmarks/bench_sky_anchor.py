@@ -29,7 +29,6 @@ Mitsuba sky is evaluated with ground albedo 0 to match.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -37,6 +36,7 @@ import sys
 
 import numpy as np
 
+from serenity.io.results import write_results
 from serenity.kernels import atmosphere as A
 from serenity.scene.model import direction_from_angles
 
@@ -171,10 +171,7 @@ def main(argv=None) -> int:
            "settings": {"map_size": MAP, "sun_samples": SUN_SAMPLES, "sun_azimuth_deg": 0.0,
                         "elevations_deg": list(ELEVATIONS), "luminance": LUM.tolist()},
            "runs": [{"turbidity": t, "scale": s, "results": rows} for t, (s, rows) in runs.items()]}
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as f:
-        json.dump(out, f, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, out)
     if args.chart:
         chart(args.chart, runs)
         print(f"wrote {args.chart}")

@@ -24,7 +24,6 @@ same map, at sun elevations 90/45/10/2° (azimuth 135°). Figures: mean |E_sh �
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -41,6 +40,7 @@ except ImportError:  # scipy < 1.15: the older name, with (m, n) and the angles 
         return sph_harm(m, n, phi, theta)
 
 from serenity.device import resolve_device
+from serenity.io.results import write_results
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
 from serenity.kernels.sampling import fibonacci_sphere
@@ -148,10 +148,7 @@ def main(argv=None) -> int:
     }
     print(f"mean over elevations: L2 {out['l2_mean_rel_error']:.4f}, L4 {out['l4_mean_rel_error']:.4f}; "
           + ", ".join(f"{k} {v:.4f}" for k, v in out["l2_by_window_mean_rel_error"].items()))
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as f:
-        json.dump(out, f, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, out)
     return 0
 
 
