@@ -19,6 +19,8 @@ SH_WINDOWS = ("none", "hanning", "lanczos", "nonneg")
 #: per-probe direction sequences of the sky volume
 SKY_SEQUENCES = ("hammersley", "sobol-owen")
 SKY_METHODS = ("transfer", "layers")
+SKY_TRANSFER_MAX_BANDS = 5
+"""SH bands the sky transfer can project the sky on (``kernels/skytransfer.eval_sh25``: bands 0–4)."""
 #: texels per side of the paraboloid sky map (``serenity.kernels.atmosphere``)
 SKY_MAP_SIZE = 256
 #: cascades the LPV kernels and ``lpv.glsl`` take at most
@@ -158,8 +160,9 @@ class SkyConfig:
     def __post_init__(self):
         if self.method not in SKY_METHODS:
             raise ConfigError(f"SkyConfig.method must be one of {SKY_METHODS}, got {self.method!r}")
-        if not 1 <= self.transfer_bands <= 5:
-            raise ConfigError(f"SkyConfig.transfer_bands must be in 1..5, got {self.transfer_bands}")
+        if not 1 <= self.transfer_bands <= SKY_TRANSFER_MAX_BANDS:
+            raise ConfigError(f"SkyConfig.transfer_bands must be in 1..{SKY_TRANSFER_MAX_BANDS}, "
+                              f"got {self.transfer_bands}")
         if not 1 <= self.sky_steps <= 1024:
             raise ConfigError(f"SkyConfig.sky_steps must be in 1..1024, got {self.sky_steps}")
         if not (1 <= self.rays_per_probe <= 1 << 20):

@@ -200,7 +200,10 @@ class Renderer:
                 self.rt_deferred.resize(self.width, 2 * self.height)
                 self.composite_pass = CompositePass(self.ctx)
                 self.composite_pass.resize(self.width, self.height)
-                self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-rt")
+                # on CUDA the tracer overlaps in a thread (its launches are asynchronous); on the
+                # CPU it runs in the tracer process (``_ensure_tracer``)
+                self._pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-rt")
+                              if cfg.overlap and not str(self.device).startswith("cpu") else None)
             self._init_gi()
         self._upload_ms = self._timings.pop("upload")
         self._first = True
@@ -340,7 +343,7 @@ class Renderer:
         if tracer is self._tracer_proc:
             tracer.submit(self._ray_batches(rcb))
             return rcb, self._join_tracer_process
-        if self.config.overlap:
+        if self._pool is not None:
             return rcb, self._pool.submit(self._trace, rcb).result
         traced = self._trace(rcb)
         return rcb, lambda: traced
@@ -523,7 +526,7 @@ class Renderer:
 
     def _join_tracer_process(self) -> tuple[dict | None, dict | None]:
         proc = self._tracer_proc
-        first = not proc._ready
+        first = proc.build_seconds is None
         results, t0, t1 = proc.result()
         if first:
             self._timings["kd-tree build"] = proc.build_seconds * 1e3

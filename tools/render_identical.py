@@ -23,7 +23,7 @@ import sys
 import tarfile
 import tempfile
 
-import numpy as np
+from diff_renders import diff  # tools/ is this script's folder, first on sys.path
 
 from serenity.io.exr import read_exr
 
@@ -38,19 +38,14 @@ def render(tree: str, scene: str, size: str, png: str) -> None:
 
 
 def compare(before_png: str, after_png: str) -> dict:
+    """PNG bytes, then every EXR layer through ``diff_renders.diff`` (a layer missing on one side
+    is not identical)."""
     with open(before_png, "rb") as f, open(after_png, "rb") as g:
         png_same = f.read() == g.read()
     a = read_exr(os.path.splitext(before_png)[0] + ".exr")
     b = read_exr(os.path.splitext(after_png)[0] + ".exr")
-    layers = {}
-    for name in sorted(set(a) | set(b)):
-        if name not in a or name not in b or a[name].shape != b[name].shape:
-            layers[name] = {"identical": False, "why": "missing or reshaped"}
-            continue
-        x, y = a[name], b[name]
-        finite = np.isfinite(x) & np.isfinite(y)
-        layers[name] = {"identical": bool(np.array_equal(x, y, equal_nan=True)),
-                        "max_abs_diff": float(np.abs(x[finite] - y[finite]).max(initial=0.0))}
+    layers = {name: diff(a[name], b[name]) if name in a and name in b else {"identical": False, "missing": True}
+              for name in sorted(set(a) | set(b))}
     return {"png_bytes_identical": png_same, "exr_layers": layers,
             "identical": png_same and all(v["identical"] for v in layers.values())}
 

@@ -88,10 +88,14 @@ def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: 
 def save_speed_accuracy_chart(points: list[dict], path: str, error_name: str = "error",
                               title: str | None = None) -> str:
     """Write the chart of ``points`` as a PNG to ``path``; returns ``path``."""
-    plt = pyplot("speed-vs-accuracy charts")
-    fig = speed_accuracy_figure(points, error_name, title)
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
+    return save_figure(speed_accuracy_figure(points, error_name, title), path)
+
+
+def save_figure(fig, path: str) -> str:
+    """Write a matplotlib figure as a PNG to ``path`` (creating its folder), then close it; a path
+    that cannot be written is a ``SerenityError`` naming it. Returns ``path``."""
+    plt = pyplot("charts")
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     try:
         fig.savefig(path)
     except OSError as exc:

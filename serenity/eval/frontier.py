@@ -29,12 +29,12 @@ x = ms per frame, y = error, both log.
 from __future__ import annotations
 
 import math
-import os
 import time
 
 import numpy as np
 
 from serenity.errors import SerenityError
+from serenity.eval.charts import save_figure
 from serenity.eval.reference import load_mitsuba_scene, mitsuba, with_effective_sun
 
 GOAL_SPEEDUP = 10.0
@@ -304,14 +304,4 @@ def frontier_figure(panels: list[dict], goal: float = GOAL_SPEEDUP, metrics=CHAR
 
 def save_frontier_chart(panels: list[dict], path: str, goal: float = GOAL_SPEEDUP, metrics=CHART_METRICS) -> str:
     """Write :func:`frontier_figure` as a PNG to ``path``; returns ``path``."""
-    import matplotlib.pyplot as plt
-
-    fig = frontier_figure(panels, goal, metrics)
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    try:
-        fig.savefig(path)
-    except OSError as exc:
-        raise SerenityError(f"{path}: cannot write chart ({exc})") from exc
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(frontier_figure(panels, goal, metrics), path)

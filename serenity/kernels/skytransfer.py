@@ -36,6 +36,7 @@ import functools
 import numpy as np
 import warp as wp
 
+from serenity.config import SKY_TRANSFER_MAX_BANDS
 from serenity.kernels.atmosphere_ref import sky_map_directions, sky_map_solid_angles
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
@@ -48,8 +49,6 @@ wp.set_module_options({"enable_backward": False})
 # ---------------------------------------------------------------------------------------------
 # constants
 
-MAX_BANDS = 5
-_PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
 
 vec25 = wp.types.vector(length=25, dtype=wp.float32)
 
@@ -215,8 +214,8 @@ class SkyTransfer:
 
     def __init__(self, quads_wp, quad_count: int, base, rays: int, sequence: int, seed: int, bands: int,
                  device: str):
-        if not 1 <= bands <= MAX_BANDS:
-            raise ValueError(f"transfer bands must be in 1..{MAX_BANDS}, got {bands}")
+        if not 1 <= bands <= SKY_TRANSFER_MAX_BANDS:
+            raise ValueError(f"transfer bands must be in 1..{SKY_TRANSFER_MAX_BANDS}, got {bands}")
         self.functions = bands * bands
         self.device = device
         self._args = [*quads_wp, int(quad_count), base, int(rays), wp.uint32(seed & 0xFFFFFFFF), self.functions]

@@ -80,7 +80,6 @@ PAPER_RESOLUTION = (32, 16, 23)
 SEQUENCES = SKY_SEQUENCES
 COEFFS = 27
 _FOUR_PI = wp.constant(4.0 * math.pi)
-_PROBE_SALT = wp.constant(wp.uint32(0x2545F491))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -314,7 +313,6 @@ class SkyVolume:
         if cfg.method == "transfer":
             self._transfer = SkyTransfer(self._quads_wp, len(quads), self._base, n, SEQUENCES.index(cfg.sequence),
                                          cfg.seed, cfg.transfer_bands, dev)
-            self._irr_scale = self._scale
 
     # -- sky
 
@@ -371,7 +369,7 @@ class SkyVolume:
         ``sun_direction`` defaults to ``scene.sun.direction``."""
         sky_map, changed = self._current_sky_map(self._sun(sun_direction))
         if self._transfer is not None:
-            if changed or self._transfer.grid is None or self.layer_versions[0] != self.sky_version:
+            if self.pending_layers:  # never lit, or the sky was rebaked since
                 self._apply_transfer()
                 return True
             return False
@@ -393,7 +391,7 @@ class SkyVolume:
         if self._constant_sky:  # the 2×2 map is too coarse a quadrature for the projection
             sky = np.broadcast_to(sky[:1, :1], (64, 64, 3))
         f = project_sky(sky, self.ground_radiance, self._transfer.functions)
-        self._transfer.apply(self.grid_origin, self.cell_size, self.resolution, f, self._irr_scale, self._coeffs)
+        self._transfer.apply(self.grid_origin, self.cell_size, self.resolution, f, self._scale, self._coeffs)
         self._host = None
         self.layer_versions[:] = self.sky_version
 

@@ -71,15 +71,13 @@ class TracerProcess:
         os.close(from_child_w)
         self._out, self._in = to_child_w, from_child_r
         self._pending = False
-        self._ready = False
-        self.build_seconds = None
+        self.build_seconds: float | None = None
+        """Seconds the child took to build its tracer (None until it has said it is ready)."""
         _write(self._out, (scene, device))
 
     def _wait_ready(self) -> None:
-        if not self._ready:
-            msg = self._receive()
-            self.build_seconds = msg[1]
-            self._ready = True
+        if self.build_seconds is None:
+            self.build_seconds = self._receive()[1]
 
     def _receive(self):
         try:

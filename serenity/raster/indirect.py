@@ -16,6 +16,8 @@ of the pixels carry it; texture detail comes back from the full-resolution albed
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import moderngl
 
 from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_program, low_res_size
@@ -23,6 +25,35 @@ from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_progra
 TECHNIQUES = {"sky": 1, "lpv": 2}
 #: texture units 0..5 are the G-buffer, eye and AO; the volume's own textures start here
 FIRST_VOLUME_UNIT = 6
+
+
+class _AdditiveTargets:
+    """One framebuffer per target texture (cached), drawn into with additive blending: both the
+    techniques and the upsampling add their light onto an image that already holds the rest."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._fbos: dict[int, object] = {}
+
+    def adding_to(self, target):
+        """Context: draw into ``target`` (a texture), adding to what it holds."""
+        fbo = self._fbos.get(target.glo)
+        if fbo is None:
+            fbo = self._fbos[target.glo] = self.ctx.framebuffer(color_attachments=[target])
+        return self.adding_to_framebuffer(fbo)
+
+    @contextmanager
+    def adding_to_framebuffer(self, fbo):
+        """Context: draw into ``fbo``, adding to what its targets hold."""
+        ctx = self.ctx
+        fbo.use()
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        ctx.blend_equation = moderngl.FUNC_ADD
+        try:
+            yield
+        finally:
+            ctx.disable(moderngl.BLEND)
 
 
 class IndirectPass:
@@ -35,27 +66,17 @@ class IndirectPass:
         self.program = load_program(ctx, "indirect.glsl",
                                     defines={"TECHNIQUE": TECHNIQUES[technique], "LOWRES": int(lowres)})
         self.vao = fullscreen_vao(ctx, self.program)
-        self._fbos: dict[int, object] = {}
-
-    def _fbo(self, target):
-        key = target.glo
-        if key not in self._fbos:
-            self._fbos[key] = self.ctx.framebuffer(color_attachments=[target])
-        return self._fbos[key]
+        self._targets = _AdditiveTargets(ctx)
 
     def render(self, target, gbuffer, bind, camera_pos, ao=None, rt_view=None) -> None:
         """Add this technique's light onto ``target``: the lit HDR texture of the same size, or for a
         ``lowres`` pass the :class:`LowResIndirect` whose targets it adds to."""
         ctx, p = self.ctx, self.program
-        with ctx.debug_scope(f"indirect:{self.technique}"):
+        adding = (self._targets.adding_to_framebuffer(target.fbo) if self.lowres
+                  else self._targets.adding_to(target))
+        with ctx.debug_scope(f"indirect:{self.technique}"), adding:
             if self.lowres:
-                target.fbo.use()
                 p["u_scale"].value = target.scale
-            else:
-                self._fbo(target).use()
-            ctx.enable(moderngl.BLEND)
-            ctx.blend_func = moderngl.ONE, moderngl.ONE
-            ctx.blend_equation = moderngl.FUNC_ADD
             for loc, (name, tex) in enumerate((("g_albedo", gbuffer.albedo), ("g_normal", gbuffer.normal),
                                                ("g_position", gbuffer.position), ("g_material", gbuffer.material))):
                 tex.use(location=loc)
@@ -73,7 +94,6 @@ class IndirectPass:
                     p[name].value = value
             bind(p, FIRST_VOLUME_UNIT)
             draw_fullscreen(ctx, self.vao, None if rt_view is None else rt_view.rects)
-            ctx.disable(moderngl.BLEND)
 
 
 class LowResIndirect:
@@ -87,7 +107,7 @@ class LowResIndirect:
         self.program = load_program(ctx, "upsample.glsl")
         self.vao = fullscreen_vao(ctx, self.program)
         self.size = None
-        self._fbos: dict[int, object] = {}
+        self._targets = _AdditiveTargets(ctx)
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
@@ -107,14 +127,7 @@ class LowResIndirect:
     def upsample(self, target, gbuffer, camera_pos, camera_forward) -> None:
         """Add albedo·E + glossy, upsampled, onto ``target`` (the full-resolution lit HDR texture)."""
         ctx, p = self.ctx, self.program
-        with ctx.debug_scope("indirect:upsample"):
-            key = target.glo
-            if key not in self._fbos:
-                self._fbos[key] = ctx.framebuffer(color_attachments=[target])
-            self._fbos[key].use()
-            ctx.enable(moderngl.BLEND)
-            ctx.blend_func = moderngl.ONE, moderngl.ONE
-            ctx.blend_equation = moderngl.FUNC_ADD
+        with ctx.debug_scope("indirect:upsample"), self._targets.adding_to(target):
             for loc, (name, tex) in enumerate((("g_albedo", gbuffer.albedo), ("g_normal", gbuffer.normal),
                                                ("g_position", gbuffer.position), ("u_irr", self.irr),
                                                ("u_gloss", self.gloss))):
@@ -124,4 +137,3 @@ class LowResIndirect:
             p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
             p["u_camera_forward"].value = tuple(float(x) for x in camera_forward)
             self.vao.render(vertices=3)
-            ctx.disable(moderngl.BLEND)
