@@ -60,6 +60,7 @@ from serenity.raster.shadow import ShadowPass, fit_overlapped, fit_shadow_cascad
 from serenity.raster.sky import SkyTexturesGL
 from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
+from serenity.threads import single_threaded_blas
 
 MAIN_LANE = "main (GL + volumes)"
 STAGES = (
@@ -268,6 +269,10 @@ class Renderer:
         wanted = set(READ_BACK) if read_back is True else set(read_back or ())
         if not wanted <= set(READ_BACK):
             raise SerenityError(f"read_back must be a bool or a subset of {READ_BACK}, got {read_back!r}")
+        with single_threaded_blas():  # the frame's own threads (llvmpipe, Warp launches) fill the cores
+            return self._render(wanted, jitter)
+
+    def _render(self, wanted: set[str], jitter: tuple[float, float]) -> Frame:
         self._begin_frame()
         cam = self.scene.camera
         proj = cam.projection_matrix(self.width / self.height)

@@ -28,6 +28,7 @@ import time
 
 from serenity.errors import SerenityError
 from serenity.kernels.raytrace import RayTracer
+from serenity.threads import single_threaded_blas
 
 _HEADER = struct.Struct("<Q")
 
@@ -117,7 +118,8 @@ class TracerProcess:
 
 def _serve(fd_in: int, fd_out: int) -> None:
     try:
-        _serve_frames(fd_in, fd_out)
+        with single_threaded_blas():
+            _serve_frames(fd_in, fd_out)
     except EOFError:  # the parent went away without saying goodbye
         return
 

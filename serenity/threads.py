@@ -1,0 +1,31 @@
+"""Keeping the BLAS library's own thread pool out of the frame's way.
+
+numpy's matrix products call OpenBLAS (or MKL), which by default starts one thread per core and,
+after each call, keeps them spinning for a while waiting for the next one. Inside a frame the
+cores are already taken — llvmpipe renders on its own threads and every Warp CPU launch is split
+over a thread per core (``kernels/launch.py``) — so those spinning threads steal the cores from
+the real work. Measured on the 2-core machine while other jobs ran: the sky projection's
+(26 × 7232) @ (7232 × 3) product took 2–10 ms with OpenBLAS's default pool and 0.15 ms on one
+thread, and the sky transfer's Warp launch next to it went from ~15 to ~5.5 CPU-ms.
+
+:func:`single_threaded_blas` limits the BLAS pool to one thread for the duration of a ``with``
+block (``threadpoolctl``, the library scikit-learn uses for the same purpose) and restores the
+caller's setting afterwards, so a program that renders between its own large matrix products
+keeps its BLAS threads for them.
+"""
+
+from __future__ import annotations
+
+from contextlib import AbstractContextManager
+
+from threadpoolctl import ThreadpoolController
+
+_controller: ThreadpoolController | None = None
+
+
+def single_threaded_blas() -> AbstractContextManager:
+    """A context manager under which numpy's BLAS runs on the calling thread only."""
+    global _controller
+    if _controller is None:  # scans the loaded libraries once (a few ms)
+        _controller = ThreadpoolController()
+    return _controller.limit(limits=1, user_api="blas")
