@@ -546,3 +546,18 @@ def test_accumulated_grid_without_the_injected_lobes(device):
     w.inject(centre_of(c)[None] - 0.5 * n, n, np.array([[1.0, 1.0, 1.0]]))
     w.propagate()
     np.testing.assert_allclose(acc, w.level_grid(0, "accum") - inj, atol=1e-6)
+
+
+def test_clamped_propagation_equals_the_linear_one_for_a_non_negative_source(device):
+    # a source whose intensity is positive in every direction (two opposite lobes and a weak third):
+    # no face is clamped, so the clamped gather takes the linear transfer's shortcut — same result
+    grids = []
+    for clamp in (False, True):
+        v = unit_grid_volume(device, res=8, iterations=1, clamp_faces=clamp)
+        c = centre_of((4, 3, 5))
+        n = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
+        v.inject(c[None] - 0.1 * n, n, np.array([[1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [0.2, 0.3, 0.4]]))
+        v.propagate()
+        grids.append(v.level_grid(0, "last").astype(np.float64))
+    assert np.abs(grids[0]).max() > 0
+    np.testing.assert_allclose(grids[1], grids[0], rtol=1e-5, atol=1e-7)
