@@ -19,6 +19,8 @@ near-field alternatives that were measured and not adopted):
 - ``plane_self_illumination``: E_self/M of a lit plane (the kernel test's set-up: one 16³ cascade
   of 1 m cells, 8 iterations, plane heights 3.01/3.3/3.6/3.9 m, with its surfels in the geometry
   volume as in a frame); exact 0;
+- ``synthetic_cost``: CPU-ms of one update on ``bench_lpv.py``'s synthetic workload, before / face
+  clamp / default, interleaved (``--cost-only`` re-measures just this into an existing JSON);
 - ``lpv_update_ms``: the frame's LPV update (Σ ``frame.LPV_UPDATE_STAGES``) in the courtyard at 320×180,
   median of 3 forced re-updates (wall time on a shared machine: compare within a run);
   ``lpv_inject_propagate_cpu_ms``: the stages this change touches ("lpv inject" + "lpv propagate"),
@@ -31,6 +33,7 @@ The LPV row "off" is the error to beat. ``--quick`` skips the courtyard.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -59,6 +62,9 @@ VARIANTS = {
     "default + lookups without the injected lobes": {"accumulate_injected": False},
     "default + injection offset 1 cell": {"injection_offset": 1.0},
 }
+
+COST_VARIANTS = {k: VARIANTS[k] for k in ("before (paper transfer, view-fitted cells)", "face clamp",
+                                          "default (all three)")}
 
 
 def _reference(scene, w, h, spp, component):
@@ -178,17 +184,63 @@ def plane_self_illumination(variants):
     return out
 
 
+def synthetic_cost(variants, reps=7):
+    """CPU-ms (process time, summed over the worker threads) of one LPV update — clear, inject,
+    inject_geometry, propagate — on ``bench_lpv.py``'s synthetic courtyard-sized workload (107 k VPLs,
+    58 k surfels, 3 cascades of 16³), median of ``reps`` after a warm-up, per setting; the settings
+    interleaved round by round so a load change hits them alike."""
+    from bench_lpv import BOUNDS, CAMERA, workload
+
+    sets, surfels = workload()
+    vols = {}
+    for label, kw in variants.items():
+        v = LightPropagationVolume(LPVConfig(**kw), device="cpu")
+        v.fit(CAMERA, BOUNDS)
+        vols[label] = v
+    rows = {label: {"total": [], "propagate": []} for label in variants}
+    for k in range(reps + 1):
+        for label, v in vols.items():
+            t0 = time.process_time()
+            v.clear()
+            for st in sets:
+                v.inject(*st)
+            for st in surfels:
+                v.inject_geometry(*st)
+            t1 = time.process_time()
+            v.propagate()
+            t2 = time.process_time()
+            if k:
+                rows[label]["total"].append((t2 - t0) * 1e3)
+                rows[label]["propagate"].append((t2 - t1) * 1e3)
+    out = {label: {"update_cpu_ms": float(np.median(r["total"])), "propagate_cpu_ms": float(np.median(r["propagate"])),
+                   "iterations_run": vols[label].iterations_run} for label, r in rows.items()}
+    for label, r in out.items():
+        print(f"synthetic update  {label:<48} {r['update_cpu_ms']:7.1f} CPU-ms "
+              f"(propagate {r['propagate_cpu_ms']:.1f}), "
+              f"iterations {r['iterations_run']}", flush=True)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--json", default=os.path.join(HERE, "results", "lpv_room.json"))
     ap.add_argument("--quick", action="store_true", help="skip the courtyard")
+    ap.add_argument("--cost-only", action="store_true",
+                    help="only the synthetic CPU-ms, merged into an existing --json")
     args = ap.parse_args(argv)
+    if args.cost_only:
+        with open(args.json) as fh:
+            out = json.load(fh)
+        out["synthetic_cost"] = synthetic_cost(COST_VARIANTS)
+        write_results(args.json, out)
+        return 0
     keys = ("clamp_faces", "lookup_occlusion", "scene_cells", "accumulate_injected", "injection_offset")
     out = {"benchmark": "lpv_room", "default_lpv": {k: getattr(LPVConfig(), k) for k in keys},
            "plane_self_illumination": plane_self_illumination(VARIANTS),
            "cornell_indirect": cornell_indirect(VARIANTS), "open_ground": open_ground(VARIANTS)}
     if not args.quick:
         out["courtyard"] = courtyard(VARIANTS)
+    out["synthetic_cost"] = synthetic_cost(COST_VARIANTS)
     write_results(args.json, out)
     return 0
 
