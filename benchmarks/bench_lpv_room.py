@@ -25,7 +25,8 @@ near-field alternatives that were measured and not adopted):
   median of 3 forced re-updates (wall time on a shared machine: compare within a run);
   ``lpv_inject_propagate_cpu_ms``: the stages this change touches ("lpv inject" + "lpv propagate"),
   as process CPU time (the clock ``tools/profile_frame.py`` uses; robust to a busy machine, summed
-  over the worker threads), median of 3 more.
+  over the worker threads), median of 3 more; ``lpv_lighting_cpu_ms`` the "lpv lighting" GL pass
+  the same way (llvmpipe renders on the calling thread: ``LP_NUM_THREADS=0``, set by this script).
 
 The LPV row "off" is the error to beat. ``--quick`` skips the courtyard.
 """
@@ -38,16 +39,18 @@ import os
 import sys
 import time
 
-import numpy as np
+os.environ.setdefault("LP_NUM_THREADS", "0")  # llvmpipe on the calling thread: GL passes in process CPU time
 
-from serenity.config import LPVConfig, RenderConfig
-from serenity.eval.metrics import compare, rel_mse
-from serenity.eval.reference import render_reference
-from serenity.eval.regions import region_report
-from serenity.frame import LPV_UPDATE_STAGES, Renderer
-from serenity.io.results import write_results
-from serenity.kernels.lpv import LightPropagationVolume
-from serenity.scene import load
+import numpy as np  # noqa: E402
+
+from serenity.config import LPVConfig, RenderConfig  # noqa: E402
+from serenity.eval.metrics import compare, rel_mse  # noqa: E402
+from serenity.eval.reference import render_reference  # noqa: E402
+from serenity.eval.regions import region_report  # noqa: E402
+from serenity.frame import LPV_UPDATE_STAGES, Renderer  # noqa: E402
+from serenity.io.results import write_results  # noqa: E402
+from serenity.kernels.lpv import LightPropagationVolume  # noqa: E402
+from serenity.scene import load  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 WALL = time.perf_counter
@@ -118,7 +121,7 @@ def courtyard(variants):
         r = Renderer(scene, w, h, config=RenderConfig(lpv=LPVConfig(**kw)))
         f = r.render()
         m = compare(f.hdr, ref, exposure=f.exposure)
-        upd, cpu = [], []
+        upd, cpu, light = [], [], []
         for _ in range(3):
             r.invalidate_lpv()
             upd.append(sum(r.render().timings.get(k, 0.0) for k in LPV_UPDATE_STAGES))
@@ -128,18 +131,21 @@ def courtyard(variants):
                 r.invalidate_lpv()
                 t = r.render().timings
                 cpu.append(sum(t.get(k, 0.0) for k in ("lpv inject", "lpv propagate")))
+                light.append(t.get("lpv lighting", 0.0))
         finally:
             time.perf_counter = WALL
         rows.append({"config": label, "lpv": kw, "rel_mse": m["rel_mse"],
                      "rel_mse_trimmed": rel_mse(f.hdr, ref, trim=1e-3), "flip": m["flip"],
                      "lpv_update_ms": float(np.median(upd)), "lpv_inject_propagate_cpu_ms": float(np.median(cpu)),
+                     "lpv_lighting_cpu_ms": float(np.median(light)),
                      "cell_m": [g.cell_size for g in r.lpv.grids],
                      "luminance_ratio": _regions(f.hdr, ref, f, scene, f.exposure, m["flip_map"])})
         lr = rows[-1]["luminance_ratio"]
         print(f"courtyard         {label:<48} relMSE {m['rel_mse']:.4f}  FLIP {m['flip']:.4f}  down-facing "
               f"{lr['down-facing']:.3f}  vertical {lr['vertical']:.3f}  up {lr['up-facing']:.3f}  "
               f"update {rows[-1]['lpv_update_ms']:.1f} ms, inject + propagate "
-              f"{rows[-1]['lpv_inject_propagate_cpu_ms']:.1f} CPU-ms", flush=True)
+              f"{rows[-1]['lpv_inject_propagate_cpu_ms']:.1f} CPU-ms, lighting {rows[-1]['lpv_lighting_cpu_ms']:.1f} "
+              f"CPU-ms", flush=True)
     return {"size": [w, h], "reference_spp": 256, "rows": rows}
 
 

@@ -308,8 +308,8 @@ class RenderConfig:
     """The sky lighting irradiance volume (paper §7); ``enabled=False`` turns the sky term off."""
     lpv: LPVConfig = field(default_factory=LPVConfig)
     """Light propagation volumes (paper §8); ``enabled=False`` turns the LPV off. Default: 3 cascades
-    of 16³, 8 iterations, the coarsest extended to cross the scene, far light handed over to the finer
-    cascades."""
+    of 16³, 8 iterations, the coarsest extended to cross the scene and at most 6 cells across it, far
+    light handed over to the finer cascades, clamped face flux, lookup occlusion."""
     sync_stages: bool = True
     """Wait for the GL queue after each stage so per-stage wall times are exact (costs overlap)."""
     ray_tracing: bool = True

@@ -112,10 +112,12 @@ light from sources within N of its (small) cells. Two measures, both on by defau
     courtyard's FLIP from 0.235 to 0.124 and the Cornell box's trimmed relMSE from 18 to 1.0.
     Default resolution 16³ (not the paper's 32³): at 32³ cells are finer than the propagation
     can cross in a frame's budget, and the sweep's error is lower at 16³ in both scenes.
-Known error (measured, ``tests/kernels/test_lpv.py::test_self_illumination_of_a_lit_plane``): L1
-lobes are wide, so light a lit plane's VPLs send sideways reaches the plane itself: a plane of
-exitance M receives ≈ 0.5·M from itself (exact: 0). This, not leaking, is why lit surfaces and
-their neighbours come out too bright (Cornell box: the short box's front face, ×2–3).
+Known error (measured, ``tests/kernels/test_lpv.py::test_self_illumination_of_a_lit_plane`` and
+``benchmarks/bench_lpv_room.py``): L1 lobes are wide and propagation is diffusive, so light a lit
+plane's VPLs send sideways reaches the plane itself: a plane of exitance M receives 0.5–0.6·M from
+itself with the paper's transfer and no geometry volume, 0.20–0.41·M with its surfels in the geometry
+volume and the defaults (exact: 0). With the faces next to a lit patch that share its cells, this
+is most of what is left of the Cornell box's error (README, "The LPV in a closed room").
 
 Early stop: per cascade, after each iteration the change Σ|ΔDC| is compared with
 ``early_stop``·Σ|DC accumulated|; in a closed lossless grid the ratio is 1/(k+1), so stopping is
