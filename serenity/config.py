@@ -203,6 +203,9 @@ class LPVConfig:
     cross_scene: bool = True
     """The coarsest fitted cascade runs at least as many iterations as it has cells across the scene's
     largest side (capped at its resolution), so light can reach from one end of the scene to the other."""
+    scene_cells: float = 6.0
+    """The cascade that holds the whole scene has cells of at least (largest scene side) / scene_cells
+    (0 = off): light crosses a closed room only if it is a few cells across (``fit_cascades``)."""
     handover: bool = True
     """Cascaded reach (``kernels/lpv`` docstring, "Hand-over"): each cascade also accumulates the light
     of its iterations past the reach of the next finer one, and that far light is added into the
@@ -211,6 +214,14 @@ class LPVConfig:
     """Stop a cascade when an iteration adds less than this fraction of its accumulated |DC| (0 = never)."""
     geometry_volume: bool = True
     """Fuzzy occlusion from surfels during propagation (compiled in/out)."""
+    clamp_faces: bool = True
+    """Propagation clamps each face's flux at 0 (Φ_f = Δω_f·max(0, I(ω_f))): the L1 lobes' negative back
+    tails no longer carry negative light to the cells behind them (``kernels/lpv`` docstring, "Clamped
+    faces"; compiled in/out)."""
+    accumulate_injected: bool = True
+    """The looked-up grid holds the injected VPL lobes as well as the propagated light (False: only
+    the propagated light, so a VPL is first seen one cell away; within its own cell it is near field,
+    which an L1 lobe at the cell centre gets badly wrong)."""
     injection_offset: float = 0.5
     """VPLs are moved this many cells along their normal before picking their cell (Kaplanyan)."""
     lookup_offset: float = 0.5
@@ -219,6 +230,10 @@ class LPVConfig:
     """Irradiance lookups weight each of the 8 trilinear cells by how far its centre lies in front of
     the receiving surface: stops light behind a wall thinner than a cell leaking onto its dark side
     through the interpolation. Costs 8 unfiltered fetches instead of 1 filtered (compiled in/out)."""
+    lookup_occlusion: bool = True
+    """With the leak guard and the geometry volume: a lookup also drops the trilinear cells that lie
+    across a blocking face of the geometry volume from the cell just in front of the surface (the light
+    above a sunlit roof does not reach the top of the wall below its ceiling; compiled in/out)."""
     view_distance: float = 64.0
     """Metres the outermost cascade reaches along the view direction (capped by the scene size)."""
     cascade_scale: float = 2.0
@@ -293,8 +308,8 @@ class RenderConfig:
     """The sky lighting irradiance volume (paper §7); ``enabled=False`` turns the sky term off."""
     lpv: LPVConfig = field(default_factory=LPVConfig)
     """Light propagation volumes (paper §8); ``enabled=False`` turns the LPV off. Default: 3 cascades
-    of 16³, 8 iterations, the coarsest extended to cross the scene, far light handed over to the finer
-    cascades."""
+    of 16³, 8 iterations, the coarsest extended to cross the scene and at most 6 cells across it, far
+    light handed over to the finer cascades, clamped face flux, lookup occlusion."""
     sync_stages: bool = True
     """Wait for the GL queue after each stage so per-stage wall times are exact (costs overlap)."""
     ray_tracing: bool = True

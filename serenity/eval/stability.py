@@ -78,8 +78,10 @@ def _timed(fn, *args, **kw):
 
 
 def _unit_lpv(res: int, cell: float, iterations: int, device=None, **kw):
-    """One cascade of ``res``³ cells of ``cell`` m with its origin at (−cell, −cell, −cell)."""
+    """One cascade of ``res``³ cells of ``cell`` m with its origin at (−cell, −cell, −cell) (the cell
+    size as given: no scene-fitted coarsening)."""
     kw.setdefault("cross_scene", False)
+    kw.setdefault("scene_cells", 0.0)
     cfg = LPVConfig(resolution=res, cascades=1, iterations=iterations, early_stop=0.0, **kw)
     v = LightPropagationVolume(cfg, device=device)
     bounds = np.array([[0.0] * 3, [(res - 2) * cell] * 3])
@@ -88,12 +90,13 @@ def _unit_lpv(res: int, cell: float, iterations: int, device=None, **kw):
     return v
 
 
-def lpv_thin_wall(frac: float, geometry_volume: bool, leak_guard: bool, device=None) -> tuple[float, float]:
+def lpv_thin_wall(frac: float, geometry_volume: bool, leak_guard: bool, device=None,
+                  **lpv) -> tuple[float, float]:
     """A 5 cm wall (a twentieth of a 1 m cell) at x = 6 + ``frac`` lit on its −x face (VPLs of
     100 W/m² exitance on the lit face, a lit floor in front), surfels on both faces. Returns
     (E on the dark face, E on the lit face), W/m², each facing out of the wall. Exact dark face: 0
-    (nothing lies on its side)."""
-    v = _unit_lpv(16, 1.0, 8, device, geometry_volume=geometry_volume, leak_guard=leak_guard)
+    (nothing lies on its side). ``lpv``: other LPVConfig fields."""
+    v = _unit_lpv(16, 1.0, 8, device, geometry_volume=geometry_volume, leak_guard=leak_guard, **lpv)
     x0 = 6.0 + frac
     ys, zs = np.meshgrid(np.arange(2.0, 12.0, 0.25) + 0.125, np.arange(2.0, 12.0, 0.25) + 0.125)
     m = ys.size

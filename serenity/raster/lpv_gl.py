@@ -5,7 +5,8 @@ arbitrary points (tests, debugging).
 ``LPVTexturesGL.upload(lpv)`` takes any object shaped like ``serenity.kernels.lpv
 .LightPropagationVolume`` (``grids``, ``textures(c)``, ``config``, ``glossy_step_length()``) — this
 module never imports a kernel module (docs/architecture.md, Layers). Per active cascade: three RGBA32F textures
-(R, G, B), RGBA = L1 SH (Y0, x, y, z) of intensity in W/sr, LINEAR, CLAMP_TO_EDGE.
+(R, G, B), RGBA = L1 SH (Y0, x, y, z) of intensity in W/sr, LINEAR, CLAMP_TO_EDGE, and one of face
+openness (``openness(c)``, the lookup occlusion; RGB = +x, +y, +z faces of each cell).
 """
 
 from __future__ import annotations
@@ -19,22 +20,23 @@ from serenity.raster.interop import upload_texture3d
 
 MAX_CASCADES = LPV_MAX_CASCADES
 CHANNELS = ("r", "g", "b")
-UNITS = MAX_CASCADES * len(CHANNELS)  # texture units ``bind`` uses, from ``first_unit`` on
+UNITS = MAX_CASCADES * (len(CHANNELS) + 1)  # texture units ``bind`` uses, from ``first_unit`` on
 
 
 class LPVTexturesGL:
-    """The LPV's cascades as 9 sampler3D (3 cascades × RGB) plus the lookup uniforms of lpv.glsl."""
+    """The LPV's cascades as 12 sampler3D (3 cascades × RGB + openness) plus the lookup uniforms of lpv.glsl."""
 
     def __init__(self, ctx):
         self.ctx = ctx
         zero = np.zeros((1, 1, 1, 4), np.float32)
         self._empty = upload_texture3d(ctx, zero)
-        self.textures: list[list] = [[self._empty] * 3 for _ in range(MAX_CASCADES)]
+        self.textures: list[list] = [[self._empty] * 4 for _ in range(MAX_CASCADES)]
         self.count = 0
         self.geom = np.zeros((MAX_CASCADES, 4), np.float32)
         self.res = np.ones(MAX_CASCADES, np.int32)
         self.lookup_offset = 0.5
         self.leak_guard = True
+        self.occlusion = False
         self.margin = 0.5
         self.band = 2.0
         self.glossy_steps = 8
@@ -52,7 +54,7 @@ class LPVTexturesGL:
             g = grids[c]
             self.geom[c, :3], self.geom[c, 3] = g.origin, g.cell_size
             self.res[c] = g.resolution
-            for k, arr in enumerate(lpv.textures(c)):
+            for k, arr in enumerate((*lpv.textures(c), lpv.openness(c))):
                 tex = self.textures[c][k]
                 shape = (arr.shape[2], arr.shape[1], arr.shape[0])
                 if tex is not self._empty and tex.size == shape:
@@ -63,23 +65,24 @@ class LPVTexturesGL:
                     self.textures[c][k] = upload_texture3d(self.ctx, arr)
         self.lookup_offset = float(cfg.lookup_offset)
         self.leak_guard = bool(cfg.leak_guard)
+        self.occlusion = bool(cfg.leak_guard and cfg.lookup_occlusion and cfg.geometry_volume)
         self.margin = float(cfg.edge_margin)
         self.band = float(cfg.blend_cells)
         self.glossy_steps = int(cfg.glossy_steps)
         self.glossy_step = float(lpv.glossy_step_length())
 
     def _drop(self, c: int) -> None:
-        for k in range(3):
+        for k in range(4):
             if self.textures[c][k] is not self._empty:
                 self.textures[c][k].release()
                 self.textures[c][k] = self._empty
 
     def bind(self, program, first_unit: int = 8) -> None:
-        """Bind the 9 textures to units first_unit..first_unit+8 and set lpv.glsl's uniforms on
+        """Bind the 12 textures to units first_unit..first_unit+11 and set lpv.glsl's uniforms on
         ``program`` (uniforms the compiler optimised away are skipped)."""
         for c in range(MAX_CASCADES):
-            for k, ch in enumerate(CHANNELS):
-                unit = first_unit + 3 * c + k
+            for k, ch in enumerate((*CHANNELS, "o")):
+                unit = first_unit + 4 * c + k
                 self.textures[c][k].use(location=unit)
                 name = f"u_lpv_{ch}{c}"
                 if name in program:
@@ -87,6 +90,7 @@ class LPVTexturesGL:
         self._write(program, "u_lpv_geom", self.geom, 4)
         self._write(program, "u_lpv_res", self.res, 1)
         for name, value in (("u_lpv_count", int(self.count)), ("u_lpv_leak_guard", self.leak_guard),
+                            ("u_lpv_occlusion", self.occlusion),
                             ("u_lpv_glossy_steps", int(self.glossy_steps)),
                             ("u_lpv_lookup_offset", self.lookup_offset), ("u_lpv_margin", self.margin),
                             ("u_lpv_band", self.band), ("u_lpv_glossy_step", self.glossy_step)):

@@ -13,13 +13,19 @@ def test_thin_wall_leak_across_a_cell_with_the_default_mitigations(device):
     """A 5 cm wall (1/20 of a 1 m cell) lit on one side, at 5 positions across a cell. Exact
     irradiance on the dark face: 0. Plain volume (no geometry volume, no leak guard): E_dark/E_lit
     0.16–0.74 (worst with the wall in a cell's far half); with the defaults (geometry volume + leak
-    guard) 0.005–0.010. Bounds: mitigated ≤ 0.02 at every position; the plain leak is still there
-    (> 0.3 somewhere), so the case keeps testing what the mitigations fix."""
+    guard + lookup occlusion, clamped faces) 0.012–0.095: the clamp drops the negative light the
+    paper's linear transfer sent through the wall, which cancelled most of what leaked (its
+    L1-limited 2/3 blocking of a two-sided wall); with the linear transfer 0.006–0.011. Bounds:
+    mitigated ≤ 0.12 (default) and ≤ 0.02 (linear transfer) at every position; the plain leak is
+    still there (> 0.3 somewhere), so the case keeps testing what the mitigations fix."""
     case = S.lpv_thin_wall_case(device=device)
     print(case.extra)
     assert case.error_without > 0.3
-    assert case.error_with <= 0.02
-    assert all(0.0 <= r <= 0.02 for r in case.extra["ratio_mitigated"])
+    assert case.error_with <= 0.12
+    assert all(0.0 <= r <= 0.12 for r in case.extra["ratio_mitigated"])
+    for f in case.extra["wall_position_in_cell"]:
+        dark, lit = S.lpv_thin_wall(f, True, True, device, clamp_faces=False)
+        assert 0.0 <= dark / lit <= 0.02
 
 
 def test_self_illumination_of_a_lit_plane_is_bounded(device):

@@ -38,7 +38,14 @@ Lookup (units):
         centre and u_s the surface point (without the offset), both in cells: a cell whose centre
         lies behind the surface's plane does not light it, one 1/4 cell or more in front counts
         fully (plain trilinear if Σ w_i·g_i < 1e-4). Clamp to edge as above (indices clamped,
-        centres of the clamped cells). (An earlier +1 in g let cells up to 1/4 cell behind count:
+        centres of the clamped cells). Lookup occlusion (``lookup_occlusion``, with the leak guard and
+        the geometry volume; default on): each cell's weight is also multiplied, for every axis on
+        which it differs from the home cell h = ⌊u_s + n/4⌋, by the openness 1 − clamp(C0·b0 +
+        C1·|b_axis|, 0, 1) of the geometry volume's face between them (taken in h's row): the light
+        above a sunlit roof no longer reaches the top of the wall under the ceiling (the bright
+        lines along the Cornell box's ceiling edges). Limit: a blocker in a cell's lower half blocks
+        the face below it, so a point between that face and the blocker shares the far side's
+        cell and is not helped. (An earlier +1 in g let cells up to 1/4 cell behind count:
         in the Cornell box that lit the ceiling's underside with the sunlit roof's VPLs, relMSE
         of the indirect image 467 → 260 at 32³ when removed.)
     glossy    mean over k = 1..glossy_steps of max(0, C0·l0 + A1·C1·(l.xyz·(−r))) at
@@ -62,7 +69,15 @@ along d), Δω_side = 0.4234314 sr (exact rectangle formula, ``face_solid_angles
 (the transfer is linear in the SH and the DC term's weights sum to 4π); light sent across the
 grid's outer faces is lost. The 5-face sum collapses to a sparse 4×4 transfer per direction
 (constants T_* in ``basis``; ``tests/kernels/test_lpv.py`` checks it against the explicit 5-face sum).
-No clamping during propagation (linear, energy-exact; negative lobes are clamped at lookup).
+That linear transfer is the paper's (``clamp_faces=False``). Clamped faces (``clamp_faces``, default
+on): an L1 lobe is negative behind it (a VPL's (1 + 2 cos θ)/4π for cos θ < −1/2), and the linear
+transfer carries that negative light on: in the Cornell box the cells under the ceiling ended with
+negative DC and the ceiling got nothing. With the clamp each face's flux is Δω_f·max(0, I_src(ω_f)),
+the explicit 5-face sum (``kernels.gather_clamped``); no cell ever holds negative light, and flux is
+no longer exactly conserved (what the clamp drops was negative). Propagation is diffusive either
+way: at each step 0.8 of a beam's flux turns into side lobes, so light covers about √N cells in N
+iterations, not N (a 4 m lit patch under 32³ × 30 iterations of 1 m cells: irradiance 8 cells above
+0.29 of the exact value, 16 cells above 0.001). Hence the scene-fitted coarsest cascade below.
 
 Geometry volume (fuzzy occlusion, K&D 2010 §5.2): a surfel of area A and normal n adds a blocking
 potential B(ω) = A/s²·(1/3 + 2/3·n·ω) — the L1 projection of the clamped cosine max(0, n·ω)
@@ -72,8 +87,10 @@ propagating along d through the face shared with the source is attenuated by
 1 − clamp(B_face(−d), 0, 1), B_face the mean of the 4 geometry cells at the face's corners.
 Two-sided walls: surfels of both sides sum to an isotropic 2/3 block (L1 cannot do better).
 
-Cascades: ``fit_cascades`` — see its docstring. Skipped: cascades whose box misses the scene, and
-(after injection) cascades that received no light: they are neither propagated nor looked up.
+Cascades: ``fit_cascades`` — see its docstring (``scene_cells``: the cascade that holds the whole
+scene has at most that many cells across it, default 6, so light crosses a closed room). Skipped:
+cascades whose box misses the scene, and (after injection) cascades that received no light: they
+are neither propagated nor looked up.
 Every VPL is injected into every cascade it falls in; lookups take the finest cascade (blended
 at its border, see "cascades" above).
 
@@ -95,10 +112,12 @@ light from sources within N of its (small) cells. Two measures, both on by defau
     courtyard's FLIP from 0.235 to 0.124 and the Cornell box's trimmed relMSE from 18 to 1.0.
     Default resolution 16³ (not the paper's 32³): at 32³ cells are finer than the propagation
     can cross in a frame's budget, and the sweep's error is lower at 16³ in both scenes.
-Known error (measured, ``tests/kernels/test_lpv.py::test_self_illumination_of_a_lit_plane``): L1
-lobes are wide, so light a lit plane's VPLs send sideways reaches the plane itself: a plane of
-exitance M receives ≈ 0.5·M from itself (exact: 0). This, not leaking, is why lit surfaces and
-their neighbours come out too bright (Cornell box: the short box's front face, ×2–3).
+Known error (measured, ``tests/kernels/test_lpv.py::test_self_illumination_of_a_lit_plane`` and
+``benchmarks/bench_lpv_room.py``): L1 lobes are wide and propagation is diffusive, so light a lit
+plane's VPLs send sideways reaches the plane itself: a plane of exitance M receives 0.5–0.6·M from
+itself with the paper's transfer and no geometry volume, 0.20–0.41·M with its surfels in the geometry
+volume and the defaults (exact: 0). With the faces next to a lit patch that share its cells, this
+is most of what is left of the Cornell box's error (README, "The LPV in a closed room").
 
 Early stop: per cascade, after each iteration the change Σ|ΔDC| is compared with
 ``early_stop``·Σ|DC accumulated|; in a closed lossless grid the ratio is 1/(k+1), so stopping is

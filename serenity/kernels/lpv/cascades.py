@@ -48,7 +48,11 @@ def fit_cascades(camera_position, view_dir, scene_bounds, config: LPVConfig) -> 
     extent_out = D / (0.5 + forward_shift); cascade c has extent_out / cascade_scale^(C−1−c),
     capped at the scene's largest side plus one cell each way ("whole"). A cascade within a factor
     √cascade_scale of "whole" is grown to "whole" and is the last one (a coarser cascade barely
-    coarser than it would cost a full propagation for nothing).
+    coarser than it would cost a full propagation for nothing). That last cascade's cells are at
+    least (largest scene side) / ``scene_cells``: propagation is diffusive (a beam turns into side
+    lobes within a cell or two, so light covers about √N cells in N iterations, not N), and light
+    that must cross a closed room needs the room to be only a few cells across. Its box is then
+    larger than the scene (centred on it); the cost is the same.
     Cell sizes depend only on the config and the scene — never on the camera — so nothing swims.
     Placement: the box's min corner is camera + forward_shift·extent·view − extent/2, clipped
     per axis to the scene bounds padded by one cell (centred on the scene along an axis the box
@@ -71,6 +75,9 @@ def fit_cascades(camera_position, view_dir, scene_bounds, config: LPVConfig) -> 
         if holds_scene:
             extent = whole
         cell = extent / res
+        if holds_scene and config.scene_cells > 0:  # light must cross the scene: coarse enough cells
+            cell = max(cell, float(size.max()) / config.scene_cells)
+            extent = cell * res
         lo, hi = b[0] - cell, b[1] + cell
         want = cam + config.forward_shift * extent * view - extent / 2
         mn = np.where(extent >= hi - lo, (lo + hi - extent) / 2, np.clip(want, lo, np.maximum(lo, hi - extent)))

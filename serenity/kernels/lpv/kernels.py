@@ -15,7 +15,24 @@ import warp as wp
 
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import slot_base
-from serenity.kernels.lpv.basis import C0, C1, E0, E1, G0, G1, K0, K1, T_AX_AX, T_AX_DC, T_DC_AX, T_DC_DC, T_PERP
+from serenity.kernels.lpv.basis import (
+    C0,
+    C1,
+    E0,
+    E1,
+    G0,
+    G1,
+    INV_SQRT5,
+    K0,
+    K1,
+    T_AX_AX,
+    T_AX_DC,
+    T_DC_AX,
+    T_DC_DC,
+    T_PERP,
+    W_FRONT_C,
+    W_SIDE_C,
+)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -89,6 +106,38 @@ def gather_pair(out: wp.vec4, p: wp.vec4, m: wp.vec4, axis: int) -> wp.vec4:
 
 
 @wp.func
+def face_emit(out: wp.vec4, phi: float, axis: int, sign: float) -> wp.vec4:
+    """out + the clamped-cosine lobe of flux phi facing sign·e_axis: phi·(K0, K1·sign·e_axis)."""
+    if axis == 0:
+        return out + wp.vec4(K0 * phi, K1 * sign * phi, 0.0, 0.0)
+    if axis == 1:
+        return out + wp.vec4(K0 * phi, 0.0, K1 * sign * phi, 0.0)
+    return out + wp.vec4(K0 * phi, 0.0, 0.0, K1 * sign * phi)
+
+
+@wp.func
+def gather_clamped(out: wp.vec4, s: wp.vec4, axis: int, sign: float) -> wp.vec4:
+    """What a cell gathers from a source of SH s at −d, d = sign·e_axis, with every face's flux
+    clamped at 0: Φ_f = Δω_f·max(0, I_s(ω_f)) (package doc, "Clamped faces"). The explicit 5-face sum
+    of the package docstring, which ``gather_pair`` collapses to a linear 4×4 transfer without the clamp."""
+    sd = sign * s[axis + 1]
+    if C0 * s[0] >= C1 * wp.sqrt(s[1] * s[1] + s[2] * s[2] + s[3] * s[3]):
+        # I_s ≥ 0 in every direction: no face is clamped, the linear transfer is exact (and cheaper)
+        lin = wp.vec4(T_DC_DC * s[0] + T_DC_AX * sd, T_PERP * s[1], T_PERP * s[2], T_PERP * s[3])
+        lin[axis + 1] = sign * (T_AX_DC * s[0] + T_AX_AX * sd)
+        return out + lin
+    i_front = C0 * s[0] + C1 * sd
+    out = face_emit(out, W_FRONT_C * wp.max(i_front, 0.0), axis, sign)
+    for k in range(2):
+        e = (axis + 1 + k) % 3
+        se = s[e + 1]
+        base = C0 * s[0] + C1 * INV_SQRT5 * 2.0 * sd
+        out = face_emit(out, W_SIDE_C * wp.max(base + C1 * INV_SQRT5 * se, 0.0), e, 1.0)
+        out = face_emit(out, W_SIDE_C * wp.max(base - C1 * INV_SQRT5 * se, 0.0), e, -1.0)
+    return out
+
+
+@wp.func
 def gv_at(gv: wp.array(dtype=wp.vec4), base: int, r1: int, x: int, y: int, z: int) -> wp.vec4:
     return gv[base + (z * r1 + y) * r1 + x]
 
@@ -121,12 +170,35 @@ def guard_weight(n: wp.vec3, us: wp.vec3, x: int, y: int, z: int) -> float:
 
 
 @wp.func
+def open_weight(opn: wp.array(dtype=wp.vec3), cell_base: int, res: int, us: wp.vec3, n: wp.vec3, x: int, y: int,
+                z: int) -> float:
+    """Π over the axes where cell (x, y, z) differs from the home cell h = ⌊us + n/4⌋ (the cell just in
+    front of the surface) of the openness of the face between them on that axis, taken in h's row:
+    a cell behind a wall, floor or ceiling of the geometry volume does not light the surface
+    (package doc, "Lookup occlusion")."""
+    h = us + 0.25 * n
+    hx = wp.clamp(int(wp.floor(h[0])), 0, res - 1)
+    hy = wp.clamp(int(wp.floor(h[1])), 0, res - 1)
+    hz = wp.clamp(int(wp.floor(h[2])), 0, res - 1)
+    f = float(1.0)
+    if x != hx:
+        f = f * opn[cell_base + (hz * res + hy) * res + wp.min(x, hx)][0]
+    if y != hy:
+        f = f * opn[cell_base + (hz * res + wp.min(y, hy)) * res + hx][1]
+    if z != hz:
+        f = f * opn[cell_base + (wp.min(z, hz) * res + hy) * res + hx][2]
+    return f
+
+
+@wp.func
 def trilinear_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3, us: wp.vec3, n: wp.vec3,
-                 guard: bool) -> wp.vec4:
+                 guard: bool, opn: wp.array(dtype=wp.vec3), cell_base: int, occlusion: bool) -> wp.vec4:
     """Trilinear SH at grid coordinate u (cells), cell centres at i + 0.5, clamp to edge (GL_LINEAR).
     With ``guard`` (a compile-time constant at every call), each of the 8 cells' weights is also
-    multiplied by ``guard_weight`` for a surface at us with normal n and renormalised (package doc),
-    plain trilinear where they sum below 1e-4."""
+    multiplied by ``guard_weight`` for a surface at us with normal n and, with ``occlusion``, by
+    ``open_weight`` (the faces of the geometry volume between the surface's home cell and it; ``opn``
+    the cascade's face openness from ``cell_base`` on), and renormalised (package doc), plain
+    trilinear where they sum below 1e-4."""
     p = u - wp.vec3(0.5, 0.5, 0.5)
     fx = wp.floor(p[0])
     fy = wp.floor(p[1])
@@ -164,6 +236,8 @@ def trilinear_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3,
         plain += w * s
         if guard:
             gw = w * guard_weight(n, us, xi, yi, zi)
+            if occlusion:
+                gw = gw * open_weight(opn, cell_base, res, us, n, xi, yi, zi)
             acc += gw * s
             wsum += gw
     if not guard or wsum < 1.0e-4:
@@ -174,7 +248,20 @@ def trilinear_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3,
 @wp.func
 def sample_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3) -> wp.vec4:
     """Plain trilinear SH at grid coordinate u (``trilinear_sh`` without the guard)."""
-    return trilinear_sh(grid, base, res, u, u, wp.vec3(), False)
+    p = u - wp.vec3(0.5, 0.5, 0.5)
+    f = wp.vec3(wp.floor(p[0]), wp.floor(p[1]), wp.floor(p[2]))
+    t = p - f
+    x0 = wp.clamp(int(f[0]), 0, res - 1)
+    y0 = wp.clamp(int(f[1]), 0, res - 1)
+    z0 = wp.clamp(int(f[2]), 0, res - 1)
+    x1 = wp.clamp(int(f[0]) + 1, 0, res - 1)
+    y1 = wp.clamp(int(f[1]) + 1, 0, res - 1)
+    z1 = wp.clamp(int(f[2]) + 1, 0, res - 1)
+    r0 = (1.0 - t[0]) * grid[base + (z0 * res + y0) * res + x0] + t[0] * grid[base + (z0 * res + y0) * res + x1]
+    r1 = (1.0 - t[0]) * grid[base + (z0 * res + y1) * res + x0] + t[0] * grid[base + (z0 * res + y1) * res + x1]
+    r2 = (1.0 - t[0]) * grid[base + (z1 * res + y0) * res + x0] + t[0] * grid[base + (z1 * res + y0) * res + x1]
+    r3 = (1.0 - t[0]) * grid[base + (z1 * res + y1) * res + x0] + t[0] * grid[base + (z1 * res + y1) * res + x1]
+    return (1.0 - t[2]) * ((1.0 - t[1]) * r0 + t[1] * r1) + t[2] * ((1.0 - t[1]) * r2 + t[1] * r3)
 
 
 @wp.func
@@ -209,7 +296,8 @@ def eval_radiance(s: wp.vec4, w: wp.vec3, a1: float, inv_area: float) -> float:
 
 @wp.func
 def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p: wp.vec3, n: wp.vec3,
-                       lookup_offset: float, leak_guard: bool, margin: float, band: float, keep: float) -> wp.vec4:
+                       lookup_offset: float, leak_guard: bool, margin: float, band: float, keep: float,
+                       opn: wp.array(dtype=wp.vec3), occlusion: bool) -> wp.vec4:
     """Cascade g's share of the irradiance at p (normal n): (α·E_rgb, α), α its blend weight times
     what the finer cascades left (``keep``). The twin of lpv.glsl's lpv_cascade_irradiance."""
     us = grid_coord(g, p)
@@ -219,9 +307,9 @@ def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p
         return wp.vec4()
     inv_area = 1.0 / (g.cell * g.cell)
     n3 = g.res * g.res * g.res
-    sr = trilinear_sh(grids, g.base, g.res, u, us, n, leak_guard)
-    sg = trilinear_sh(grids, g.base + n3, g.res, u, us, n, leak_guard)
-    sb = trilinear_sh(grids, g.base + 2 * n3, g.res, u, us, n, leak_guard)
+    sr = trilinear_sh(grids, g.base, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion)
+    sg = trilinear_sh(grids, g.base + n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion)
+    sb = trilinear_sh(grids, g.base + 2 * n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion)
     return wp.vec4(alpha * eval_irradiance(sr, n, inv_area), alpha * eval_irradiance(sg, n, inv_area),
                    alpha * eval_irradiance(sb, n, inv_area), alpha)
 
@@ -345,9 +433,12 @@ def eval_face_transmittance(
     # outputs
     trans_pos: wp.array(dtype=wp.vec3),
     trans_neg: wp.array(dtype=wp.vec3),
+    opn: wp.array(dtype=wp.vec3),
     offset: int,
 ):
-    """Per receiving cell: transmittance of the face shared with the source at −d, for d = ±x, ±y, ±z."""
+    """Per receiving cell: transmittance of the face shared with the source at −d, for d = ±x, ±y, ±z;
+    and the openness of its three high faces (+x, +y, +z) for the lookup occlusion: 1 − clamp(B(d) or
+    B(−d), whichever blocks more) = 1 − clamp(C0·b0 + C1·|b_axis|, 0, 1)."""
     i = wp.tid() + offset
     l = find_level(i, levels, n_levels)
     if l < 0:
@@ -370,11 +461,20 @@ def eval_face_transmittance(
     tn[2] = eval_transmittance(gv_face(gv, b, r1, 2, x, y, z + 1), 2, -1.0)
     trans_pos[i] = tp
     trans_neg[i] = tn
+    o = wp.vec3()
+    bx = gv_face(gv, b, r1, 0, x + 1, y, z)
+    by = gv_face(gv, b, r1, 1, x, y + 1, z)
+    bz = gv_face(gv, b, r1, 2, x, y, z + 1)
+    o[0] = 1.0 - wp.clamp(C0 * bx[0] + C1 * wp.abs(bx[1]), 0.0, 1.0)
+    o[1] = 1.0 - wp.clamp(C0 * by[0] + C1 * wp.abs(by[2]), 0.0, 1.0)
+    o[2] = 1.0 - wp.clamp(C0 * bz[0] + C1 * wp.abs(bz[3]), 0.0, 1.0)
+    opn[i] = o
 
 
-@kernel_factory(geometry_volume=(False, True))
-def propagate_kernel(geometry_volume: bool):
-    """The propagation kernel (one launch covers every cascade), geometry volume compiled in or out."""
+@kernel_factory(geometry_volume=(False, True), clamp_faces=(False, True))
+def propagate_kernel(geometry_volume: bool, clamp_faces: bool = False):
+    """The propagation kernel (one launch covers every cascade), geometry volume and the face clamp
+    (package doc, "Clamped faces") compiled in or out."""
 
     @wp.kernel(enable_backward=False, module="unique")
     def propagate_lpv(
@@ -421,28 +521,42 @@ def propagate_kernel(geometry_volume: bool):
         for ch in range(3):
             j = e.base + ch * n3 + k
             out = wp.vec4()
-            # x pair: p = source at x−1 (light travelling +x), m = source at x+1
-            p = wp.vec4()
-            m = wp.vec4()
-            if x > 0:
-                p = tp[0] * src[j - 1]
-            if x < res - 1:
-                m = tn[0] * src[j + 1]
-            out = gather_pair(out, p, m, 0)
-            p = wp.vec4()
-            m = wp.vec4()
-            if y > 0:
-                p = tp[1] * src[j - res]
-            if y < res - 1:
-                m = tn[1] * src[j + res]
-            out = gather_pair(out, p, m, 1)
-            p = wp.vec4()
-            m = wp.vec4()
-            if z > 0:
-                p = tp[2] * src[j - rr]
-            if z < res - 1:
-                m = tn[2] * src[j + rr]
-            out = gather_pair(out, p, m, 2)
+            if wp.static(clamp_faces):
+                if x > 0:
+                    out = gather_clamped(out, tp[0] * src[j - 1], 0, 1.0)
+                if x < res - 1:
+                    out = gather_clamped(out, tn[0] * src[j + 1], 0, -1.0)
+                if y > 0:
+                    out = gather_clamped(out, tp[1] * src[j - res], 1, 1.0)
+                if y < res - 1:
+                    out = gather_clamped(out, tn[1] * src[j + res], 1, -1.0)
+                if z > 0:
+                    out = gather_clamped(out, tp[2] * src[j - rr], 2, 1.0)
+                if z < res - 1:
+                    out = gather_clamped(out, tn[2] * src[j + rr], 2, -1.0)
+            else:
+                # x pair: p = source at x−1 (light travelling +x), m = source at x+1
+                p = wp.vec4()
+                m = wp.vec4()
+                if x > 0:
+                    p = tp[0] * src[j - 1]
+                if x < res - 1:
+                    m = tn[0] * src[j + 1]
+                out = gather_pair(out, p, m, 0)
+                p = wp.vec4()
+                m = wp.vec4()
+                if y > 0:
+                    p = tp[1] * src[j - res]
+                if y < res - 1:
+                    m = tn[1] * src[j + res]
+                out = gather_pair(out, p, m, 1)
+                p = wp.vec4()
+                m = wp.vec4()
+                if z > 0:
+                    p = tp[2] * src[j - rr]
+                if z < res - 1:
+                    m = tn[2] * src[j + rr]
+                out = gather_pair(out, p, m, 2)
             dst[j] = out
             a = acc_src[j] + out
             accum[j] = a
@@ -496,10 +610,10 @@ def hand_over_far(
     accum[j + 2 * n3] = accum[j + 2 * n3] + add_b
 
 
-@kernel_factory(leak_guard=(False, True))
-def lookup_irradiance_kernel(leak_guard: bool):
+@kernel_factory(leak_guard=(False, True), occlusion=(False, True))
+def lookup_irradiance_kernel(leak_guard: bool, occlusion: bool = False):
     """Irradiance lookups (W/m², RGB) at points with unit normals, cascades blended finest first; the
-    leak guard (package doc) compiled in or out."""
+    leak guard and its lookup occlusion (package doc) compiled in or out."""
 
     @wp.kernel(enable_backward=False, module="unique")
     def lookup_irradiance(
@@ -507,6 +621,7 @@ def lookup_irradiance_kernel(leak_guard: bool):
         points: wp.array(dtype=wp.vec3),
         normals: wp.array(dtype=wp.vec3),
         grids: wp.array(dtype=wp.vec4),
+        opn: wp.array(dtype=wp.vec3),
         cascades: wp.array(dtype=Cascade),
         n_cascades: int,
         lookup_offset: float,
@@ -523,7 +638,8 @@ def lookup_irradiance_kernel(leak_guard: bool):
         keep = float(1.0)
         for c in range(n_cascades):
             r = cascade_irradiance(grids, cascades[c], c == n_cascades - 1, p, n, lookup_offset,
-                                   wp.static(leak_guard), margin, band, keep)
+                                   wp.static(leak_guard), margin, band, keep, opn,
+                                   wp.static(occlusion))
             e += wp.vec3(r[0], r[1], r[2])
             keep = keep - r[3]
         out[i] = e

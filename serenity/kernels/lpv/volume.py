@@ -80,8 +80,9 @@ class LightPropagationVolume:
         self.grids: list[CascadeGrid] = []
         self.timings: dict[str, float] = {}
         self.iterations_run: list[int] = []
-        self._propagate = propagate_kernel(bool(self.config.geometry_volume))
-        self._lookup_irradiance = lookup_irradiance_kernel(bool(self.config.leak_guard))
+        self._propagate = propagate_kernel(bool(self.config.geometry_volume), bool(self.config.clamp_faces))
+        self._occlusion = bool(self.config.leak_guard and self.config.lookup_occlusion and self.config.geometry_volume)
+        self._lookup_irradiance = lookup_irradiance_kernel(bool(self.config.leak_guard), self._occlusion)
         dev = self.device
         self._levels: list[_Level] = []
         base = cbase = gbase = 0
@@ -98,6 +99,7 @@ class LightPropagationVolume:
         self._far_from = wp.zeros(len(self._levels), dtype=int, device=dev)
         self._trans_pos = wp.ones(cbase, dtype=wp.vec3, device=dev)
         self._trans_neg = wp.ones(cbase, dtype=wp.vec3, device=dev)
+        self._open = wp.ones(cbase, dtype=wp.vec3, device=dev)
         self._change = wp.zeros(cbase, dtype=float, device=dev)
         self._total = wp.zeros(cbase, dtype=float, device=dev)
         self._level_table = wp.array([v.struct() for v in self._levels], dtype=Cascade, device=dev)
@@ -213,8 +215,9 @@ class LightPropagationVolume:
         self.grids = [g for g in self.fitted if injected[g.level] > 0.0]
         self._tables(self.grids, self._cas_table)
         if cfg.geometry_volume and self._gv_dirty:
-            launch(eval_face_transmittance, self._n_cells, [self._gv.array, self._level_table, nl, self._trans_pos,
-                                                            self._trans_neg], device=dev, threads=self.threads)
+            launch(eval_face_transmittance, self._n_cells,
+                   [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open],
+                   device=dev, threads=self.threads)
             self._gv_dirty = False
         # hand-over: a cascade's iterations past the finer one's reach (in its own cells) go to "far"
         far_from = np.full(nl, 1 << 30, np.int32)
@@ -228,7 +231,10 @@ class LightPropagationVolume:
         done = np.zeros(nl, np.int64)
         last = {lv: inj for lv in range(nl)}
         bufs = (self._ping, self._pong)
-        wp.copy(self._accum, inj)
+        if cfg.accumulate_injected:
+            wp.copy(self._accum, inj)
+        else:
+            self._accum.zero_()
         for k in range(int(iters.max(initial=0))):
             on = on & (iters > k)
             if not on.any():
@@ -329,7 +335,7 @@ class LightPropagationVolume:
         out = self._staging.buffer("out", p.shape[0], wp.vec3)
         cfg = self.config
         launch(self._lookup_irradiance, p.shape[0],
-               [p, n, self._accum, self._cas_table, len(self.grids), float(cfg.lookup_offset),
+               [p, n, self._accum, self._open, self._cas_table, len(self.grids), float(cfg.lookup_offset),
                 float(cfg.edge_margin), float(cfg.blend_cells if blend else 0.0), out],
                device=self.device, threads=self.threads)
         res = out.numpy().copy()
@@ -366,6 +372,14 @@ class LightPropagationVolume:
         ``grids[cascade]``."""
         g = self.level_grid(self.grids[cascade].level, "accum")
         return g[0].copy(), g[1].copy(), g[2].copy()
+
+    def openness(self, cascade: int) -> np.ndarray:
+        """Face openness of active cascade ``cascade`` for GL upload: float32 (Z, Y, X, 4), RGB = 1 − the
+        geometry volume's blocking of the cell's +x, +y, +z faces (1 = open; all 1 without a geometry
+        volume), A = 1."""
+        lv = self._levels[self.grids[cascade].level]
+        o = self._open.numpy()[lv.cell_base:lv.cell_base + lv.res**3].reshape(lv.res, lv.res, lv.res, 3)
+        return np.concatenate([o, np.ones(o.shape[:3] + (1,), np.float32)], axis=-1)
 
     def level_grid(self, level: int, which: str = "accum") -> np.ndarray:
         """A config level's grid as numpy: (3, res, res, res, 4) float32 (RGB, z, y, x, SH) for

@@ -22,6 +22,10 @@ uniform sampler3D u_lpv_b1;
 uniform sampler3D u_lpv_r2;
 uniform sampler3D u_lpv_g2;
 uniform sampler3D u_lpv_b2;
+uniform sampler3D u_lpv_o0;           // per cascade: RGB = openness of the cell's +x, +y, +z faces
+uniform sampler3D u_lpv_o1;           // (1 - the geometry volume's blocking; lookup occlusion)
+uniform sampler3D u_lpv_o2;
+uniform bool u_lpv_occlusion;         // the leak guard also drops cells across a blocking face
 uniform vec4 u_lpv_geom[3];           // xyz: grid min corner (m), w: cell size (m)
 uniform int u_lpv_res[3];             // cells per axis
 uniform int u_lpv_count;              // active cascades, 0..3 (0: the LPV adds nothing)
@@ -61,20 +65,34 @@ void lpv_fetch(sampler3D tr, sampler3D tg, sampler3D tb, int res, vec3 u, out ve
 }
 
 // Trilinear with each of the 8 cells also weighted by g = clamp(4 n.(centre - us), 0, 1):
-// cells whose centre lies behind the surface point us (cells) do not light it.
-void lpv_fetch_guarded(sampler3D tr, sampler3D tg, sampler3D tb, int res, vec3 u, vec3 us, vec3 n,
+// cells whose centre lies behind the surface point us (cells) do not light it; with u_lpv_occlusion
+// also by the openness of the faces between the home cell h = floor(us + n/4) and the cell, one per
+// axis where they differ, taken in h's row (the twin of kernels.open_weight).
+void lpv_fetch_guarded(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D to, int res, vec3 u, vec3 us, vec3 n,
                        out vec4 sr, out vec4 sg, out vec4 sb) {
     vec3 p = u - vec3(0.5);
     vec3 f = floor(p);
     vec3 t = p - f;
     ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1));
     ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1));
+    ivec3 h = clamp(ivec3(floor(us + 0.25 * n)), ivec3(0), ivec3(res - 1));
+    // openness of the face between h and i0 / i1 on each axis (1 where they coincide)
+    vec3 o0 = vec3(1.0), o1 = vec3(1.0);
+    if (u_lpv_occlusion) {
+        if (i0.x != h.x) o0.x = texelFetch(to, ivec3(min(i0.x, h.x), h.y, h.z), 0).r;
+        if (i1.x != h.x) o1.x = texelFetch(to, ivec3(min(i1.x, h.x), h.y, h.z), 0).r;
+        if (i0.y != h.y) o0.y = texelFetch(to, ivec3(h.x, min(i0.y, h.y), h.z), 0).g;
+        if (i1.y != h.y) o1.y = texelFetch(to, ivec3(h.x, min(i1.y, h.y), h.z), 0).g;
+        if (i0.z != h.z) o0.z = texelFetch(to, ivec3(h.x, h.y, min(i0.z, h.z)), 0).b;
+        if (i1.z != h.z) o1.z = texelFetch(to, ivec3(h.x, h.y, min(i1.z, h.z)), 0).b;
+    }
     sr = vec4(0.0); sg = vec4(0.0); sb = vec4(0.0);
     float wsum = 0.0;
     for (int k = 0; k < 8; ++k) {
         bool bx = (k & 1) != 0, by = (k & 2) != 0, bz = (k & 4) != 0;
         ivec3 ii = ivec3(bx ? i1.x : i0.x, by ? i1.y : i0.y, bz ? i1.z : i0.z);
         float g = clamp(4.0 * dot(n, vec3(ii) + vec3(0.5) - us), 0.0, 1.0);
+        g *= (bx ? o1.x : o0.x) * (by ? o1.y : o0.y) * (bz ? o1.z : o0.z);
         float w = (bx ? t.x : 1.0 - t.x) * (by ? t.y : 1.0 - t.y) * (bz ? t.z : 1.0 - t.z) * g;
         sr += w * texelFetch(tr, ii, 0); sg += w * texelFetch(tg, ii, 0); sb += w * texelFetch(tb, ii, 0);
         wsum += w;
@@ -96,7 +114,8 @@ float lpv_eval_radiance(vec4 s, vec3 w, float a1, float inv_area) {
 
 // Irradiance from cascade c (its samplers tr, tg, tb), weighted by its alpha times what the finer
 // cascades left (keep, updated).
-vec3 lpv_cascade_irradiance(sampler3D tr, sampler3D tg, sampler3D tb, int c, vec3 p, vec3 n, inout float keep) {
+vec3 lpv_cascade_irradiance(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D to, int c, vec3 p, vec3 n,
+                            inout float keep) {
     float cell = u_lpv_geom[c].w;
     int res = u_lpv_res[c];
     vec3 us = (p - u_lpv_geom[c].xyz) / cell;
@@ -104,7 +123,7 @@ vec3 lpv_cascade_irradiance(sampler3D tr, sampler3D tg, sampler3D tb, int c, vec
     float alpha = lpv_cascade_weight(u, res, c == u_lpv_count - 1) * keep;
     if (alpha <= 0.0) return vec3(0.0);
     vec4 sr, sg, sb;
-    if (u_lpv_leak_guard) lpv_fetch_guarded(tr, tg, tb, res, u, us, n, sr, sg, sb);
+    if (u_lpv_leak_guard) lpv_fetch_guarded(tr, tg, tb, to, res, u, us, n, sr, sg, sb);
     else lpv_fetch(tr, tg, tb, res, u, sr, sg, sb);
     float inv_area = 1.0 / (cell * cell);
     keep -= alpha;
@@ -116,9 +135,9 @@ vec3 lpv_irradiance(vec3 p, vec3 n_in) {
     vec3 n = normalize(n_in);
     vec3 e = vec3(0.0);
     float keep = 1.0;
-    if (u_lpv_count > 0) e += lpv_cascade_irradiance(u_lpv_r0, u_lpv_g0, u_lpv_b0, 0, p, n, keep);
-    if (u_lpv_count > 1 && keep > 0.0) e += lpv_cascade_irradiance(u_lpv_r1, u_lpv_g1, u_lpv_b1, 1, p, n, keep);
-    if (u_lpv_count > 2 && keep > 0.0) e += lpv_cascade_irradiance(u_lpv_r2, u_lpv_g2, u_lpv_b2, 2, p, n, keep);
+    if (u_lpv_count > 0) e += lpv_cascade_irradiance(u_lpv_r0, u_lpv_g0, u_lpv_b0, u_lpv_o0, 0, p, n, keep);
+    if (u_lpv_count > 1 && keep > 0.0) e += lpv_cascade_irradiance(u_lpv_r1, u_lpv_g1, u_lpv_b1, u_lpv_o1, 1, p, n, keep);
+    if (u_lpv_count > 2 && keep > 0.0) e += lpv_cascade_irradiance(u_lpv_r2, u_lpv_g2, u_lpv_b2, u_lpv_o2, 2, p, n, keep);
     return e;
 }
 
