@@ -78,11 +78,21 @@ def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
 
     s = Settings()
     base = s.config()
-    for name, value in (("exposure", 0.05), ("ssao", False), ("shadow_filter", "pcf")):
+    for name, value in (("exposure", 0.05), ("ssao", False), ("shadow_filter", "pcf"), ("lpv_diffuse", False),
+                        ("lpv_glossy", False), ("reflections", False), ("refractions", False), ("taa", False)):
         t = Settings(**{name: value})
         assert not Settings.needs_rebuild(base, t.config()), name
-    for name, value in (("lpv", False), ("sky_lighting", False), ("ray_tracing", False), ("quality", "low")):
+    for name, value in (("sky_lighting", False), ("quality", "low")):
         assert Settings.needs_rebuild(base, Settings(**{name: value}).config()), name
+    # one term of a pair switches live; both off turns the technique off, which needs a rebuild
+    lpv = Settings(lpv_glossy=False).config().lpv
+    assert lpv.enabled and lpv.diffuse and not lpv.glossy
+    off = Settings(lpv_diffuse=False, lpv_glossy=False).config()
+    assert not off.lpv.enabled and Settings.needs_rebuild(base, off)
+    rt = Settings(refractions=False).config()
+    assert rt.ray_tracing and rt.reflections and not rt.refractions
+    off = Settings(reflections=False, refractions=False).config()
+    assert not off.ray_tracing and Settings.needs_rebuild(base, off)
     assert quality_config("medium") == Settings().config(), "the viewer starts at serenity render's quality"
     with pytest.raises(SerenityError, match="quality preset"):
         quality_config("ultra")
