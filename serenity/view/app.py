@@ -420,7 +420,8 @@ class Viewer:
             return tex, present.HDR
         if view == "lpv indirect" and r.lpv is not None and r.lpv_gl.count:
             tex = self._scratch_tex()
-            r.lpv_pass.render(tex, gbuf, r.lpv_gl.bind, r.scene.camera.position)
+            c = r.config.lpv  # the panel's diffuse / glossy switches
+            r.lpv_pass.render(tex, gbuf, r.lpv_gl.bind, r.scene.camera.position, diffuse=c.diffuse, glossy=c.glossy)
             return tex, present.HDR
         if view == "ao" and out["ao"] is not None:
             return out["ao"], present.SCALAR

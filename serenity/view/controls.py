@@ -33,7 +33,7 @@ VIEWS = {
     "normal": "G-buffer world normal (0.5 + 0.5 n)",
     "direct": "direct sun light (tone-mapped)",
     "sky light": "sky-volume light, full resolution, without AO (tone-mapped)",
-    "lpv indirect": "LPV diffuse + glossy light, full resolution, without AO (tone-mapped)",
+    "lpv indirect": "LPV diffuse + glossy light (as switched), full resolution, without AO (tone-mapped)",
     "ao": "SSAO (1 = open; at the indirect light's resolution)",
     "rt mask": "pixels with ray-traced reflection/refraction",
     "lpv cascades": "the frame with the LPV cascades' bounds",
