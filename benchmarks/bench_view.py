@@ -14,6 +14,8 @@ Keys (medians over the frames after the first two; all milliseconds):
 - ``view_loop_ms``: the viewer's full frame period (script input, render, present, panel, swap).
 - ``view_overhead_ms``: ``loop - render`` of the same frame; ``view_overhead_ratio``: overhead / loop.
 - ``no_taa``: the same three for the run with ``--taa 0`` (``taa_samples`` of each run's last frame).
+  It runs first; on a machine shared with other jobs the first viewer process renders slower (warm-up),
+  so compare the two runs' overheads, not their render times.
 - ``readback_ms``: the ``readback`` stage of ``render(read_back=True)`` (HDR, LDR, AOVs), which the
   viewer does not pay; ``offscreen_render_ms``: that frame's ``wall_ms``.
 Timings are wall clock on whatever machine runs it (see ``machine``); on a shared machine they are
@@ -78,7 +80,7 @@ def main() -> None:
 
     w, h = parse_size(args.size)
     runs = {}
-    for name, extra in (("taa", []), ("no_taa", ["--taa", "0"])):
+    for name, extra in (("no_taa", ["--taa", "0"]), ("taa", [])):
         t = viewer_trace(args.scene, args.size, args.frames, extra)
         fr = t["frames"][2:]
         render = np.array([f["wall_ms"] for f in fr[:-1]])
