@@ -308,6 +308,9 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
 
 REF_SCRIPT = """
 [[step]]
+frame = 0
+set = { taa = false }   # compared below with F12's frame: one unjittered frame, as R saw it
+[[step]]
 frame = 1
 press = "R"
 [[step]]
