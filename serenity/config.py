@@ -191,6 +191,12 @@ class LPVConfig:
 
     enabled: bool = True
     """Render the LPV's indirect light (False: no RSM, no injection, no LPV lighting pass)."""
+    diffuse: bool = True
+    """Add the LPV's diffuse light (albedo/π · E). False: the lighting passes skip its lookup (the
+    volume is still injected and propagated while ``glossy`` needs it)."""
+    glossy: bool = True
+    """Add the LPV's glossy light (k_s · L along the reflected direction). False: the lighting passes
+    skip the glossy march. With ``diffuse`` also False the LPV lighting passes are not drawn."""
     resolution: int | tuple[int, ...] = 16
     """Cells per axis of each cascade's cubic grid; an int for all cascades or one per cascade.
     16³, not the paper's 32³: at 32³ cells are finer than the propagation can cross in a frame's
@@ -314,6 +320,12 @@ class RenderConfig:
     """Wait for the GL queue after each stage so per-stage wall times are exact (costs overlap)."""
     ray_tracing: bool = True
     """Ray-traced reflections and refractions for mirror/metal/glass pixels (paper §9)."""
+    reflections: bool = True
+    """Trace the reflected rays. False: none are traced, and the reflection term of the Fresnel blend
+    shows the rasterised surface instead (a mirror looks as with ``ray_tracing=False``)."""
+    refractions: bool = True
+    """Trace the refracted rays. False: none are traced, and a glass pixel's transmitted term shows
+    the rasterised surface instead (its Fresnel reflection stays)."""
     transmissions: int = 4
     """Transparent interfaces a refraction ray is bent through before the surface it shows (the
     back face of a glass solid, a second pane, total internal reflection inside a prism); 0 = the

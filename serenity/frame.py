@@ -341,7 +341,7 @@ class Renderer:
             return None, None
         with self._stage("ray casting buffer"):
             self.raycast_pass.render(view_proj, self.scene.camera)
-            rcb = self.raycast_pass.read()
+            rcb = self.raycast_pass.read().select(self.config.reflections, self.config.refractions)
         if not rcb.count:
             return rcb, None
         tracer = self._ensure_tracer()
@@ -397,10 +397,11 @@ class Renderer:
             with self._stage("sky lighting"):
                 (self.sky_pass if lo is None else self.sky_pass_lo).render(target, gbuf, sky_gl.bind, cam.position,
                                                                            ao)
-        if self.lpv is not None and self.lpv_gl.count:
+        terms = self._lpv_terms()
+        if terms:
             with self._stage("lpv lighting"):
                 (self.lpv_pass if lo is None else self.lpv_pass_lo).render(target, gbuf, self.lpv_gl.bind,
-                                                                           cam.position, ao)
+                                                                           cam.position, ao, **terms)
         if lo is not None:
             with self._stage("indirect upsample"):
                 lo.upsample(lit.hdr, gbuf, cam.position, cam.forward)
@@ -425,14 +426,23 @@ class Renderer:
         if sky_gl is not None:
             with self._stage("rt sky lighting"):
                 self.sky_pass.render(rt_lit.hdr, view_rt, sky_gl.bind, cam.position, rt_view=view_rt)
-        if self.lpv is not None and self.lpv_gl.count:
+        terms = self._lpv_terms()
+        if terms:
             with self._stage("rt lpv lighting"):
-                self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt)
+                self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt, **terms)
         with self._stage("composite"):
             return self.composite_pass.render(lit.hdr, rt_lit.hdr, view_rt.index, gbuf,
                                               self.raycast_pass.targets[2], cam.position)
 
     # ---------------------------------------------------------------------------------- volumes
+
+    def _lpv_terms(self) -> dict | None:
+        """The LPV lighting passes' switches (``LPVConfig.diffuse`` / ``.glossy``, read each frame), or
+        None when there is no LPV light to add this frame (no LPV, no cascade, or both terms off)."""
+        c = self.config.lpv
+        if self.lpv is None or not self.lpv_gl.count or not (c.diffuse or c.glossy):
+            return None
+        return {"diffuse": c.diffuse, "glossy": c.glossy}
 
     def _sky_irradiance_at(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray | None:
         """Sky irradiance (W/m²) at G-buffer points for the sky-light VPLs; None without a sky volume."""

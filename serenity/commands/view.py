@@ -8,6 +8,7 @@ import os
 from serenity.commands.common import DEFAULT_OUT_DIR, DEFAULT_SCENE, DEFAULT_SIZE, add_quality_argument, parse_size
 from serenity.config import DEFAULT_EXPOSURE
 from serenity.errors import SerenityError
+from serenity.view import TAA_SAMPLES
 
 
 def register(subparsers) -> None:
@@ -29,6 +30,9 @@ def register(subparsers) -> None:
     v.add_argument("--out-dir", default=os.path.join(DEFAULT_OUT_DIR, "view"),
                    help="where F12 writes PNG + EXR + TOML (default %(default)s)")
     v.add_argument("--spp", type=int, default=64, help="samples per pixel of the reference (R; default %(default)s)")
+    v.add_argument("--taa", type=int, default=TAA_SAMPLES, metavar="N",
+                   help="jittered frames a still view accumulates until it is converged (default %(default)s; "
+                        "0 or 1: no temporal anti-aliasing)")
     v.set_defaults(func=run)
 
 
@@ -41,6 +45,8 @@ def run(args) -> int:
     quality_config(args.quality)  # an unknown preset fails before a window opens
     if args.exit_after is not None and args.exit_after < 1:
         raise SerenityError(f"--exit-after must be at least 1, got {args.exit_after}")
+    if not 0 <= args.taa <= 1024:
+        raise SerenityError(f"--taa must be in 0..1024 samples, got {args.taa}")
     if args.spp < 1:
         raise SerenityError(f"--spp must be at least 1, got {args.spp}")
     if args.screenshot and not args.screenshot.lower().endswith(".png"):
@@ -54,5 +60,5 @@ def run(args) -> int:
 
     viewer = Viewer(scene, width, height, settings, device=args.device, script=script, screenshot=args.screenshot,
                     exit_after=args.exit_after, trace=args.trace, panel=not args.no_panel, out_dir=args.out_dir,
-                    spp=args.spp)
+                    spp=args.spp, taa_samples=args.taa)
     return viewer.run()

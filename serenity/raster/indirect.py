@@ -68,9 +68,11 @@ class IndirectPass:
         self.vao = fullscreen_vao(ctx, self.program)
         self._targets = _AdditiveTargets(ctx)
 
-    def render(self, target, gbuffer, bind, camera_pos, ao=None, rt_view=None) -> None:
+    def render(self, target, gbuffer, bind, camera_pos, ao=None, rt_view=None, diffuse: bool = True,
+               glossy: bool = True) -> None:
         """Add this technique's light onto ``target``: the lit HDR texture of the same size, or for a
-        ``lowres`` pass the :class:`LowResIndirect` whose targets it adds to."""
+        ``lowres`` pass the :class:`LowResIndirect` whose targets it adds to. ``diffuse`` / ``glossy``:
+        which of the LPV's two terms to add (the sky's light is diffuse only and ignores them)."""
         ctx, p = self.ctx, self.program
         adding = (self._targets.adding_to_framebuffer(target.fbo) if self.lowres
                   else self._targets.adding_to(target))
@@ -89,7 +91,8 @@ class IndirectPass:
                 ao.use(location=5)
                 p["u_ao"].value = 5
             for name, value in (("u_use_ao", ao is not None and rt_view is None), ("u_rt_view", rt_view is not None),
-                                ("u_camera_pos", tuple(float(x) for x in camera_pos))):
+                                ("u_camera_pos", tuple(float(x) for x in camera_pos)),
+                                ("u_diffuse", bool(diffuse)), ("u_glossy", bool(glossy))):
                 if name in p:
                     p[name].value = value
             bind(p, FIRST_VOLUME_UNIT)

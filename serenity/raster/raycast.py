@@ -56,6 +56,23 @@ class RayCastingBuffer:
         """(N,) bool: the rays with a refracted direction to trace (not under total internal reflection)."""
         return ((self.flags & TRACE_REFRACTION) != 0) & np.any(self.refract_dirs != 0, axis=1)
 
+    def select(self, reflections: bool = True, refractions: bool = True) -> RayCastingBuffer:
+        """This buffer with only the ray kinds switched on (``RenderConfig.reflections`` /
+        ``.refractions``): the other kind's flag cleared, and pixels left with no ray to trace
+        dropped. The composite shows the rasterised surface where a pixel's ray is missing."""
+        if reflections and refractions:
+            return self
+        flags = self.flags.copy()
+        if not reflections:
+            flags &= ~TRACE_REFLECTION
+        if not refractions:
+            flags &= ~TRACE_REFRACTION
+        keep = ((flags & TRACE_REFLECTION) != 0) | (((flags & TRACE_REFRACTION) != 0)
+                                                    & np.any(self.refract_dirs != 0, axis=1))
+        return RayCastingBuffer(self.width, self.height, self.pixels[keep], self.origins[keep],
+                                self.reflect_dirs[keep], self.refract_dirs[keep], self.cone_width[keep],
+                                self.cone_spread[keep], flags[keep], self.normals[keep], self.material[keep])
+
     def mask(self) -> np.ndarray:
         m = np.zeros(self.width * self.height, bool)
         m[self.pixels] = True

@@ -7,6 +7,13 @@ read_back=False)`` → the chosen view drawn from the renderer's GL textures int
 framebuffer (``PresentPass``) → the Dear ImGui panel → swap. Nothing is read back per frame: the
 read-backs are F12 (one frame rendered with ``read_back=True``), starting a reference (the HDR
 image of that moment, to compare with) and screenshots.
+
+Static camera refinement (temporal anti-aliasing): while nothing changes (camera, sun, settings,
+view) and the sky volume is current, each frame is rendered with the next sub-pixel jitter of
+``Renderer.render_accumulated``'s Halton(2, 3) sequence (the first unjittered) and folded into a
+running mean on the GL side (``present.AccumulatePass``), which the final view shows; after
+``taa_samples`` frames the view is converged (the panel says so) and frames are rendered unjittered
+again, the mean kept. Any change starts it afresh. The AOV views are never jittered.
 """
 
 from __future__ import annotations
@@ -18,16 +25,17 @@ import time
 import moderngl
 import numpy as np
 
+from serenity.colour import reinhard_srgb
 from serenity.errors import SerenityError
 from serenity.eval.metrics import compare, flip_png
-from serenity.frame import Renderer
+from serenity.frame import Renderer, halton
 from serenity.io.exr import write_exr
 from serenity.io.png import write_png
 from serenity.optional import require
 from serenity.raster.interop import read_texture, upload_texture
 from serenity.scene.mesh_io import export_glb
 from serenity.scene.toml_scene import save_toml
-from serenity.view import present
+from serenity.view import TAA_SAMPLES, present
 from serenity.view.controls import VIEWS, FlyCamera, Settings, TimeOfDay
 from serenity.view.panel import draw_panel
 from serenity.view.reference_job import ReferenceJob
@@ -35,13 +43,18 @@ from serenity.view.script import SCRIPT_DT, Script
 from serenity.view.window import open_window
 
 _CASCADE_COLORS = [(1.0, 0.3, 0.2), (0.3, 1.0, 0.3), (0.3, 0.5, 1.0), (1.0, 1.0, 0.3)]
+#: the views that show the final image, and so its temporal anti-aliasing
+TAA_VIEWS = ("final", "lpv cascades")
+#: the panel's and a script's names of the ``Settings`` that go into the ``RenderConfig``
+CONFIG_SETTINGS = ("exposure", "quality", "shadow_filter", "ssao", "sky_lighting", "lpv_diffuse", "lpv_glossy",
+                   "reflections", "refractions")
 
 
 class Viewer:
     def __init__(self, scene, width: int, height: int, settings: Settings, device: str | None = None,
                  script: Script | None = None, screenshot: str | None = None, exit_after: int | None = None,
                  trace: str | None = None, panel: bool = True, out_dir: str = "serenity_out/view", spp: int = 64,
-                 visible: bool = True):
+                 visible: bool = True, taa_samples: int = TAA_SAMPLES):
         self.scene, self.width, self.height = scene, int(width), int(height)
         self.settings, self.device = settings, device
         self.script, self.screenshot_path, self.exit_after = script, screenshot, exit_after
@@ -62,6 +75,10 @@ class Viewer:
         self._quit = False
         self.frame_index = 0
         self.still_frames = 0
+        self.taa_samples = int(taa_samples)
+        self.taa_count = 0
+        """Frames in the temporal anti-aliasing's running mean (0: none; 1: the unjittered frame alone)."""
+        self._taa_reset = False
         self.ms: dict[str, float] = {}
         self.fps = 0.0
         self.frame_ms = 0.0
@@ -79,6 +96,8 @@ class Viewer:
         self._build_renderer()
         self.present = present.PresentPass(self.ctx)
         self.lines = present.LinesPass(self.ctx)
+        self.accum = present.AccumulatePass(self.ctx)
+        self.accum.resize(self.width, self.height)
         self._init_imgui()
         self._bind_events()
 
@@ -156,7 +175,7 @@ class Viewer:
         elif name == "F1":
             self.show_panel = not self.show_panel
         elif name == "V":
-            names = list(VIEWS)
+            names = list(VIEWS)  # through set_value: a new view restarts the accumulation
             self.set_value("view", names[(names.index(self.view) + (-1 if shift else 1)) % len(names)])
         elif name == "T":
             self.set_value("hour", (self.tod.hour + (-0.25 if shift else 0.25)) % 24.0)
@@ -193,7 +212,7 @@ class Viewer:
                 setattr(self.tod, name, old)
                 raise
             self._sun_dirty = True
-        elif name in ("exposure", "quality", "shadow_filter", "ssao", "sky_lighting", "lpv", "ray_tracing"):
+        elif name in CONFIG_SETTINGS:
             old = getattr(self.settings, name)
             setattr(self.settings, name, value)
             try:
@@ -202,11 +221,15 @@ class Viewer:
                 setattr(self.settings, name, old)
                 raise
             self._config_dirty = True
+        elif name == "taa":
+            self.settings.taa = bool(value)
+            self._taa_reset = True
         elif name == "speed":
             self.fly.speed = float(value)
         elif name == "view":
             if value not in VIEWS:
                 raise SerenityError(f"unknown view {value!r} (views: {', '.join(VIEWS)})")
+            self._taa_reset |= value != self.view
             self.view = value
         elif name == "panel":
             self.show_panel = bool(value)
@@ -299,10 +322,9 @@ class Viewer:
 
     def _frame(self, shots: list[str], real_dt: float) -> None:
         self._loop_ms = real_dt * 1e3  # the previous frame's full period: input, render, draw, panel, swap
-        r = self.renderer
         save = self._save_requested
         self._save_requested = False
-        frame = r.render(read_back=save)
+        frame = self._render(save)
         if save:
             self._save(frame)
         if self._reference_requested:
@@ -321,6 +343,35 @@ class Viewer:
             self._screenshot(path)
         self._record(frame)
         self.wnd.swap_buffers()
+
+    def _render(self, save: bool):
+        """This frame: the next sample of the still view's temporal anti-aliasing (module docstring),
+        or an unjittered frame. An F12 frame is rendered unjittered (its AOVs are those of the view) and
+        joins the mean only as its first sample."""
+        taa = self.taa_on
+        if self.still_frames == 0 or self._taa_reset or not taa:
+            self.taa_count = 0
+            self._taa_reset = False
+        i = self.taa_count
+        sample = taa and i < self.taa_samples and (i == 0 or not save)
+        jitter = (halton(i, 2) - 0.5, halton(i, 3) - 0.5) if sample and i else (0.0, 0.0)
+        frame = self.renderer.render(read_back=save, jitter=jitter)
+        stale = self.sky_stale()
+        if stale is not None and stale.any():
+            self.taa_count = 0  # the sky volume's layer sweep still changes the image: nothing to average yet
+        elif sample:
+            self.accum.add(self.renderer.outputs["hdr"], i + 1)
+            self.taa_count = i + 1
+        return frame
+
+    @property
+    def taa_on(self) -> bool:
+        """Whether the shown view is refined by temporal anti-aliasing."""
+        return self.settings.taa and self.taa_samples > 1 and self.view in TAA_VIEWS
+
+    def shown_hdr(self) -> np.ndarray:
+        """(H, W, 3) float32: the final view's HDR image as shown (the TAA mean while there is one)."""
+        return read_texture(self.accum.mean if self.taa_count > 1 else self.renderer.outputs["hdr"], 3)
 
     def _update_stats(self, frame, real_dt: float) -> None:
         a = 0.2 if self.frame_index > 1 else 1.0
@@ -353,7 +404,9 @@ class Viewer:
         """(texture, mode) for the current view, or None when this view has nothing to show."""
         r, out, view = self.renderer, self.renderer.outputs, self.view
         gbuf = out["gbuffer"]
-        if view in ("final", "lpv cascades"):
+        if view in TAA_VIEWS:
+            if self.taa_count > 1:
+                return self.accum.mean, present.HDR
             return out["ldr"], present.DISPLAY
         if view == "albedo":
             return gbuf.albedo, present.LINEAR
@@ -367,7 +420,8 @@ class Viewer:
             return tex, present.HDR
         if view == "lpv indirect" and r.lpv is not None and r.lpv_gl.count:
             tex = self._scratch_tex()
-            r.lpv_pass.render(tex, gbuf, r.lpv_gl.bind, r.scene.camera.position)
+            c = r.config.lpv  # the panel's diffuse / glossy switches
+            r.lpv_pass.render(tex, gbuf, r.lpv_gl.bind, r.scene.camera.position, diffuse=c.diffuse, glossy=c.glossy)
             return tex, present.HDR
         if view == "ao" and out["ao"] is not None:
             return out["ao"], present.SCALAR
@@ -423,17 +477,25 @@ class Viewer:
 
     @property
     def converged(self) -> bool:
-        """Nothing moved this frame and nothing temporal is left to refine (the sky volume's layer
-        sweep is the pipeline's only progressive state)."""
+        """Nothing moved this frame and nothing temporal is left to refine: the sky volume's layer
+        sweep is done and the temporal anti-aliasing (when the view has it) holds all its samples."""
         s = self.sky_stale()
-        return self.still_frames > 0 and (s is None or not s.any())
+        return (self.still_frames > 0 and (s is None or not s.any())
+                and (not self.taa_on or self.taa_count >= self.taa_samples))
 
     # ----------------------------------------------------------------------- save / screenshots
 
     def _save(self, frame) -> None:
         """F12: PNG + multi-layer EXR exactly as ``serenity render`` writes them, and a TOML scene
-        (camera and sun as now; the meshes once per session as a GLB beside it)."""
+        (camera and sun as now; the meshes once per session as a GLB beside it). While the final view
+        shows a TAA mean of n > 1 frames, the beauty (and the PNG) is that mean, as
+        ``Renderer.render_accumulated(n)`` gives it; the AOVs are the unjittered frame's."""
         os.makedirs(self.out_dir, exist_ok=True)
+        taa = ""
+        if self.taa_count > 1 and self.view in TAA_VIEWS:
+            frame.hdr = self.shown_hdr()
+            frame.ldr = reinhard_srgb(frame.hdr, self.settings.exposure)
+            taa = f" (beauty: the mean of {self.taa_count} jittered frames)"
         stem = os.path.join(self.out_dir, f"{self.scene.name}_{len(self.saved):03d}")
         if self._mesh_file is None:
             self._mesh_file = os.path.join(self.out_dir, f"{self.scene.name}.glb")
@@ -443,7 +505,7 @@ class Viewer:
         save_toml(self.scene, stem + ".toml", os.path.basename(self._mesh_file))
         self.saved.append(stem)
         self.messages.append(f"wrote {stem}.png/.exr/.toml")
-        print(f"wrote {stem}.png, {stem}.exr (layers: beauty, {', '.join(frame.aovs)}), {stem}.toml")
+        print(f"wrote {stem}.png, {stem}.exr (layers: beauty, {', '.join(frame.aovs)}), {stem}.toml{taa}")
 
     def _screenshot(self, path: str) -> None:
         bw, bh = self.wnd.buffer_size
@@ -466,6 +528,7 @@ class Viewer:
             "frame": self.frame_index, "camera_position": cam.position.tolist(), "camera_forward": cam.forward.tolist(),
             "sun_direction": sun.direction.tolist(), "sun_elevation_deg": sun.elevation_deg, "hour": self.tod.hour,
             "view": self.view, "still_frames": self.still_frames, "renderer_builds": self.builds,
+            "taa_samples": self.taa_count,
             "loop_ms": self._loop_ms, "ssao": self.renderer.config.ssao.enabled, "converged": self.converged,
             "sky_stale_layers": None if s is None else int(s.sum()), "timings_ms": frame.timings,
             "wall_ms": frame.wall_ms,
@@ -478,7 +541,7 @@ class Viewer:
     def _start_reference(self) -> None:
         if self.job is not None and self.job.running:
             self.job.cancel()
-        self._ours_hdr = read_texture(self.renderer.outputs["hdr"], 3)
+        self._ours_hdr = self.shown_hdr()
         self.job = ReferenceJob(self.scene, self.width, self.height, spp=self.spp)
         self.messages.append(f"reference started ({self.spp} spp, {self.width}x{self.height})")
 

@@ -20,9 +20,11 @@ from serenity.config import DEFAULT_EXPOSURE, DEFAULT_QUALITY, RenderConfig
 from serenity.errors import SerenityError
 from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, parse_time, sun_from_time
 
-#: the techniques the panel switches; "live" ones change per frame, the others rebuild the Renderer
-LIVE_TOGGLES = ("ssao",)
-REBUILD_TOGGLES = ("sky_lighting", "lpv", "ray_tracing")
+#: the techniques the panel switches; "live" ones change per frame, the others rebuild the Renderer.
+#: A pair (LPV diffuse/glossy, reflections/refractions) is live while one of the two stays on;
+#: switching off both turns the whole technique off (``LPVConfig.enabled``, ``ray_tracing``): a rebuild
+LIVE_TOGGLES = ("ssao", "lpv_diffuse", "lpv_glossy", "reflections", "refractions", "taa")
+REBUILD_TOGGLES = ("sky_lighting",)
 SHADOW_FILTERS = ("hard", "pcf", "pcss")
 #: view name -> what it shows (the panel's combo, a script's ``set = { view = ... }``, V cycles)
 VIEWS = {
@@ -31,7 +33,7 @@ VIEWS = {
     "normal": "G-buffer world normal (0.5 + 0.5 n)",
     "direct": "direct sun light (tone-mapped)",
     "sky light": "sky-volume light, full resolution, without AO (tone-mapped)",
-    "lpv indirect": "LPV diffuse + glossy light, full resolution, without AO (tone-mapped)",
+    "lpv indirect": "LPV diffuse + glossy light (as switched), full resolution, without AO (tone-mapped)",
     "ao": "SSAO (1 = open; at the indirect light's resolution)",
     "rt mask": "pixels with ray-traced reflection/refraction",
     "lpv cascades": "the frame with the LPV cascades' bounds",
@@ -142,16 +144,20 @@ class TimeOfDay:
 @dataclass
 class Settings:
     """What the panel edits: the quality preset, the technique switches, the shadow filter and the
-    exposure. ``config()`` is the ``RenderConfig`` they give."""
+    exposure. ``config()`` is the ``RenderConfig`` they give. ``taa`` (temporal anti-aliasing of a
+    still view) is the viewer's own and not part of it."""
 
     quality: str = DEFAULT_QUALITY
     exposure: float = DEFAULT_EXPOSURE
     ssao: bool = True
     sky_lighting: bool = True
-    lpv: bool = True
-    ray_tracing: bool = True
+    lpv_diffuse: bool = True
+    lpv_glossy: bool = True
+    reflections: bool = True
+    refractions: bool = True
     shadow_filter: str = "pcss"
     overlap: bool = True
+    taa: bool = True
 
     def config(self) -> RenderConfig:
         base = quality_config(self.quality)
@@ -162,14 +168,18 @@ class Settings:
             ssao=dataclasses.replace(base.ssao, enabled=bool(self.ssao) and base.ssao.enabled),
             shadow=dataclasses.replace(base.shadow, filter=self.shadow_filter),
             sky=dataclasses.replace(base.sky, enabled=bool(self.sky_lighting) and base.sky.enabled),
-            lpv=dataclasses.replace(base.lpv, enabled=bool(self.lpv) and base.lpv.enabled),
-            ray_tracing=bool(self.ray_tracing) and base.ray_tracing)
+            lpv=dataclasses.replace(base.lpv, enabled=(self.lpv_diffuse or self.lpv_glossy) and base.lpv.enabled,
+                                    diffuse=bool(self.lpv_diffuse), glossy=bool(self.lpv_glossy)),
+            ray_tracing=(self.reflections or self.refractions) and base.ray_tracing,
+            reflections=bool(self.reflections), refractions=bool(self.refractions))
 
     @staticmethod
     def needs_rebuild(old: RenderConfig, new: RenderConfig) -> bool:
         """True when ``new`` differs from ``old`` in more than what ``Renderer.render`` reads each
-        frame (exposure, SSAO on/off, the shadow filter): the Renderer must be built again."""
-        live = dict(exposure=new.exposure,
+        frame (exposure, SSAO on/off, the shadow filter, the LPV's diffuse/glossy terms, reflections /
+        refractions): the Renderer must be built again."""
+        live = dict(exposure=new.exposure, reflections=new.reflections, refractions=new.refractions,
                     ssao=dataclasses.replace(old.ssao, enabled=new.ssao.enabled),
-                    shadow=dataclasses.replace(old.shadow, filter=new.shadow.filter))
+                    shadow=dataclasses.replace(old.shadow, filter=new.shadow.filter),
+                    lpv=dataclasses.replace(old.lpv, diffuse=new.lpv.diffuse, glossy=new.lpv.glossy))
         return dataclasses.replace(old, **live) != new

@@ -1,5 +1,6 @@
 """The viewer's Dear ImGui panel (imgui-bundle, drawn by moderngl-window's integration): FPS and
-per-stage milliseconds as bars, the sky volume's stale layers and whether the view has converged,
+per-stage milliseconds as bars, the sky volume's stale layers, the temporal anti-aliasing's samples
+and whether the view has converged,
 the camera, the sun (time of day, date, place), the technique switches, quality and exposure, the
 view switch, saving and the reference comparison. Every widget changes state through
 ``Viewer.set_value`` — the same path a script's ``set`` takes."""
@@ -40,7 +41,8 @@ def draw_panel(viewer, real_dt: float) -> None:
 
 
 def _frame_window(viewer, imgui) -> None:
-    """Right: FPS, the stages' milliseconds as bars, the sky volume's layers, convergence."""
+    """Right: FPS; the sky volume's layers, the TAA samples and convergence (first, so that a short
+    window still shows them); the stages' milliseconds as bars."""
     bw = viewer.wnd.size[0]
     imgui.set_next_window_pos(imgui.ImVec2(max(8, bw - 298), 8), imgui.Cond_.first_use_ever)
     imgui.set_next_window_size(imgui.ImVec2(290, 0), imgui.Cond_.first_use_ever)
@@ -49,12 +51,6 @@ def _frame_window(viewer, imgui) -> None:
     r = viewer.renderer
     imgui.text(f"{viewer.fps:5.2f} FPS {viewer.frame_ms:8.1f} ms/frame")
     imgui.text(f"{viewer.width}x{viewer.height}, {r.device}, {viewer.settings.quality} quality")
-    top = max([1.0] + list(viewer.ms.values()))
-    for name, ms in viewer.ms.items():
-        imgui.progress_bar(min(1.0, ms / top), imgui.ImVec2(-1, 13), f"{name} {ms:.1f}")
-    total = sum(v for k, v in viewer.ms.items() if k != "cpu ray tracing")
-    imgui.text(f"stages on the main thread: {total:.1f} ms")
-
     s = viewer.sky_stale()
     if s is None:
         imgui.text("sky volume: off")
@@ -68,12 +64,22 @@ def _frame_window(viewer, imgui) -> None:
             col = imgui.get_color_u32(imgui.ImVec4(*(_STALE if s[i] else _FRESH)))
             dl.add_rect_filled(imgui.ImVec2(p.x + i * w, p.y), imgui.ImVec2(p.x + (i + 1) * w - 1, p.y + 8), col)
         imgui.dummy(imgui.ImVec2(layers * w, 10))
+    if viewer.taa_on:
+        n, total = viewer.taa_count, viewer.taa_samples
+        imgui.progress_bar(min(1.0, n / total), imgui.ImVec2(-1, 13), f"TAA {n}/{total} samples")
+    else:
+        imgui.text("TAA: " + ("off" if not (viewer.settings.taa and viewer.taa_samples > 1) else "not in this view"))
     if viewer.converged:
         imgui.text_colored(imgui.ImVec4(*_FRESH), f"converged (still for {viewer.still_frames} frames)")
     elif viewer.still_frames:
         imgui.text_colored(imgui.ImVec4(*_STALE), f"refining: still for {viewer.still_frames} frames")
     else:
         imgui.text("moving")
+    top = max([1.0] + list(viewer.ms.values()))
+    for name, ms in viewer.ms.items():
+        imgui.progress_bar(min(1.0, ms / top), imgui.ImVec2(-1, 13), f"{name} {ms:.1f}")
+    total = sum(v for k, v in viewer.ms.items() if k != "cpu ray tracing")
+    imgui.text(f"stages on the main thread: {total:.1f} ms")
     imgui.end()
 
 
@@ -116,8 +122,9 @@ def _controls_window(viewer, imgui, VIEWS) -> None:
         if ch:
             _set(viewer, "shadow_filter", SHADOW_FILTERS[v])
         for name, label in (("ssao", "SSAO"), ("sky_lighting", "sky volume (rebuild)"),
-                            ("lpv", "LPV diffuse + glossy (rebuild)"),
-                            ("ray_tracing", "ray-traced refl./refr. (rebuild)")):
+                            ("lpv_diffuse", "LPV diffuse"), ("lpv_glossy", "LPV glossy"),
+                            ("reflections", "ray-traced reflections"), ("refractions", "ray-traced refractions"),
+                            ("taa", "TAA when still")):
             ch, v = imgui.checkbox(label, getattr(st, name))
             if ch:
                 _set(viewer, name, v)

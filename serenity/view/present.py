@@ -7,6 +7,10 @@ pixels) of ``fbo`` with nearest-texel sampling: at the render's own size a pixel
 Modes (see the shader): DISPLAY, HDR (exposure + Reinhard + sRGB, as ``TonemapPass``), SIGNED
 (0.5 + 0.5·v), LINEAR (sRGB-encoded), SCALAR (red channel as grey).
 
+``AccumulatePass.add(hdr, samples)`` (``glsl/view_accumulate.glsl``) keeps the running mean of a
+still view's jittered HDR frames in ``AccumulatePass.mean`` (RGBA32F, render size): temporal
+anti-aliasing, drawn with the HDR mode.
+
 ``LinesPass.draw(fbo, viewport, view_proj, boxes)`` draws axis-aligned boxes ((min, max, rgb))
 as world-space wireframes over the image (the LPV cascades' bounds).
 """
@@ -17,7 +21,7 @@ import moderngl
 import numpy as np
 
 from serenity.config import DEFAULT_EXPOSURE
-from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.context import FullscreenPass, fullscreen_vao, load_program
 
 DISPLAY, HDR, SIGNED, LINEAR, SCALAR = range(5)
 
@@ -43,6 +47,27 @@ class PresentPass:
         p["u_split"].value = float(split) if b is not None else 2.0
         p["u_line_px"].value = 1.0 / max(1, int(viewport[2]))
         self.vao.render(vertices=3)
+
+
+class AccumulatePass(FullscreenPass):
+    SHADER = "view_accumulate.glsl"
+    TARGETS = {"mean": (4, "f4")}
+
+    def add(self, hdr, samples: int) -> None:
+        """Fold ``hdr`` (a texture of the render's size) into the mean as its ``samples``-th frame
+        (1 = start afresh: the mean becomes ``hdr``)."""
+        ctx, p = self.ctx, self.program
+        self.fbo.use()
+        ctx.enable_only(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        ctx.blend_equation = moderngl.FUNC_ADD
+        try:
+            hdr.use(location=0)
+            p["u_frame"].value = 0
+            p["u_weight"].value = 1.0 / float(samples)
+            self.vao.render(vertices=3)
+        finally:
+            ctx.enable_only(moderngl.NOTHING)
 
 
 def box_segments(lo, hi) -> np.ndarray:

@@ -44,8 +44,8 @@ from serenity.errors import SerenityError
 ACTIONS = ("key", "mouse", "set", "press", "screenshot", "wait", "exit")
 SETTABLE = {"hour": float, "date": str, "latitude": float, "longitude": float, "utc_offset": float,
             "exposure": float, "speed": float, "view": str, "quality": str, "shadow_filter": str,
-            "ssao": bool, "sky_lighting": bool, "lpv": bool, "ray_tracing": bool, "panel": bool,
-            "split": float}
+            "ssao": bool, "sky_lighting": bool, "lpv_diffuse": bool, "lpv_glossy": bool, "reflections": bool,
+            "refractions": bool, "taa": bool, "panel": bool, "split": float}
 SCRIPT_DT = 1.0 / 30.0
 """Seconds of camera motion per frame in scripted mode."""
 

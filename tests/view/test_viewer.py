@@ -78,11 +78,21 @@ def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
 
     s = Settings()
     base = s.config()
-    for name, value in (("exposure", 0.05), ("ssao", False), ("shadow_filter", "pcf")):
+    for name, value in (("exposure", 0.05), ("ssao", False), ("shadow_filter", "pcf"), ("lpv_diffuse", False),
+                        ("lpv_glossy", False), ("reflections", False), ("refractions", False), ("taa", False)):
         t = Settings(**{name: value})
         assert not Settings.needs_rebuild(base, t.config()), name
-    for name, value in (("lpv", False), ("sky_lighting", False), ("ray_tracing", False), ("quality", "low")):
+    for name, value in (("sky_lighting", False), ("quality", "low")):
         assert Settings.needs_rebuild(base, Settings(**{name: value}).config()), name
+    # one term of a pair switches live; both off turns the technique off, which needs a rebuild
+    lpv = Settings(lpv_glossy=False).config().lpv
+    assert lpv.enabled and lpv.diffuse and not lpv.glossy
+    off = Settings(lpv_diffuse=False, lpv_glossy=False).config()
+    assert not off.lpv.enabled and Settings.needs_rebuild(base, off)
+    rt = Settings(refractions=False).config()
+    assert rt.ray_tracing and rt.reflections and not rt.refractions
+    off = Settings(reflections=False, refractions=False).config()
+    assert not off.ray_tracing and Settings.needs_rebuild(base, off)
     assert quality_config("medium") == Settings().config(), "the viewer starts at serenity render's quality"
     with pytest.raises(SerenityError, match="quality preset"):
         quality_config("ultra")
@@ -148,7 +158,7 @@ SIZE = (160, 90)
 SCRIPT = """
 [[step]]
 frame = 1
-set = { hour = 10.0 }
+set = { hour = 10.0, taa = false }
 [[step]]
 frame = 2
 key = "W"
@@ -161,10 +171,10 @@ frame = 7
 set = { panel = false, ssao = false }
 [[step]]
 frame = 8
-set = { lpv = false, ssao = true }
+set = { lpv_diffuse = false, lpv_glossy = false, ssao = true }
 [[step]]
 frame = 9
-set = { lpv = true }
+set = { lpv_diffuse = true, lpv_glossy = true }
 [[step]]
 frame = {still}
 press = "F12"
@@ -173,6 +183,7 @@ frame = {still}
 screenshot = "still.png"
 {views}
 """
+TAA = 6
 VIEW_STEPS = ("albedo", "normal", "direct", "ao", "rt mask", "sky light", "lpv indirect", "lpv cascades")
 
 
@@ -199,11 +210,17 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     views = "".join(f'[[step]]\nframe = {still + 1 + i}\nset = {{ view = "{v}" }}\n'
                     f'[[step]]\nframe = {still + 1 + i}\nscreenshot = "view_{i}.png"\n'
                     for i, v in enumerate(VIEW_STEPS))
-    views += f"[[step]]\nframe = {still + 1 + len(VIEW_STEPS)}\nexit = true\n"
+    # then temporal anti-aliasing on the still final view: TAA samples from frame taa0 on, converged
+    # TAA frames later; a screenshot and F12 of the converged view; one step forward resets it
+    taa0 = still + 1 + len(VIEW_STEPS)
+    done = taa0 + TAA
+    views += (f'[[step]]\nframe = {taa0}\nset = {{ view = "final", taa = true }}\n'
+              f'[[step]]\nframe = {done}\nscreenshot = "taa.png"\n[[step]]\nframe = {done}\npress = "F12"\n'
+              f'[[step]]\nframe = {done + 1}\nkey = "W"\n[[step]]\nframe = {done + 2}\nexit = true\n')
     (tmp_path / "s.toml").write_text(SCRIPT.replace("{still}", str(still)).replace("{views}", views))
     env = {**os.environ, "PYTHONPATH": ROOT}
     cmd = _xvfb_prefix() + [sys.executable, "-m", "serenity", "view", "courtyard", "--size", f"{SIZE[0]}x{SIZE[1]}",
-                            "--script", "s.toml", "--trace", "trace.json", "--out-dir", "saved"]
+                            "--script", "s.toml", "--trace", "trace.json", "--out-dir", "saved", "--taa", str(TAA)]
     p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900, cwd=tmp_path)
     if p.returncode != 0 and "cannot open a window" in p.stderr:
         pytest.skip(f"no X server could be had: {p.stderr.strip().splitlines()[-1]}")
@@ -211,8 +228,8 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     trace = json.loads((tmp_path / "trace.json").read_text())
     assert trace["window_buffer_size"] == list(SIZE)
     f = {fr["frame"]: fr for fr in trace["frames"]}
-    assert max(f) == still + len(VIEW_STEPS)
-    assert not any(fr["read_back"] for fr in trace["frames"] if fr["frame"] != still)
+    assert max(f) == done + 1
+    assert not any(fr["read_back"] for fr in trace["frames"] if fr["frame"] not in (still, done))
 
     # the time slider moved the sun to the NOAA position of 10:00 at the scene's place
     want = sun_from_time("2024-06-21 10:00 +01:00", *scene.location).direction
@@ -270,8 +287,29 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     lines = np.any(shots["lpv cascades"] != shot, axis=-1)
     assert 0 < lines.mean() < 0.2, "the cascades' edges are drawn over the unchanged frame"
 
+    # TAA: the still view's samples count up to TAA, converged only then; moving starts afresh
+    assert [f[i]["taa_samples"] for i in range(taa0 - 1, done + 2)] == [0] + list(range(1, TAA + 1)) + [TAA, 1]
+    assert [f[i]["converged"] for i in (taa0, done - 2, done - 1, done, done + 1)] == [False, False, True, True, False]
+    # the converged view is Renderer.render_accumulated(TAA) of the same camera (F12's TOML), not one frame
+    from serenity.config import RenderConfig
+    from serenity.frame import Renderer
+
+    taa_shot = np.asarray(Image.open(tmp_path / "taa.png").convert("RGB")).astype(np.int16)
+    saved = str(tmp_path / "saved" / "courtyard_001")
+    assert np.array_equal(np.asarray(Image.open(saved + ".png").convert("RGB")), taa_shot), "F12 saves the mean"
+    r = Renderer(load(saved + ".toml"), *SIZE, config=RenderConfig.preset("medium"))
+    try:
+        acc, one = r.render_accumulated(TAA).ldr.astype(np.int16), r.render().ldr.astype(np.int16)
+    finally:
+        r.close()
+    assert np.abs(taa_shot - acc).max() <= 1
+    assert np.percentile(np.abs(taa_shot - one).max(-1), 99) > 8, "the edges are anti-aliased"
+
 
 REF_SCRIPT = """
+[[step]]
+frame = 0
+set = { taa = false }   # compared below with F12's frame: one unjittered frame, as R saw it
 [[step]]
 frame = 1
 press = "R"
@@ -384,3 +422,63 @@ def test_real_x_input_moves_the_camera_and_escape_quits(tmp_path):
     assert np.dot(moved, first["camera_forward"]) > 0.05, moved
     # a rightward drag turned the view right: forward rotated clockwise seen from above
     assert np.cross(first["camera_forward"], last["camera_forward"])[1] < -1e-3
+
+
+# What a window manager sends when the title bar's close button is clicked: a WM_PROTOCOLS client
+# message carrying WM_DELETE_WINDOW (ICCCM 4.2.8.1). Xvfb runs no window manager, so it is sent
+# here with Xlib (through ctypes: libX11 is what GLFW itself loads).
+WM_CLOSE = r"""
+import ctypes, sys
+x = ctypes.cdll.LoadLibrary("libX11.so.6")
+class ClientMessage(ctypes.Structure):
+    _fields_ = [("type", ctypes.c_int), ("serial", ctypes.c_ulong), ("send_event", ctypes.c_int),
+                ("display", ctypes.c_void_p), ("window", ctypes.c_ulong), ("message_type", ctypes.c_ulong),
+                ("format", ctypes.c_int), ("data", ctypes.c_long * 5)]
+class XEvent(ctypes.Union):
+    _fields_ = [("xclient", ClientMessage), ("pad", ctypes.c_long * 24)]
+x.XOpenDisplay.restype = ctypes.c_void_p
+x.XOpenDisplay.argtypes = [ctypes.c_char_p]
+x.XInternAtom.restype = ctypes.c_ulong
+x.XInternAtom.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_int]
+x.XSendEvent.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.c_int, ctypes.c_long, ctypes.POINTER(XEvent)]
+x.XFlush.argtypes = x.XCloseDisplay.argtypes = [ctypes.c_void_p]
+dpy = x.XOpenDisplay(None)
+if not dpy:
+    sys.exit("cannot open the display")
+ev = XEvent()
+ev.xclient.type, ev.xclient.window, ev.xclient.format = 33, int(sys.argv[1]), 32  # 33 = ClientMessage
+ev.xclient.message_type = x.XInternAtom(dpy, b"WM_PROTOCOLS", 0)
+ev.xclient.data[0] = x.XInternAtom(dpy, b"WM_DELETE_WINDOW", 0)
+x.XSendEvent(dpy, int(sys.argv[1]), 0, 0, ctypes.byref(ev))
+x.XFlush(dpy)
+x.XCloseDisplay(dpy)
+"""
+
+CLOSE = r"""
+"$PY" -m serenity view plane --size 64x36 --no-panel --script ready.toml --exit-after 100000 &
+pid=$!
+for i in $(seq 1 600); do [ -f ready.png ] && break; sleep 0.5; done
+[ -f ready.png ] || { kill $pid; echo "viewer never got to frame 3" >&2; exit 3; }
+wid=$(xdotool search --sync --name "Serenity")
+"$PY" wm_close.py "$wid"
+wait $pid
+"""
+
+
+@pytest.mark.gl
+def test_closing_the_window_ends_with_one_line(tmp_path):
+    """The window manager's close (title-bar X) ends the session: exit status 0, one line saying so,
+    no traceback."""
+    pytest.importorskip("moderngl_window")
+    if not shutil.which("xdotool") or not shutil.which("xvfb-run"):
+        pytest.skip("needs xvfb-run and xdotool (tools/check_sysdeps.sh installs them)")
+    (tmp_path / "ready.toml").write_text('[[step]]\nframe = 3\nscreenshot = "ready.png"\n')
+    (tmp_path / "wm_close.py").write_text(WM_CLOSE)
+    (tmp_path / "close.sh").write_text(CLOSE)
+    env = {**os.environ, "PYTHONPATH": ROOT, "PY": sys.executable}
+    p = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 640x480x24", "sh", "close.sh"], env=env,
+                       capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert "Traceback" not in p.stderr and not p.stderr.strip(), p.stderr[-3000:]
+    out = [ln for ln in p.stdout.splitlines() if ln.strip() and not ln.startswith("wrote ")]
+    assert len(out) == 1 and out[0].startswith("serenity view: window closed after"), p.stdout

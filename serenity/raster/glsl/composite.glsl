@@ -4,6 +4,8 @@
 //        reflection);  L = F * L_reflection + (1 - F) * (T * L_refraction + (1 - T) * L_surface)
 //   mirror / metal (reflectivity R > 0, T = 0): F = schlick(R, cos);
 //        L = F * L_reflection + (1 - F) * L_surface
+// A pixel whose reflection (or refraction) ray was not traced (RenderConfig.reflections /
+// .refractions off) has L_reflection (L_refraction) = L_surface: the rasterised surface stands in.
 // Drawn as one fullscreen pass over the G-buffer rather than a second forward pass over the
 // reflective meshes: the G-buffer already holds every attribute the forward pass would compute.
 #include "fullscreen.glsl"
@@ -39,12 +41,12 @@ void main() {
     vec3 n = normalize(texture(g_normal, v_uv).xyz);
     float cos_t = abs(dot(n, normalize(u_camera_pos - pos.xyz)));
     vec2 index = texture(u_index, v_uv).rg;
-    vec3 refl = index.r >= 0.0 ? traced(index.r) : vec3(0.0);
+    vec3 refl = index.r >= 0.0 ? traced(index.r) : surface;
     float transparency = mat.z;
     if (transparency > 0.0) {
         float f0 = pow((mat.w - 1.0) / (mat.w + 1.0), 2.0);
         float F = mod(floor(flags / 4.0), 2.0) > 0.5 ? 1.0 : schlick(f0, cos_t);
-        vec3 refr = index.g >= 0.0 ? traced(index.g) : vec3(0.0);
+        vec3 refr = index.g >= 0.0 ? traced(index.g) : surface;
         o_hdr = vec4(F * refl + (1.0 - F) * (transparency * refr + (1.0 - transparency) * surface), 1.0);
     } else {
         float F = schlick(mat.y, cos_t);

@@ -2,7 +2,8 @@
 // additive blending (so each technique has its own cost, as in the paper's Table 1):
 //   TECHNIQUE == 1  sky lighting (paper §7):   L += albedo/pi * E_sky(p, n)       (sky volume, L2 SH)
 //   TECHNIQUE == 2  LPV (paper §8, Fig. 10):   L += albedo/pi * E_lpv(p, n) + k_s * L_glossy(p, r, m)
-// Main view: multiplied by SSAO (indirect light only, paper §3). Ray-traced views (u_rt_view): the
+// u_diffuse / u_glossy (LPVConfig.diffuse / .glossy) switch the two LPV terms: a switched-off term
+// is not looked up. Main view: multiplied by SSAO (indirect light only, paper §3). Ray-traced views (u_rt_view): the
 // viewer is each pixel's ray origin, no SSAO, untraced pixels and misses get nothing.
 // LOWRES (main view at 1/u_scale resolution, lowres.glsl): no albedo here; out 0 = E/pi * AO,
 // out 1 = k_s * L_glossy * AO, summed over the techniques, then upsample.glsl multiplies by the
@@ -28,6 +29,8 @@ uniform sampler2D u_ao;         // SSAO (1 = open)
 uniform bool u_use_ao;
 uniform bool u_rt_view;
 uniform vec3 u_camera_pos;
+uniform bool u_diffuse;         // TECHNIQUE 2: add the LPV's diffuse term
+uniform bool u_glossy;          // TECHNIQUE 2: add the LPV's glossy term
 #if LOWRES
 #include "lowres.glsl"
 layout(location = 0) out vec4 o_irr;
@@ -58,13 +61,13 @@ void main() {
     vec3 eye = u_rt_view ? GBUF(g_eye).xyz : u_camera_pos;
     vec3 v = normalize(eye - p);
     if (dot(n, v) < 0.0) n = -n;                          // lit from the viewer's side
-    vec3 diffuse, glossy = vec3(0.0);
+    vec3 diffuse = vec3(0.0), glossy = vec3(0.0);
 #if TECHNIQUE == 1
     diffuse = albedo / PI * sky_irradiance(p, n);
 #else
     float shininess = GBUF(g_material).x;
-    diffuse = albedo / PI * lpv_irradiance(p, n);
-    if (nrm.w >= GLOSSY_MIN_SPECULAR) glossy = nrm.w * lpv_glossy(p, reflect(-v, n), shininess);
+    if (u_diffuse) diffuse = albedo / PI * lpv_irradiance(p, n);
+    if (u_glossy && nrm.w >= GLOSSY_MIN_SPECULAR) glossy = nrm.w * lpv_glossy(p, reflect(-v, n), shininess);
 #endif
 #if LOWRES
     o_irr = vec4(diffuse * ao, 0.0);
