@@ -23,6 +23,9 @@ SKY_TRANSFER_MAX_BANDS = 5
 """SH bands the sky transfer can project the sky on (``kernels/skytransfer.eval_sh25``: bands 0–4)."""
 #: texels per side of the paraboloid sky map (``serenity.kernels.atmosphere``)
 SKY_MAP_SIZE = 256
+SKY_VIEW_TABLE_MIN = 32
+"""Fewest nodes per side of the sky-view table the sky map is interpolated from; by default the
+table has a quarter of the map's rows, at least this many (``atmosphere.sky_view_table_size``)."""
 #: cascades the LPV kernels and ``lpv.glsl`` take at most
 LPV_MAX_CASCADES = 3
 
@@ -156,6 +159,10 @@ class SkyConfig:
     the sun's glow needs the most; ``tests/kernels/test_skytransfer.py`` measures each)."""
     sky_steps: int = 24
     """View-ray march steps of each sky-map texel's bake (``atmosphere``; error vs steps in bench_sky)."""
+    sky_view_table: int | None = None
+    """Nodes per side of the sky-view table the sky map is interpolated from (the march runs on the
+    table's N² directions instead of every texel; ``atmosphere.bake_sky_map_wp``); None = a quarter
+    of ``sky_map_size``, at least ``SKY_VIEW_TABLE_MIN``; 0 = march every texel."""
 
     def __post_init__(self):
         if self.method not in SKY_METHODS:
@@ -165,6 +172,8 @@ class SkyConfig:
                               f"got {self.transfer_bands}")
         if not 1 <= self.sky_steps <= 1024:
             raise ConfigError(f"SkyConfig.sky_steps must be in 1..1024, got {self.sky_steps}")
+        if not (self.sky_view_table is None or self.sky_view_table == 0 or 2 <= self.sky_view_table <= 1024):
+            raise ConfigError(f"SkyConfig.sky_view_table must be 0 or in 2..1024, got {self.sky_view_table}")
         if not (1 <= self.rays_per_probe <= 1 << 20):
             raise ConfigError(f"SkyConfig.rays_per_probe must be in 1..2^20, got {self.rays_per_probe}")
         if self.cell_size is not None and not self.cell_size > 0:

@@ -302,7 +302,8 @@ class SkyVolume:
         self.probe_count = x * y * z
         self._coeffs = wp.zeros((self.probe_count, COEFFS), dtype=float, device=dev)
         self._constant_sky = getattr(scene.sky, "model", "atmosphere") == "constant"
-        self.sky = SkyMapCache(cfg.sky_map_size, cfg.rebuild_angle_deg, device=dev, steps=cfg.sky_steps)
+        self.sky = SkyMapCache(cfg.sky_map_size, cfg.rebuild_angle_deg, device=dev, steps=cfg.sky_steps,
+                              table=cfg.sky_view_table)
         self._constant_map = None
         self.ground_radiance = np.zeros(3)
         #: sky-map version each layer was last integrated against (-1: never)
