@@ -451,8 +451,9 @@ def bake_sky_map_wp(sun_direction, size: int = SKY_MAP_SIZE, device: str | None 
 
     ``table`` (default :func:`sky_view_table_size`) > 0: march ``table``×``table`` view directions
     (the sky-view table: cos-zenith rows dense towards the horizon × azimuth from the sun, both
-    halves of the sky being mirror images) and interpolate every texel from it, with the phase functions applied per texel — the march
-    without them varies slowly, so the Mie glow around the sun stays sharp (after Hillaire 2020's
+    halves of the sky being mirror images) and interpolate every texel from it, with the phase
+    functions applied per texel — the march without them varies slowly, so the Mie glow around the
+    sun stays sharp (after Hillaire 2020's
     sky-view LUT and Bruneton & Neyret 2008's separated phase functions). 0: march every texel.
     With the sun lower than ``SKY_VIEW_TABLE_MIN_ELEVATION_DEG`` every texel is marched: the Earth's
     shadow then crosses the sky as an edge a 32-row table cannot follow (96² map: at 0° the table's
