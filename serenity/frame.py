@@ -65,8 +65,8 @@ from serenity.threads import single_threaded_blas
 MAIN_LANE = "main (GL + volumes)"
 STAGES = (
     "upload",
-    "ray casting buffer", "kd-tree build", "cpu ray tracing",          # sync 1, the tracer starts
-    "shadow maps (CSM)", "g-buffer", "ssao",                           # the main view
+    "g-buffer", "ray casting buffer", "kd-tree build", "cpu ray tracing",  # sync 1, the tracer starts
+    "shadow maps (CSM)", "ssao",                                       # the main view
     "sky volume build", "sky volume update", "sky upload",             # paper §7
     "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload",  # paper §8
     "direct lighting", "sky lighting", "lpv lighting", "indirect upsample",
@@ -281,8 +281,10 @@ class Renderer:
             proj[1, 2] -= 2.0 * float(jitter[1]) / self.height
         view_proj = proj @ cam.view_matrix()
         light = lighting_inputs(self.scene, self.config, view_proj)
-        rcb, join = self._start_ray_tracing(view_proj)                  # sync 1
-        shadow, gbuf, ao = self._main_view(view_proj)
+        with self._stage("g-buffer"):
+            gbuf = self.gbuffer_pass.render(view_proj, self.scene.camera.position)
+        rcb, join = self._start_ray_tracing(view_proj, gbuf)            # sync 1
+        shadow, ao = self._main_view(view_proj, gbuf)
         self._update_volumes(gbuf, light)
         lit = self._light_main_view(gbuf, shadow, light, ao)
         out_hdr = self._ray_traced_views(rcb, join, gbuf, lit, light)  # sync 2
@@ -334,13 +336,14 @@ class Renderer:
                      wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
                      rays=0 if rcb is None else rcb.count)
 
-    def _start_ray_tracing(self, view_proj):
-        """The ray-casting buffer (which pixels reflect or refract, and their rays), read back; the
-        tracer starts on them at once. Returns (rcb or None, a callable that joins the tracer)."""
+    def _start_ray_tracing(self, view_proj, gbuf):
+        """The ray-casting buffer (which pixels reflect or refract, and their rays; drawn against the
+        G-buffer's depth), read back; the tracer starts on them at once. Returns (rcb or None, a
+        callable that joins the tracer)."""
         if not self.traces:
             return None, None
         with self._stage("ray casting buffer"):
-            self.raycast_pass.render(view_proj, self.scene.camera)
+            self.raycast_pass.render(view_proj, self.scene.camera, gbuf.depth)
             rcb = self.raycast_pass.read().select(self.config.reflections, self.config.refractions)
         if not rcb.count:
             return rcb, None
@@ -353,21 +356,20 @@ class Renderer:
         traced = self._trace(rcb)
         return rcb, lambda: traced
 
-    def _main_view(self, view_proj):
-        """Sun shadow cascades (paper §6), the G-buffer, SSAO (paper §3)."""
+    def _main_view(self, view_proj, gbuf):
+        """Sun shadow cascades (paper §6) and SSAO (paper §3) of the main view (its G-buffer is
+        drawn first: the ray-casting buffer is drawn against its depth)."""
         cfg, scene, cam = self.config, self.scene, self.scene.camera
         with self._stage("shadow maps (CSM)"):
             sc = cfg.shadow
             cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
                                            sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
             shadow = self.shadow_pass.render(cascades)
-        with self._stage("g-buffer"):
-            gbuf = self.gbuffer_pass.render(view_proj, cam.position)
         ao = None
         if cfg.ssao.enabled:
             with self._stage("ssao"):
                 ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward)
-        return shadow, gbuf, ao
+        return shadow, ao
 
     def _update_volumes(self, gbuf, light: LightingInputs) -> None:
         """The sky irradiance volume (paper §7) and the light propagation volumes (paper §8), each
@@ -431,8 +433,7 @@ class Renderer:
             with self._stage("rt lpv lighting"):
                 self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt, **terms)
         with self._stage("composite"):
-            return self.composite_pass.render(lit.hdr, rt_lit.hdr, view_rt.index, gbuf,
-                                              self.raycast_pass.targets[2], cam.position)
+            return self.composite_pass.render(lit.hdr, rt_lit.hdr, view_rt.index, gbuf, cam.position)
 
     # ---------------------------------------------------------------------------------- volumes
 

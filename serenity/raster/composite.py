@@ -10,17 +10,16 @@ class CompositePass(FullscreenPass):
     SHADER = "composite.glsl"
     TARGETS = {"hdr": (4, "f4")}
 
-    def render(self, surface, effects, index, gbuffer, flags, camera_pos):
+    def render(self, surface, effects, index, gbuffer, camera_pos):
         """``effects``: the lit traced rays, packed, and ``index`` the per-pixel ray index
-        (``RTView.index``; see :mod:`serenity.raster.rt_gbuffer`). ``flags``: the ray-casting
-        buffer target whose alpha holds the per-pixel flags."""
+        (``RTView.index``; see :mod:`serenity.raster.rt_gbuffer`; −2 in its refraction channel marks
+        total internal reflection)."""
         p = self.program
         with self.ctx.debug_scope("composite"):
             self.fbo.use()
             for loc, (name, tex) in enumerate((("u_surface", surface), ("u_effects", effects), ("u_index", index),
                                                ("g_normal", gbuffer.normal),
-                                               ("g_position", gbuffer.position), ("g_material", gbuffer.material),
-                                               ("u_flags", flags))):
+                                               ("g_position", gbuffer.position), ("g_material", gbuffer.material))):
                 tex.use(location=loc)
                 p[name].value = loc
             p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)

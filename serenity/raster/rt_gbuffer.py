@@ -8,7 +8,8 @@ order of ``rcb.pixels`` — fill the texels of a (W, 2H) target in order, k → 
 (``RTView.rects``) instead of the screen rectangles around them: on a CPU rasteriser the cost of a
 pass is its pixels, and a mirror seen at a grazing angle covers a large rectangle with few traced
 pixels. ``RTView.index`` (W, H, RG32F) maps each screen pixel to its reflection and refraction
-texels (−1: none); the composite (``glsl/composite.glsl``) reads the lit rays through it.
+texels (−1: none; −2 in the refraction channel: total internal reflection); the composite
+(``glsl/composite.glsl``) reads the lit rays through it.
 
 Per-pixel layout (as ``glsl/gbuffer.glsl``): albedo.rgb; normal.xyz + specular k_s in w;
 position.xyz + coverage in w (1 = hit, 0 = miss: the deferred pass shows the sky along the ray);
@@ -24,6 +25,7 @@ import moderngl
 import numpy as np
 
 from serenity.gbuffer_layout import GBUFFER_TARGETS, RT_GBUFFER_KEYS
+from serenity.raster.raycast import TOTAL_INTERNAL_REFLECTION
 
 
 @dataclass
@@ -101,6 +103,11 @@ class RTGBufferUpload:
             self._index[rows, cols, channel] = k
             self._indexed.append((rows, cols))
             count += len(pix)
+        tir = (rcb.flags & TOTAL_INTERNAL_REFLECTION) != 0
+        if tir.any():  # the composite's F = 1 (no refraction to trace)
+            rows, cols = np.divmod(rcb.pixels[tir], w)
+            self._index[rows, cols, 1] = -2.0
+            self._indexed.append((rows, cols))
         rects = []
         if count:
             used = -(-count // w)  # whole rows; the tail of the last one is marked untraced

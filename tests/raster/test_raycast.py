@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 
+from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.raycast import TRACE_REFLECTION, TRACE_REFRACTION, RayCastPass
 from serenity.raster.scene_gl import SceneGL
 from serenity.scene.model import Camera, Material
@@ -16,10 +17,13 @@ def _render(scene, w=64, h=48):
 
     ctx = get_context()
     sgl = SceneGL(ctx, scene)
+    gb = GBufferPass(ctx, sgl)
+    gb.resize(w, h)
     rc = RayCastPass(ctx, sgl)
     rc.resize(w, h)
     cam = scene.camera
-    rc.render(cam.projection_matrix(w / h) @ cam.view_matrix(), cam)
+    vp = cam.projection_matrix(w / h) @ cam.view_matrix()
+    rc.render(vp, cam, gb.render(vp, cam.position).depth)
     return rc.read(), rc
 
 

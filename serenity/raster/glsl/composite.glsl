@@ -13,11 +13,11 @@
 #if defined FRAGMENT_SHADER
 uniform sampler2D u_surface;      // lit main view (HDR)
 uniform sampler2D u_effects;      // the lit traced rays (HDR), packed: ray k at texel (k mod W, k div W)
-uniform sampler2D u_index;        // per pixel: packed texel of its reflection (r), refraction (g); -1 none
+uniform sampler2D u_index;        // per pixel: packed texel of its reflection (r), refraction (g); -1 none,
+                                  // g = -2: total internal reflection (no refraction, F = 1)
 uniform sampler2D g_normal;
 uniform sampler2D g_position;
 uniform sampler2D g_material;     // shininess, reflectivity, transparency, ior
-uniform sampler2D u_flags;        // ray-casting target whose alpha holds flags: 1 reflect, 2 refract, 4 TIR
 uniform vec3 u_camera_pos;
 out vec4 o_hdr;
 
@@ -35,17 +35,17 @@ float schlick(float f0, float cos_theta) {
 void main() {
     vec3 surface = texture(u_surface, v_uv).rgb;
     vec4 pos = texture(g_position, v_uv);
-    float flags = texture(u_flags, v_uv).a;
-    if (pos.w == 0.0 || flags == 0.0) { o_hdr = vec4(surface, 1.0); return; }
+    vec2 index = texture(u_index, v_uv).rg;
+    // no traced ray (and no total internal reflection): the formulas below give the surface
+    if (pos.w == 0.0 || (index.r < 0.0 && index.g > -1.5)) { o_hdr = vec4(surface, 1.0); return; }
     vec4 mat = texture(g_material, v_uv);
     vec3 n = normalize(texture(g_normal, v_uv).xyz);
     float cos_t = abs(dot(n, normalize(u_camera_pos - pos.xyz)));
-    vec2 index = texture(u_index, v_uv).rg;
     vec3 refl = index.r >= 0.0 ? traced(index.r) : surface;
     float transparency = mat.z;
     if (transparency > 0.0) {
         float f0 = pow((mat.w - 1.0) / (mat.w + 1.0), 2.0);
-        float F = mod(floor(flags / 4.0), 2.0) > 0.5 ? 1.0 : schlick(f0, cos_t);
+        float F = index.g < -1.5 ? 1.0 : schlick(f0, cos_t);
         vec3 refr = index.g >= 0.0 ? traced(index.g) : surface;
         o_hdr = vec4(F * refl + (1.0 - F) * (transparency * refr + (1.0 - transparency) * surface), 1.0);
     } else {
