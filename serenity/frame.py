@@ -200,7 +200,6 @@ class Renderer:
                 self.rt_deferred = DeferredPass(self.ctx)
                 self.rt_deferred.resize(self.width, 2 * self.height)
                 self.composite_pass = CompositePass(self.ctx)
-                self.composite_pass.resize(self.width, self.height)
                 # on CUDA the tracer overlaps in a thread (its launches are asynchronous); on the
                 # CPU it runs in the tracer process (``_ensure_tracer``)
                 self._pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-rt")
@@ -433,7 +432,7 @@ class Renderer:
             with self._stage("rt lpv lighting"):
                 self.lpv_pass.render(rt_lit.hdr, view_rt, self.lpv_gl.bind, cam.position, rt_view=view_rt, **terms)
         with self._stage("composite"):
-            return self.composite_pass.render(lit.hdr, rt_lit.hdr, view_rt.index, gbuf, cam.position)
+            return self.composite_pass.render(lit.hdr, rt_lit.hdr, view_rt.points, gbuf, cam.position)
 
     # ---------------------------------------------------------------------------------- volumes
 

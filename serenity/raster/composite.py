@@ -1,27 +1,53 @@
-"""Fresnel composite of the reflection/refraction effect buffers over the main view
-(``glsl/composite.glsl``)."""
+"""Fresnel composite of the reflection/refraction effect buffers over the main view, in place, one
+point per traced pixel (``glsl/composite.glsl``)."""
 
 from __future__ import annotations
 
-from serenity.raster.context import FullscreenPass
+import moderngl
+import numpy as np
+
+from serenity.raster.context import load_program
 
 
-class CompositePass(FullscreenPass):
-    SHADER = "composite.glsl"
-    TARGETS = {"hdr": (4, "f4")}
+class CompositePass:
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.program = load_program(ctx, "composite.glsl")
+        self._fbos: dict[int, object] = {}
+        self._vbo = None
+        self._vao = None
 
-    def render(self, surface, effects, index, gbuffer, camera_pos):
-        """``effects``: the lit traced rays, packed, and ``index`` the per-pixel ray index
-        (``RTView.index``; see :mod:`serenity.raster.rt_gbuffer`; −2 in its refraction channel marks
-        total internal reflection)."""
-        p = self.program
-        with self.ctx.debug_scope("composite"):
-            self.fbo.use()
-            for loc, (name, tex) in enumerate((("u_surface", surface), ("u_effects", effects), ("u_index", index),
-                                               ("g_normal", gbuffer.normal),
+    def render(self, surface, effects, points: np.ndarray, gbuffer, camera_pos):
+        """Blend the lit rays ``effects`` (packed; :mod:`serenity.raster.rt_gbuffer`) into the lit
+        main view ``surface`` (RGBA32F, changed in place and returned) at the pixels of ``points``
+        (``RTView.points``)."""
+        ctx, p = self.ctx, self.program
+        if not len(points):
+            return surface
+        data = np.ascontiguousarray(points, np.float32)
+        if self._vbo is None or self._vbo.size < data.nbytes:
+            if self._vbo is not None:
+                self._vao.release()
+                self._vbo.release()
+            self._vbo = ctx.buffer(reserve=max(data.nbytes, 4096))
+            self._vao = ctx.vertex_array(p, [(self._vbo, "3f", "in_point")])
+        self._vbo.write(data)
+        fbo = self._fbos.get(surface.glo)
+        if fbo is None:
+            fbo = self._fbos[surface.glo] = ctx.framebuffer(color_attachments=[surface])
+        with ctx.debug_scope("composite"):
+            fbo.use()
+            for loc, (name, tex) in enumerate((("u_effects", effects), ("g_normal", gbuffer.normal),
                                                ("g_position", gbuffer.position), ("g_material", gbuffer.material))):
                 tex.use(location=loc)
                 p[name].value = loc
             p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
-            self.vao.render(vertices=3)
-        return self.hdr
+            p["u_size"].value = (surface.width, surface.height)
+            ctx.enable(moderngl.BLEND)
+            ctx.blend_func = moderngl.ONE, moderngl.SRC_ALPHA
+            ctx.blend_equation = moderngl.FUNC_ADD
+            try:
+                self._vao.render(moderngl.POINTS, vertices=len(data))
+            finally:
+                ctx.disable(moderngl.BLEND)
+        return surface

@@ -7,9 +7,9 @@ order of ``rcb.pixels`` — fill the texels of a (W, 2H) target in order, k → 
 (GL texel coordinates), so the lighting passes draw only the ``ceil(N / W)`` rows the N rays fill
 (``RTView.rects``) instead of the screen rectangles around them: on a CPU rasteriser the cost of a
 pass is its pixels, and a mirror seen at a grazing angle covers a large rectangle with few traced
-pixels. ``RTView.index`` (W, H, RG32F) maps each screen pixel to its reflection and refraction
-texels (−1: none; −2 in the refraction channel: total internal reflection); the composite
-(``glsl/composite.glsl``) reads the lit rays through it.
+pixels. ``RTView.points`` lists, for each traced screen pixel, its reflection and refraction texels
+(−1: none; −2 for the refraction: total internal reflection); the composite
+(``glsl/composite.glsl``) draws one point per entry and reads the lit rays through it.
 
 Per-pixel layout (as ``glsl/gbuffer.glsl``): albedo.rgb; normal.xyz + specular k_s in w;
 position.xyz + coverage in w (1 = hit, 0 = miss: the deferred pass shows the sky along the ray);
@@ -30,7 +30,7 @@ from serenity.raster.raycast import TOTAL_INTERNAL_REFLECTION
 
 @dataclass
 class RTView:
-    """The packed ray-traced G-buffer textures, (W, 2H) each, and the per-pixel index (W, H)."""
+    """The packed ray-traced G-buffer textures, (W, 2H) each, and the composite's points."""
 
     albedo: object
     normal: object
@@ -38,14 +38,15 @@ class RTView:
     material: object
     eye: object
     ray_dir: object
-    index: object
-    """(W, H) RG32F: per screen pixel, the packed texel number k of its reflection ray (r) and of
-    its refraction ray (g), −1 where the pixel has none."""
     width: int
     height: int  # the view's height; the packed textures are 2 * height tall
     rects: list = None
     """(x, y, w, h) GL texels of the packed target that hold rays this frame: the only texels
     written and the only ones the lighting passes draw."""
+    points: np.ndarray = None
+    """(N, 3) float32, one row per pixel of the frame's ray-casting buffer: flat pixel index
+    (row 0 = top), the packed texel k of its reflection ray, of its refraction ray (−1: not
+    traced; −2: total internal reflection, no refraction)."""
 
 
 class RTGBufferUpload:
@@ -60,7 +61,7 @@ class RTGBufferUpload:
         if self.size == (width, height):
             return
         if self.view is not None:
-            for n in (*RT_GBUFFER_KEYS, "index"):
+            for n in RT_GBUFFER_KEYS:
                 getattr(self.view, n).release()
         tex = {}
         for n in RT_GBUFFER_KEYS:
@@ -68,25 +69,20 @@ class RTGBufferUpload:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
             t.repeat_x = t.repeat_y = False
             tex[n] = t
-        index = self.ctx.texture((width, height), 2, dtype="f4")
-        index.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.view = RTView(**tex, index=index, width=width, height=height)
+        self.view = RTView(**tex, width=width, height=height)
         self._staging = {n: np.zeros((2 * height, width, 4), np.float32) for n in RT_GBUFFER_KEYS}
-        self._index = np.full((height, width, 2), -1.0, np.float32)
-        self._indexed: list[np.ndarray] = []
         self.size = (width, height)
 
     def upload(self, rcb, reflection: dict | None, refraction: dict | None) -> RTView:
-        """Pack the tracer's per-ray results and upload them with the pixel → ray index.
+        """Pack the tracer's per-ray results, upload them, and list the composite's points.
 
         ``rcb``: the frame's :class:`~serenity.raster.raycast.RayCastingBuffer`. ``reflection`` /
         ``refraction``: the ray tracer's outputs for ``rcb.reflection_rays()`` /
         ``rcb.refraction_rays()``, in the order of ``rcb.pixels``, each with (N, 4) arrays under the
         names of ``RT_GBUFFER_KEYS`` (``eye``/``ray_dir``: the last segment of each ray)."""
         w, h = self.size
-        for rows, cols in self._indexed:  # forget last frame's pixels
-            self._index[rows, cols] = -1.0
-        self._indexed = []
+        points = np.full((rcb.count, 3), -1.0, np.float32)
+        points[:, 0] = rcb.pixels
         count = 0
         flat = {n: self._staging[n].reshape(-1, 4) for n in RT_GBUFFER_KEYS}
         for channel, res, sel in ((0, reflection, rcb.reflection_rays()), (1, refraction, rcb.refraction_rays())):
@@ -99,15 +95,9 @@ class RTGBufferUpload:
             # the viewer and direction of the ray's last segment (after any transmissions)
             flat["eye"][k, :3] = res["eye"][:, :3]
             flat["ray_dir"][k, :3] = res["ray_dir"][:, :3]
-            rows, cols = np.divmod(pix, w)
-            self._index[rows, cols, channel] = k
-            self._indexed.append((rows, cols))
+            points[sel, 1 + channel] = k
             count += len(pix)
-        tir = (rcb.flags & TOTAL_INTERNAL_REFLECTION) != 0
-        if tir.any():  # the composite's F = 1 (no refraction to trace)
-            rows, cols = np.divmod(rcb.pixels[tir], w)
-            self._index[rows, cols, 1] = -2.0
-            self._indexed.append((rows, cols))
+        points[(rcb.flags & TOTAL_INTERNAL_REFLECTION) != 0, 2] = -2.0  # the composite's F = 1
         rects = []
         if count:
             used = -(-count // w)  # whole rows; the tail of the last one is marked untraced
@@ -118,7 +108,6 @@ class RTGBufferUpload:
             for n in RT_GBUFFER_KEYS:
                 getattr(self.view, n).write(np.ascontiguousarray(self._staging[n][:used]).tobytes(), viewport=rect)
             rects.append(rect)
-        # GL rows run bottom-up: image row r is texture row h - 1 - r
-        self.view.index.write(np.ascontiguousarray(self._index[::-1]).tobytes())
         self.view.rects = rects
+        self.view.points = points
         return self.view
