@@ -51,6 +51,7 @@ from serenity.raster.fxaa import FXAAPass
 from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.indirect import IndirectPass, LowResIndirect
 from serenity.raster.interop import read_texture
+from serenity.raster.lowres import LowResGuide
 from serenity.raster.lpv_gl import LPVTexturesGL
 from serenity.raster.raycast import RayCastingBuffer, RayCastPass
 from serenity.raster.rsm import RSMPass
@@ -66,7 +67,7 @@ MAIN_LANE = "main (GL + volumes)"
 STAGES = (
     "upload",
     "g-buffer", "ray casting buffer", "kd-tree build", "cpu ray tracing",  # sync 1, the tracer starts
-    "shadow maps (CSM)", "ssao",                                       # the main view
+    "shadow maps (CSM)", "low-res guide", "ssao",                      # the main view
     "sky volume build", "sky volume update", "sky upload",             # paper §7
     "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload",  # paper §8
     "direct lighting", "sky lighting", "lpv lighting", "indirect upsample",
@@ -181,7 +182,9 @@ class Renderer:
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
             self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect_scale)
-            for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass):
+            self.lowres_guide = LowResGuide(self.ctx, cfg.indirect_scale)
+            self._guide = None
+            for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass, self.lowres_guide):
                 p.resize(self.width, self.height)
             self.fxaa_pass = FXAAPass(self.ctx) if cfg.antialiasing == "fxaa" else None
             if self.fxaa_pass is not None:
@@ -365,9 +368,13 @@ class Renderer:
                                            sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
             shadow = self.shadow_pass.render(cascades)
         ao = None
+        self._guide = None
+        if cfg.ssao.enabled or self.lowres is not None:
+            with self._stage("low-res guide"):
+                self._guide = self.lowres_guide.render(gbuf, cam.position, cam.forward)
         if cfg.ssao.enabled:
             with self._stage("ssao"):
-                ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward)
+                ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward, self._guide)
         return shadow, ao
 
     def _update_volumes(self, gbuf, light: LightingInputs) -> None:
@@ -405,7 +412,7 @@ class Renderer:
                                                                            cam.position, ao, **terms)
         if lo is not None:
             with self._stage("indirect upsample"):
-                lo.upsample(lit.hdr, gbuf, cam.position, cam.forward)
+                lo.upsample(lit.hdr, gbuf, cam.position, cam.forward, self._guide)
         return lit
 
     def _ray_traced_views(self, rcb, join, gbuf, lit, light: LightingInputs):

@@ -127,13 +127,14 @@ class LowResIndirect:
     def clear(self) -> None:
         self.fbo.clear(0.0, 0.0, 0.0, 0.0)
 
-    def upsample(self, target, gbuffer, camera_pos, camera_forward) -> None:
-        """Add albedo·E + glossy, upsampled, onto ``target`` (the full-resolution lit HDR texture)."""
+    def upsample(self, target, gbuffer, camera_pos, camera_forward, guide) -> None:
+        """Add albedo·E + glossy, upsampled, onto ``target`` (the full-resolution lit HDR texture);
+        ``guide``: the frame's :class:`~serenity.raster.lowres.LowResGuide` texture (same scale)."""
         ctx, p = self.ctx, self.program
         with ctx.debug_scope("indirect:upsample"), self._targets.adding_to(target):
             for loc, (name, tex) in enumerate((("g_albedo", gbuffer.albedo), ("g_normal", gbuffer.normal),
                                                ("g_position", gbuffer.position), ("u_irr", self.irr),
-                                               ("u_gloss", self.gloss))):
+                                               ("u_gloss", self.gloss), ("u_guide", guide))):
                 tex.use(location=loc)
                 p[name].value = loc
             p["u_scale"].value = self.scale

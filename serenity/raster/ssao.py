@@ -43,8 +43,9 @@ class SSAOPass:
         self.fbo_b = self.ctx.framebuffer(color_attachments=[self.tex_b])
         self.size = (width, height)
 
-    def render(self, gbuffer, view_proj: np.ndarray, camera_pos, camera_forward):
-        """AO texture (r16f, 1 = unoccluded) of the G-buffer, at ``low_res_size`` of the view."""
+    def render(self, gbuffer, view_proj: np.ndarray, camera_pos, camera_forward, guide):
+        """AO texture (r16f, 1 = unoccluded) of the G-buffer, at ``low_res_size`` of the view;
+        ``guide``: the frame's :class:`~serenity.raster.lowres.LowResGuide` texture (same scale)."""
         cfg = self.config
         cam = tuple(float(x) for x in camera_pos)
         fwd = tuple(float(x) for x in camera_forward)
@@ -68,13 +69,10 @@ class SSAOPass:
             if cfg.blur_radius <= 0:
                 return self.tex_a
             b = self.blur
-            b["g_position"].value = 0
-            b["g_normal"].value = 1
+            guide.use(location=3)
+            b["u_guide"].value = 3
             b["u_src"].value = 2
             b["u_radius"].value = max(1, round(cfg.blur_radius / self.scale))
-            b["u_scale"].value = self.scale
-            b["u_camera_pos"].value = cam
-            b["u_camera_forward"].value = fwd
             for src, dst, axis in ((self.tex_a, self.fbo_b, (1.0, 0.0)), (self.tex_b, self.fbo_a, (0.0, 1.0))):
                 dst.use()
                 src.use(location=2)

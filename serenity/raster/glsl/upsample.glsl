@@ -3,7 +3,7 @@
 //   L = albedo * E_lo + G_lo,   E_lo, G_lo = sum_i w_i X_i / sum_i w_i over the 2x2 low-res texels
 //   around the pixel, w_i = bilinear_i * exp(-|z_i - z| / (0.05 z)) * max(0, n_i . n)^8
 // where z, n are the pixel's view depth and normal and z_i, n_i those of texel i's representative
-// G-buffer pixel (lowres.glsl). Across a silhouette or a crease the texels of the other surface get
+// G-buffer pixel (lowres.glsl), read from the low-res guide (lowres_guide.glsl). Across a silhouette or a crease the texels of the other surface get
 // ~no weight; when every weight vanishes (a pixel unlike all four) the most similar texel is used.
 #include "fullscreen.glsl"
 
@@ -14,12 +14,12 @@ uniform sampler2D g_normal;
 uniform sampler2D g_position;
 uniform sampler2D u_irr;     // E/pi * AO (W m^-2 sr^-1 per unit albedo)
 uniform sampler2D u_gloss;   // k_s * glossy * AO (W m^-2 sr^-1)
+uniform sampler2D u_guide;   // per low-res texel: xyz = normal, w = view depth (-1: background)
 uniform vec3 u_camera_pos;
 uniform vec3 u_camera_forward;
 out vec4 o_hdr;
 
 void main() {
-    ivec2 full = textureSize(g_position, 0);
     ivec2 px = ivec2(gl_FragCoord.xy);
     vec4 pos = texelFetch(g_position, px, 0);
     if (pos.w == 0.0) { o_hdr = vec4(0.0); return; }
@@ -36,12 +36,11 @@ void main() {
     for (int k = 0; k < 4; ++k) {
         ivec2 o = ivec2(k & 1, k >> 1);
         ivec2 q = clamp(i0 + o, ivec2(0), low_max);
-        ivec2 rq = representative_pixel(q, full);
-        vec4 pq = texelFetch(g_position, rq, 0);
-        vec3 nq = texelFetch(g_normal, rq, 0).xyz;
-        float zq = dot(pq.xyz - u_camera_pos, u_camera_forward);
+        vec4 g = texelFetch(u_guide, q, 0);
         float bil = (o.x == 1 ? f.x : 1.0 - f.x) * (o.y == 1 ? f.y : 1.0 - f.y);
-        float sim = pq.w == 0.0 ? 0.0 : exp(-abs(zq - z) / (0.05 * z + 1e-3)) * pow(max(dot(nq, n), 0.0), 8.0);
+        float c = max(dot(g.xyz, n), 0.0);
+        c *= c; c *= c; c *= c;  // ^8
+        float sim = g.w < 0.0 ? 0.0 : exp(-abs(g.w - z) / (0.05 * z + 1e-3)) * c;
         float w = (bil + 1e-3) * sim;
         vec3 xi = texelFetch(u_irr, q, 0).rgb, xg = texelFetch(u_gloss, q, 0).rgb;
         irr += w * xi; gloss += w * xg; wsum += w;
