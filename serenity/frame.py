@@ -51,7 +51,7 @@ from serenity.raster.fxaa import FXAAPass
 from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.indirect import IndirectPass, LowResIndirect
 from serenity.raster.interop import read_texture
-from serenity.raster.lowres import LowResGuide
+from serenity.raster.lowres import GBufferSamples, LowResGuide
 from serenity.raster.lpv_gl import LPVTexturesGL
 from serenity.raster.raycast import RayCastingBuffer, RayCastPass
 from serenity.raster.rsm import RSMPass
@@ -248,6 +248,8 @@ class Renderer:
         if cfg.lpv.enabled:
             self.rsm_pass = RSMPass(ctx, self.scene_gl, cfg.rsm_size)
             self.lpv = LightPropagationVolume(cfg.lpv, self.device)
+            self.gbuffer_samples = GBufferSamples(ctx, cfg.sky_vpl_stride)
+            self.gbuffer_samples.resize(self.width, self.height)
             self.lpv_gl = LPVTexturesGL(ctx)
             self.lpv_pass = IndirectPass(ctx, "lpv")
             self.lpv_pass_lo = IndirectPass(ctx, "lpv", lowres=True) if self.lowres else None
@@ -497,17 +499,16 @@ class Renderer:
     def _lpv_inputs(self, gbuf, rsm):
         """(VPL sets, surfel sets) of the sun's RSM and of every ``sky_vpl_stride``-th G-buffer
         pixel (the sky-lit G-buffer as a second RSM, paper Fig. 11)."""
-        scene, cam, s = self.scene, self.scene.camera, max(1, int(self.config.sky_vpl_stride))
+        scene, cam = self.scene, self.scene.camera
         vpls = [(rsm.positions, rsm.normals, rsm.flux)]
         surfels = [rsm_surfels(rsm, scene.sun.direction)]
-        c = s // 2
-        pos = self._gbuffer_image(gbuf, "position")[c::s, c::s]
-        nrm = self._gbuffer_image(gbuf, "normal")[c::s, c::s, :3]
+        g = self.gbuffer_samples.read(gbuf)  # every sky_vpl_stride-th pixel, gathered on the GL side
+        pos, nrm = g["position"], g["normal"][..., :3]
         covered = pos[..., 3] > 0
         surfels.append(gbuffer_surfels(pos, nrm, cam.position, cam.forward, cam.fov_y_deg, stride=1, valid=covered))
         e_sky = self._sky_irradiance_at(pos[..., :3], nrm)
         if e_sky is not None:
-            alb = self._gbuffer_image(gbuf, "albedo")[c::s, c::s, :3]
+            alb = g["albedo"][..., :3]
             vpls.append(sky_vpls_from_gbuffer(pos, nrm, alb, e_sky, cam.position, cam.forward, cam.fov_y_deg,
                                               stride=1, valid=covered))
         return vpls, surfels
