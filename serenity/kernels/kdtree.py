@@ -77,7 +77,10 @@ wp.set_module_options({"enable_backward": False})
 # constants
 # ----------------------------------------------------------------------------------------------
 
-STACK_SIZE = KD_MAX_DEPTH + 2  # traversal stack entries: one per level of the deepest tree
+#: traversal stack entries: the stack holds at most one entry per level of the tree (the far children
+#: of the current node's ancestors), so a tree of depth <= KD_MAX_DEPTH never overflows it and the
+#: traversal does not test for that (``KdTree.device_data`` refuses a deeper tree)
+STACK_SIZE = KD_MAX_DEPTH + 2
 T_TOLERANCE = 1e-6  # relative (to the scene scale) overlap of near/far traversal intervals
 BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest extent
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
@@ -92,7 +95,6 @@ _stack_f = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
 _INF = wp.constant(math.inf)
 _TOL = wp.constant(T_TOLERANCE)
 _TINY = wp.constant(TINY_DIRECTION)
-_STACK = wp.constant(STACK_SIZE)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -283,7 +285,7 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
             ia = inv[axis]
             if ia == 0.0:
                 # parallel to the plane: only the side of the origin, both when on the plane
-                if oa == split and sp < _STACK and empty_second == 0:
+                if oa == split and empty_second == 0:
                     st_node[sp] = second
                     st_t0[sp] = t0
                     st_t1[sp] = t1
@@ -299,7 +301,7 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                     node = second
                     leaf_end = empty_second != 0
                 else:
-                    if sp < _STACK and empty_second == 0:
+                    if empty_second == 0:
                         st_node[sp] = second
                         st_t0[sp] = wp.max(t0, ts - teps)
                         st_t1[sp] = t1
@@ -477,6 +479,8 @@ class KdTree:
             empty = leaf & (count == 0)
             if len(head) >= 1 << 27:
                 raise SerenityError(f"kd-tree of {len(head):,} nodes: at most 2^27 fit the 8-byte node")
+            if self.stats.depth >= STACK_SIZE:
+                raise SerenityError(f"kd-tree of depth {self.stats.depth}: the traversal stack has {STACK_SIZE} slots")
             right = np.minimum(child + 1, len(head) - 1)
             flags = (empty[child].astype(np.int64) << 2) | (empty[right].astype(np.int64) << 3)
             nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, (child << 4) | flags | (head & 3))

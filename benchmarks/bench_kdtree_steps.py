@@ -1,0 +1,126 @@
+"""A/B of kd-tree traversal versions in one process: the traversal of several git revisions of
+``serenity/kernels/kdtree.py`` on the same tree and the same rays, timed back to back.
+
+    python benchmarks/bench_kdtree_steps.py --json FILE REV [REV ...] [--rounds 7] [--size 1280x720]
+
+Each REV's ``kdtree.py`` is loaded as its own module (``git show REV:serenity/kernels/kdtree.py``;
+``WORKTREE`` = the file as it is now), so each is its own Warp module; they share this checkout's
+build (``kdtree_build``). Rays as in ``bench_kdtree.py``: coherent camera rays and incoherent
+random rays from their hit points. Every round traces both ray sets once with every version, on
+one thread, in turn; the figure per version is the median over rounds of rays / **CPU seconds of
+the process** (``time.process_time``), not wall time: on a machine shared with other sessions a
+version that happens to be descheduled does not look slower (cache pollution from other processes
+still adds noise: look at ``spread``, the (max − min) / median of the rounds). Hits are checked
+against the first version (same triangle and t on ≥ 99.99 % of the rays).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from serenity.config import KdBuildConfig
+from serenity.device import init_warp
+from serenity.scene.procedural import lumpy_mesh
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_kdtree import camera_rays  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def load_version(rev: str, tmp: Path, k: int):
+    """The kdtree module of git revision ``rev`` (or the working tree), loaded under its own name."""
+    if rev == "WORKTREE":
+        src = (ROOT / "serenity/kernels/kdtree.py").read_text()
+    else:
+        src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:serenity/kernels/kdtree.py"],
+                             check=True, capture_output=True, text=True).stdout
+    name = f"kdtree_step{k}_{rev.replace('~', '_').replace('^', '_')[:12]}"
+    path = tmp / f"{name}.py"
+    path.write_text(src)
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("revs", nargs="+", help="git revisions (WORKTREE = the file as it is now)")
+    ap.add_argument("--json", required=True)
+    ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--size", default="1280x720")
+    ap.add_argument("--subdivisions", type=int, default=6)
+    args = ap.parse_args(argv)
+    init_warp()
+    width, height = (int(x) for x in args.size.lower().split("x"))
+    v, f = lumpy_mesh(args.subdivisions)
+    load_before = os.getloadavg()
+    versions = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, rev in enumerate(args.revs):
+            mod = load_version(rev, Path(tmp), k)
+            tree = mod.KdTree.build(v, f, config=KdBuildConfig(), cache=False, progress=False)
+            versions.append((rev, mod, tree))
+        oc, dc = camera_rays(width, height)
+        hits = versions[0][2].intersect(oc, dc, device="cpu")
+        rng = np.random.default_rng(0)
+        oi = oc.copy()
+        oi[hits.hit] = oc[hits.hit] + dc[hits.hit] * (hits.t[hits.hit] - 1e-3)[:, None]
+        di = rng.normal(size=oc.shape).astype(np.float32)
+        di /= np.linalg.norm(di, axis=1, keepdims=True)
+        sets = {"coherent": (oc, dc), "incoherent": (oi, di)}
+        ref, agreement = {}, {}
+        for rev, _, tree in versions:  # also the warm-up (compile, first touch)
+            for s, (o, d) in sets.items():
+                h = tree.intersect(o, d, device="cpu", threads=1)
+                ref.setdefault(s, h)
+                agreement[(rev, s)] = float(np.mean((h.prim == ref[s].prim) & (h.t == ref[s].t)))
+        cpu = {(rev, s): [] for rev, _, _ in versions for s in sets}
+        for _ in range(args.rounds):
+            for rev, _, tree in versions:
+                for s, (o, d) in sets.items():
+                    c0 = time.process_time()
+                    tree.intersect(o, d, device="cpu", threads=1)
+                    cpu[(rev, s)].append(time.process_time() - c0)
+    out_versions = []
+    base = None
+    for rev, _, tree in versions:
+        entry = {"rev": rev, "nodes": tree.stats.nodes, "references": tree.stats.references}
+        for s, (o, _) in sets.items():
+            ts = cpu[(rev, s)]
+            med = statistics.median(ts)
+            entry[s] = {"mrays_per_cpu_s": len(o) / med / 1e6, "spread": (max(ts) - min(ts)) / med,
+                        "agreement_with_first": agreement[(rev, s)]}
+        base = base or entry
+        for s in sets:
+            entry[s]["vs_first"] = entry[s]["mrays_per_cpu_s"] / base[s]["mrays_per_cpu_s"]
+        out_versions.append(entry)
+        print(f"{rev:>14}: coherent {entry['coherent']['mrays_per_cpu_s']:6.3f} Mrays/CPU-s "
+              f"({entry['coherent']['vs_first']:4.2f}x, spread {entry['coherent']['spread']:.2f})   incoherent "
+              f"{entry['incoherent']['mrays_per_cpu_s']:6.3f} ({entry['incoherent']['vs_first']:4.2f}x, spread "
+              f"{entry['incoherent']['spread']:.2f})", flush=True)
+    out = {"benchmark": "kdtree_steps", "rounds": args.rounds, "size": [width, height],
+           "triangles": len(f), "threads": 1, "timing": "process CPU seconds, median over rounds",
+           "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
+           "versions": out_versions}
+    with open(args.json, "w") as fh:
+        json.dump(out, fh, indent=2)
+    print(f"wrote {args.json}")
+    return out
+
+
+if __name__ == "__main__":
+    main()
