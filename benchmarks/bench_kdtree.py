@@ -28,6 +28,13 @@ Figures (ratios of this run's own measurements; incoherent rays unless ``_cohere
   overheads, not the load; the serial Python before and after the launches is not in it); per ray
   set also ``thread_scaling_cpu_bound_one_chunk_per_thread``, the same for one contiguous chunk per
   thread (the split before ``chunks_per_thread``: uneven, sky above and ground below);
+  ``thread_cpu_efficiency`` (per ray set): Mrays per CPU-second of the process on 2 threads / on 1
+  (1.0: the second thread does its rays at the same CPU cost; below 1: the threads slow each other
+  through the shared L3 and memory); ``thread_scaling_projected`` = ``thread_scaling_cpu_bound`` ×
+  that, the 2-thread speed-up on an otherwise idle machine (the worse ray set at the top level);
+- ``*_cpu`` ratios (``ratio_vs_embree_1t_cpu``, ``speedup_vs_warp_bvh_1t_cpu``, with ``_coherent``):
+  the same 1-thread ratios from CPU seconds of the process instead of wall seconds, which a
+  time-shared (loaded) machine does not distort; ``mrays_per_cpu_s`` per ray set has the rates;
 - ``build_1m_s``: wall seconds of one build of 1 M triangles (no cache), measured;
   ``build_1m_cpu_s`` its CPU seconds (all threads). The sweep over ``--build-sizes`` builds random
   subsets (seeded) of the subdivision-8 scene (2.6 M triangles), with an N log N least-squares fit.
@@ -78,13 +85,18 @@ def camera_rays(width: int, height: int, position=(0.0, 0.6, 3.5), target=(0.0, 
     return np.ascontiguousarray(o, np.float32), d.astype(np.float32)
 
 
-def median_time(fn, repeats: int) -> float:
+def median_time(fn, repeats: int, cpu: dict | None = None, key: str = "") -> float:
+    """Median wall seconds of ``fn`` over ``repeats`` runs after a warm-up; with ``cpu``, also
+    ``cpu[key]`` = the median CPU seconds of the process (all its threads) per run."""
     fn()  # warm-up: compile, first touch
-    times = []
+    times, cpus = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         fn()
         times.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    if cpu is not None:
+        cpu[key] = statistics.median(cpus)
     return statistics.median(times)
 
 
@@ -128,25 +140,26 @@ def _warp_bvh_kernel(wp):
     return query_rays
 
 
-def measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts: list[int], repeats: int) -> dict:
-    """Mrays/s of ours and Warp's BVH on each thread count, Embree on 1 and on all."""
+def measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts: list[int], repeats: int):
+    """Mrays/s (wall) of ours and Warp's BVH on each thread count, Embree on 1 and on all; and
+    Mrays per CPU-second of the process for the same runs (one thread: immune to time-sharing)."""
     n = len(o)
     wo, wd = wp.array(o, dtype=wp.vec3, device="cpu"), wp.array(d, dtype=wp.vec3, device="cpu")
     wt, wpr = wp.empty(n, dtype=float, device="cpu"), wp.empty(n, dtype=wp.int32, device="cpu")
-    rates = {}
+    rates, cpu = {}, {}
     for nt in thread_counts:
         say(f"  {n:,} rays, {nt} thread(s): ours, Warp BVH")
         rates[f"ours_{nt}t"] = n / median_time(lambda nt=nt: tree.intersect(o, d, device="cpu", threads=nt),
-                                               repeats) / 1e6
+                                               repeats, cpu, f"ours_{nt}t") / 1e6
         rates[f"warp_bvh_{nt}t"] = n / median_time(
             lambda nt=nt: launch(query_rays, n, [mesh.id, wo, wd, wt, wpr], device="cpu", threads=nt,
-                                 chunks_per_thread=16), repeats) / 1e6
+                                 chunks_per_thread=16), repeats, cpu, f"warp_bvh_{nt}t") / 1e6
     top = max(thread_counts)
     say(f"  {n:,} rays: Embree on 1 and {top} thread(s)")
-    rates["embree_1t"] = n / median_time(lambda: embree(o, d, 1), repeats) / 1e6
+    rates["embree_1t"] = n / median_time(lambda: embree(o, d, 1), repeats, cpu, "embree_1t") / 1e6
     if top > 1:
         rates[f"embree_{top}t"] = n / median_time(lambda: embree(o, d, top), repeats) / 1e6
-    return rates
+    return rates, {k: n / c / 1e6 for k, c in cpu.items()}
 
 
 def build_sweep(sizes: list[int], repeats: int) -> list[dict]:
@@ -275,11 +288,11 @@ def main(argv=None) -> dict:
         return list(pool.map(lambda c: escene.run(o[c[0]:c[-1] + 1], d[c[0]:c[-1] + 1]), chunks))
 
     figures, table = {}, []
-    scaling, scaling_cpu = [], []
+    scaling, scaling_cpu, scaling_projected = [], [], []
     for name, (o, d) in ray_sets.items():
         say(f"{name} rays")
         n = len(o)
-        rates = measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts, args.repeats)
+        rates, cpu_rates = measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts, args.repeats)
         cpu_bound = thread_cpu_split(wp, lambda o=o, d=d: tree.intersect(o, d, device="cpu", threads=2))
         # the same with one contiguous chunk per thread (the split before chunks_per_thread)
         args_1 = [tree.device_data("cpu"), wp.array(o, dtype=wp.vec3, device="cpu"),
@@ -298,20 +311,30 @@ def main(argv=None) -> dict:
         agree = float(np.mean(((e_prim == ours.prim) & ((e_prim < 0) | close)) | close))
         suffix = "" if name == "incoherent" else "_coherent"
         embree_best = max(rates["embree_1t"], rates.get(f"embree_{threads}t", 0.0))
+        # CPU time: the work per ray on 2 threads against 1 (1.0 = the threads do not slow each other
+        # down through the shared caches and memory); times the balance = the 2-thread speed-up
+        # when each thread has a core of its own
+        efficiency = cpu_rates["ours_2t"] / cpu_rates["ours_1t"]
         figures[name] = {"rays": n, "hit_fraction": float(ours.hit.mean()), "mrays_per_s": rates,
+                         "mrays_per_cpu_s": cpu_rates, "thread_cpu_efficiency": efficiency,
+                         "thread_scaling_projected": cpu_bound * efficiency,
                          "agreement_with_embree": agree, "thread_scaling_cpu_bound": cpu_bound,
                          "thread_scaling_cpu_bound_one_chunk_per_thread": cpu_bound_halves}
         figures[f"ratio_vs_embree_1t{suffix}"] = rates["ours_1t"] / rates["embree_1t"]
+        figures[f"ratio_vs_embree_1t_cpu{suffix}"] = cpu_rates["ours_1t"] / cpu_rates["embree_1t"]
+        figures[f"speedup_vs_warp_bvh_1t_cpu{suffix}"] = cpu_rates["ours_1t"] / cpu_rates["warp_bvh_1t"]
         figures[f"ratio_vs_embree_all_threads{suffix}"] = rates[f"ours_{threads}t"] / embree_best
         figures[f"speedup_vs_warp_bvh_1t{suffix}"] = rates["ours_1t"] / rates["warp_bvh_1t"]
         figures[f"speedup_vs_warp_bvh_all_threads{suffix}"] = rates[f"ours_{threads}t"] / rates[f"warp_bvh_{threads}t"]
         scaling.append(rates["ours_2t"] / rates["ours_1t"])
         scaling_cpu.append(cpu_bound)
+        scaling_projected.append(cpu_bound * efficiency)
         for k, r in rates.items():
             table.append((name, k, r))
     pool.shutdown()
     figures["thread_scaling"] = min(scaling)
     figures["thread_scaling_cpu_bound"] = min(scaling_cpu)
+    figures["thread_scaling_projected"] = min(scaling_projected)
 
     sweep = build_sweep([int(x) for x in args.build_sizes.split(",") if x.strip()], args.repeats)
     one_m = [s for s in sweep if s["triangles"] == 1_000_000]
@@ -347,13 +370,16 @@ def main(argv=None) -> dict:
     print(f"{'rays':<11} {'tracer':<16} {'Mrays/s':>8}")
     for name, k, r in table:
         print(f"{name:<11} {k:<16} {r:8.2f}")
-    for k in ("ratio_vs_embree_1t", "ratio_vs_embree_all_threads", "speedup_vs_warp_bvh_1t",
-              "speedup_vs_warp_bvh_all_threads"):
+    for k in ("ratio_vs_embree_1t", "ratio_vs_embree_1t_cpu", "ratio_vs_embree_all_threads", "speedup_vs_warp_bvh_1t",
+              "speedup_vs_warp_bvh_1t_cpu", "speedup_vs_warp_bvh_all_threads"):
         print(f"{k:<34} incoherent {figures[k]:5.2f}   coherent {figures[k + '_coherent']:5.2f}")
     print(f"thread_scaling (2 threads / 1, worse of the two) {figures['thread_scaling']:.2f}; "
           f"CPU-bound (Σ thread CPU / busiest thread) {figures['thread_scaling_cpu_bound']:.2f}; "
           "one chunk per thread: " + ", ".join(
               f"{k} {figures[k]['thread_scaling_cpu_bound_one_chunk_per_thread']:.2f}" for k in ray_sets))
+    print("CPU cost per ray, 1 thread / 2 threads: " + ", ".join(
+        f"{k} {figures[k]['thread_cpu_efficiency']:.2f}" for k in ray_sets)
+        + f"; projected 2-thread speed-up on an idle machine {figures['thread_scaling_projected']:.2f}")
     print(f"agreement with Embree: coherent {figures['coherent']['agreement_with_embree']:.6f}, "
           f"incoherent {figures['incoherent']['agreement_with_embree']:.6f}")
     if one_m:

@@ -1,11 +1,13 @@
 """A/B of kd-tree traversal versions in one process: the traversal of several git revisions of
 ``serenity/kernels/kdtree.py`` on the same tree and the same rays, timed back to back.
 
-    python benchmarks/bench_kdtree_steps.py --json FILE REV [REV ...] [--rounds 7] [--size 1280x720]
+    python benchmarks/bench_kdtree_steps.py --json FILE REV[@key=value,...] ... [--rounds 7] [--size 1280x720]
 
 Each REV's ``kdtree.py`` is loaded as its own module (``git show REV:serenity/kernels/kdtree.py``;
 ``WORKTREE`` = the file as it is now), so each is its own Warp module; they share this checkout's
-build (``kdtree_build``). Rays as in ``bench_kdtree.py``: coherent camera rays and incoherent
+build (``kdtree_build``), with :class:`serenity.config.KdBuildConfig` defaults unless the version
+says otherwise after an ``@`` (``HEAD@max_depth=40,min_empty_fraction=0.1``: the same traversal
+on a tree built with those settings). Rays as in ``bench_kdtree.py``: coherent camera rays and incoherent
 random rays from their hit points. Every round traces both ray sets once with every version, on
 one thread, in turn; the figure per version is the median over rounds of rays / **CPU seconds of
 the process** (``time.process_time``), not wall time: on a machine shared with other sessions a
@@ -46,7 +48,7 @@ def load_version(rev: str, tmp: Path, k: int):
     else:
         src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:serenity/kernels/kdtree.py"],
                              check=True, capture_output=True, text=True).stdout
-    name = f"kdtree_step{k}_{rev.replace('~', '_').replace('^', '_')[:12]}"
+    name = f"kdtree_step{k}"
     path = tmp / f"{name}.py"
     path.write_text(src)
     spec = importlib.util.spec_from_file_location(name, path)
@@ -71,8 +73,11 @@ def main(argv=None) -> dict:
     versions = []
     with tempfile.TemporaryDirectory() as tmp:
         for k, rev in enumerate(args.revs):
-            mod = load_version(rev, Path(tmp), k)
-            tree = mod.KdTree.build(v, f, config=KdBuildConfig(), cache=False, progress=False)
+            git_rev, _, settings = rev.partition("@")
+            cfg = KdBuildConfig(**{key: json.loads(val) for key, val in
+                                   (kv.split("=") for kv in settings.split(",") if kv)})
+            mod = load_version(git_rev, Path(tmp), k)
+            tree = mod.KdTree.build(v, f, config=cfg, cache=False, progress=False)
             versions.append((rev, mod, tree))
         oc, dc = camera_rays(width, height)
         hits = versions[0][2].intersect(oc, dc, device="cpu")
@@ -98,7 +103,7 @@ def main(argv=None) -> dict:
     out_versions = []
     base = None
     for rev, _, tree in versions:
-        entry = {"rev": rev, "nodes": tree.stats.nodes, "references": tree.stats.references}
+        entry = {"rev": rev, "nodes": tree.stats.nodes, "references": tree.stats.references, "depth": tree.stats.depth}
         for s, (o, _) in sets.items():
             ts = cpu[(rev, s)]
             med = statistics.median(ts)
@@ -108,7 +113,7 @@ def main(argv=None) -> dict:
         for s in sets:
             entry[s]["vs_first"] = entry[s]["mrays_per_cpu_s"] / base[s]["mrays_per_cpu_s"]
         out_versions.append(entry)
-        print(f"{rev:>14}: coherent {entry['coherent']['mrays_per_cpu_s']:6.3f} Mrays/CPU-s "
+        print(f"{rev:>24}: coherent {entry['coherent']['mrays_per_cpu_s']:6.3f} Mrays/CPU-s "
               f"({entry['coherent']['vs_first']:4.2f}x, spread {entry['coherent']['spread']:.2f})   incoherent "
               f"{entry['incoherent']['mrays_per_cpu_s']:6.3f} ({entry['incoherent']['vs_first']:4.2f}x, spread "
               f"{entry['incoherent']['spread']:.2f})", flush=True)
