@@ -277,14 +277,14 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
             second = child + 1
             empty_first = (head >> 2) & 1  # the flags of the empty leaves among the children
             empty_second = (head >> 3) & 1
+            if oa > split or (oa == split and d[axis] > 0.0):
+                first = child + 1
+                second = child
+                empty_first = (head >> 3) & 1
+                empty_second = (head >> 2) & 1
             ia = inv[axis]
             if ia == 0.0:
                 # parallel to the plane: only the side of the origin, both when on the plane
-                if oa > split:
-                    first = child + 1
-                    second = child
-                    empty_first = (head >> 3) & 1
-                    empty_second = (head >> 2) & 1
                 if oa == split and empty_second == 0:
                     st_node[sp] = second
                     st_t0[sp] = t0
@@ -293,14 +293,8 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                 node = first
                 leaf_end = empty_first != 0
             else:
-                # front to back by the direction's sign (Wald): the near child first
-                s = wp.where(ia < 0.0, 1, 0)
-                first = child + s
-                second = child + 1 - s
-                empty_first = (head >> (2 + s)) & 1
-                empty_second = (head >> (3 - s)) & 1
                 ts = (split - oa) * ia
-                if ts > t1 + teps:
+                if ts <= 0.0 or ts > t1 + teps:
                     node = first
                     leaf_end = empty_first != 0
                 elif ts < t0 - teps:
