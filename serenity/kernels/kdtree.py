@@ -39,11 +39,15 @@ On the CPU the launches are split over all cores with :func:`serenity.kernels.la
 ``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
 
 Where the time goes (``perf record -e cpu-clock`` on the Warp-generated CPU code, incoherent rays,
-samples mapped onto the disassembly of the cached object file): about a quarter on the node load
-of each step, a quarter on the triangles' vertex loads and 7 % on a leaf's count — cache misses,
-not arithmetic. Hence the count in the node, the leaf-contiguous ``refs`` and the empty-leaf
-flags. Tried without a measurable gain: two rays per thread with interleaved steps (to overlap
-their misses), -O3 instead of Warp's CPU -O2, other SAH cost ratios.
+samples mapped onto the JIT-loaded code): the largest stalls are the node load of each step and the
+first vertex load of each triangle; the rest is spread over the step's compare-and-branch logic and
+the float64 edge functions. Per ray ~25 inner-node steps against ~6 triangle tests and ~1 non-empty
+leaf (``benchmarks/kdtree_counts.py``): a chain of dependent, data-dependent steps, bound by load
+latency and branch mispredictions. Hence the count in the node, the leaf-contiguous ``refs`` and the
+empty-leaf flags. Tried without a measurable gain (``benchmarks/bench_kdtree_steps.py``): ordering
+the children by the direction's sign instead of the origin's side, a branch-free step, deeper trees
+and a minimum empty-space fraction (fewer steps and tests, no time saved); earlier, two rays per
+thread with interleaved steps, -O3 instead of Warp's CPU -O2, other SAH cost ratios.
 """
 
 from __future__ import annotations
