@@ -88,27 +88,27 @@ def main(argv=None) -> dict:
         di /= np.linalg.norm(di, axis=1, keepdims=True)
         sets = {"coherent": (oc, dc), "incoherent": (oi, di)}
         ref, agreement = {}, {}
-        for rev, _, tree in versions:  # also the warm-up (compile, first touch)
+        for k, (_, _, tree) in enumerate(versions):  # also the warm-up (compile, first touch)
             for s, (o, d) in sets.items():
                 h = tree.intersect(o, d, device="cpu", threads=1)
                 ref.setdefault(s, h)
-                agreement[(rev, s)] = float(np.mean((h.prim == ref[s].prim) & (h.t == ref[s].t)))
-        cpu = {(rev, s): [] for rev, _, _ in versions for s in sets}
+                agreement[(k, s)] = float(np.mean((h.prim == ref[s].prim) & (h.t == ref[s].t)))
+        cpu = {(k, s): [] for k in range(len(versions)) for s in sets}  # by position: a version may repeat
         for _ in range(args.rounds):
-            for rev, _, tree in versions:
+            for k, (_, _, tree) in enumerate(versions):
                 for s, (o, d) in sets.items():
                     c0 = time.process_time()
                     tree.intersect(o, d, device="cpu", threads=1)
-                    cpu[(rev, s)].append(time.process_time() - c0)
+                    cpu[(k, s)].append(time.process_time() - c0)
     out_versions = []
     base = None
-    for rev, _, tree in versions:
+    for k, (rev, _, tree) in enumerate(versions):
         entry = {"rev": rev, "nodes": tree.stats.nodes, "references": tree.stats.references, "depth": tree.stats.depth}
         for s, (o, _) in sets.items():
-            ts = cpu[(rev, s)]
+            ts = cpu[(k, s)]
             med = statistics.median(ts)
             entry[s] = {"mrays_per_cpu_s": len(o) / med / 1e6, "spread": (max(ts) - min(ts)) / med,
-                        "agreement_with_first": agreement[(rev, s)]}
+                        "agreement_with_first": agreement[(k, s)]}
         base = base or entry
         for s in sets:
             entry[s]["vs_first"] = entry[s]["mrays_per_cpu_s"] / base[s]["mrays_per_cpu_s"]
