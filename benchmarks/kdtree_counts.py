@@ -64,7 +64,8 @@ def counting_module(tmp: Path):
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--json", required=True)
-    ap.add_argument("--configs", default=";max_depth=40;min_empty_fraction=0.1;traversal_cost=1.0,max_depth=40")
+    ap.add_argument("--configs", default="min_empty_fraction=0.0;;max_depth=40,min_empty_fraction=0.0;"
+                    "traversal_cost=1.0,max_depth=40,min_empty_fraction=0.0")
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--subdivisions", type=int, default=6)
     args = ap.parse_args(argv)

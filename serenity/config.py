@@ -416,8 +416,11 @@ class KdBuildConfig:
     """C_isect: cost of one ray–triangle test."""
     empty_bonus: float = 0.8
     """Fraction (0..1) of a split's cost removed when one side is empty (empty-space cut-off)."""
-    min_empty_fraction: float = 0.0
-    """The bonus applies only when the empty side is at least this fraction (0..1) of the node's extent."""
+    min_empty_fraction: float = 0.1
+    """The bonus applies only when the empty side is at least this fraction (0..1) of the node's extent.
+    0.1 rather than 0: thin empty slabs cost a traversal step each and save little; with 0.1 the
+    benchmark's rays take 12 % fewer steps and 17 % fewer triangle tests (``kdtree_counts.json``)
+    and coherent rays trace 16-22 % faster per CPU-second (``kdtree_steps*.json``)."""
     bins: int = 32
     """SAH bins per axis per node, 4..64 (a node with fewer triangles gets fewer: the next power of 2)."""
     max_depth: int | None = None

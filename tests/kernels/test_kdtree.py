@@ -392,6 +392,24 @@ def test_empty_and_malformed_meshes_raise():
         KdTree.build(np.zeros((3, 2), np.float32), np.array([[0, 1, 2]]))
 
 
+def test_a_tree_deeper_than_the_traversal_stack_is_refused():
+    """The traversal does not test for stack overflow (one entry per level at most): a tree whose
+    recorded depth exceeds the stack (a foreign or corrupt cache entry) must not reach a kernel."""
+    import dataclasses
+
+    from serenity.kernels.kdtree import STACK_SIZE
+
+    rng = np.random.default_rng(16)
+    v, f = random_soup(rng, 50)
+    tree = KdTree.build(v, f, cache=False)
+    tree.device_data("cpu")  # a real tree is accepted
+    deep = KdTree(tree.vertices, tree.faces, {"node_head": tree.node_head, "node_split": tree.node_split,
+                                              "prims": tree.prims, "box": tree.box},
+                  dataclasses.replace(tree.stats, depth=STACK_SIZE))
+    with pytest.raises(SerenityError, match="stack"):
+        deep.device_data("cpu")
+
+
 def test_nan_vertices_leave_their_triangles_out(device):
     rng = np.random.default_rng(15)
     v, f = random_soup(rng, 100)
