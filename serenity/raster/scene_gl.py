@@ -21,21 +21,40 @@ class DrawRange:
     count: int   # number of indices
 
 
+def bottom_plane_triangles(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) bool: the triangles lying in the plane of the scene's lowest point (y = min y, within
+    1e-6 of the scene's height): a ground under everything. Nothing lies below it, so it shadows
+    nothing — the shadow maps leave it out (on a CPU rasteriser a shadow tile costs its covered
+    texels, and the ground covers most of every tile); where it would have been, the map holds
+    the far plane, which lights a receiver just as the ground's own depth did."""
+    if not len(faces):
+        return np.zeros(0, bool)
+    y = np.asarray(positions, np.float64)[:, 1]
+    eps = 1e-6 * max(float(y.max() - y.min()), 1.0)
+    return np.all(y[faces] <= y.min() + eps, axis=1)
+
+
 class SceneGL:
     """VBO/IBO and per-material textures of a ``Scene``."""
 
     def __init__(self, ctx, scene):
         self.ctx = ctx
         pos, nrm, uv, faces, fmat = scene.merged()
-        order = np.argsort(fmat, kind="stable")
-        faces, fmat = faces[order], fmat[order]
+        floor = bottom_plane_triangles(pos, faces)
+        # casters first, then the bottom plane's triangles, each grouped by material
+        order = np.lexsort((fmat, floor))
+        faces, fmat, floor = faces[order], fmat[order], floor[order]
         self.ranges: list[DrawRange] = []
         if len(fmat):
-            bounds = np.flatnonzero(np.diff(fmat)) + 1
+            group = fmat.astype(np.int64) * 2 + floor
+            bounds = np.flatnonzero(np.diff(group)) + 1
             starts = np.concatenate([[0], bounds])
             ends = np.concatenate([bounds, [len(fmat)]])
             for s, e in zip(starts, ends, strict=True):
                 self.ranges.append(DrawRange(int(fmat[s]), int(s) * 3, int(e - s) * 3))
+        self.caster_index_count = int(np.count_nonzero(~floor)) * 3
+        """Indices of the triangles that can cast a sun shadow: all but the bottom plane's, which
+        come last in the index buffer (``bottom_plane_triangles``)."""
         vertices = np.hstack([pos, nrm, uv]).astype(np.float32)
         self.vbo = ctx.buffer(vertices.tobytes())
         self.ibo = ctx.buffer(faces.astype(np.int32).tobytes())

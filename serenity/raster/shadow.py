@@ -161,6 +161,7 @@ class ShadowPass:
         self.count = cascades
         self.program = load_program(ctx, "shadow_depth.glsl")
         self.vao = scene_gl.vao(self.program, with_attributes=("in_position",))
+        self.caster_index_count = scene_gl.caster_index_count
         tiles = 2 if cascades > 1 else 1
         self.depth = ctx.depth_texture((size * tiles, size * tiles))
         self.depth.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -194,7 +195,8 @@ class ShadowPass:
                 self.fbo.clear(depth=1.0, viewport=tile)
                 self.fbo.viewport = tile
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
-                self.vao.render(moderngl.TRIANGLES)
+                if self.caster_index_count:  # the casters: the bottom plane shadows nothing
+                    self.vao.render(moderngl.TRIANGLES, vertices=self.caster_index_count)
                 self._drawn[i] = key
                 self.redrawn += 1
             self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)

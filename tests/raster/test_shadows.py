@@ -135,3 +135,23 @@ def test_shadow_config_validation():
         ShadowConfig(filter="vsm")
     with pytest.raises(Exception, match="cascades"):
         replace(ShadowConfig(), cascades=7)
+
+
+def test_bottom_plane_is_left_out_of_the_shadow_maps():
+    """The ground under everything shadows nothing: its triangles come last in the index buffer and
+    the shadow pass draws only the ones before (raster/scene_gl.py)."""
+    import numpy as np
+
+    from serenity.raster.scene_gl import bottom_plane_triangles
+    from serenity.scene import load
+
+    pos, _, _, faces, _ = load("courtyard").merged()
+    floor = bottom_plane_triangles(pos, faces)
+    y = pos[:, 1]
+    assert floor.any() and not floor.all()
+    assert np.all(y[faces[floor]] == y.min())
+    assert np.all(y[faces[~floor]].max(axis=1) > y.min())  # a triangle touching the ground still casts
+    # a wall standing on the ground: its bottom edge is at min y, but it is not in the plane
+    wall = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    assert not bottom_plane_triangles(wall, np.array([[0, 1, 2], [0, 2, 3]])).any()
+    assert bottom_plane_triangles(np.zeros((3, 3)), np.array([[0, 1, 2]])).all()  # flat scene: all ground
