@@ -349,14 +349,19 @@ def terrain_sky_case(count: int = 48, rays: int = 256, device=None) -> Case:
 # ----------------------------------------------------------------------------------------------
 
 
-def shadow_scene(elevation: float, azimuth: float = 90.0, wall: bool = False, box: bool = False):
+def shadow_scene(elevation: float, azimuth: float = 90.0, wall: bool = False, box: bool = False,
+                 raised: bool = False):
     """A 40 × 40 m grey plane (albedo 0.5) under a sun of 1000 W/m² (black sky), optionally a 2 m
     high, 0.2 m thick wall along z at x ∈ [−0.1, 0.1], z ∈ [−19, 15] and a 2 m cube at the origin
-    (x, z ∈ [−1, 1]). The camera looks down −z from (−3, 1.7, 18)."""
+    (x, z ∈ [−1, 1]). The camera looks down −z from (−3, 1.7, 18). ``raised``: a 1 m square 1 m
+    under the plane's centre, hidden by it, so the plane is not the scene's bottom plane, which the
+    shadow maps leave out (``raster/scene_gl.bottom_plane_triangles``), but a caster like any other."""
     b = _Builder()
     b.material("plane", albedo=(0.5, 0.5, 0.5))
     b.material("block", albedo=(0.5, 0.5, 0.5))
     b.rect("plane", (0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, -20.0))
+    if raised:
+        b.rect("block", (0.0, -1.0, 0.0), (0.5, 0.0, 0.0), (0.0, 0.0, -0.5))
     if wall:
         b.box("block", (-0.1, 0.0, -19.0), (0.1, 2.0, 15.0), skip=("-y",))
     if box:
@@ -396,8 +401,10 @@ def exact_ground_visibility(scene, points, n: int = 256):
 def shadow_acne_case(elevation: float = 2.0, size=(160, 90)) -> Case:
     """Shadow acne on an open plane under a grazing sun (exact visibility 1 everywhere): fraction of
     ground pixels darker than 0.99 of the unshadowed light, without depth bias and normal offset
-    vs the defaults. Images: visibility."""
-    scene = shadow_scene(elevation)
+    vs the defaults. Images: visibility. The plane is raised over a hidden square (``shadow_scene``):
+    as the scene's bottom plane it would be left out of the shadow maps and could not acne at all,
+    while any surface above it can (a roof, a terrace, a table)."""
+    scene = shadow_scene(elevation, raised=True)
     a = render_sun_visibility(scene, *size, ShadowConfig(bias=0.0, normal_offset=0.0))
     b = render_sun_visibility(scene, *size, ShadowConfig())
     err = [float(np.mean(v[g] < 0.99)) for v, _, g, _ in (a, b)]
