@@ -2,9 +2,9 @@
 
     python benchmarks/bench_lpv_room.py [--json FILE] [--quick]
 
-For each LPV setting (``VARIANTS``: the settings before this change, each of the three changes alone
-— ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — the new default with all three, and two
-near-field alternatives that were measured and not adopted):
+For each LPV setting (``VARIANTS``: the settings before the closed-room work, each of its three changes
+alone — ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — all three, the default (all three +
+``lookup_planes``), and two near-field alternatives that were measured and not adopted):
 
 - ``cornell_indirect``: the Cornell box's indirect light alone at 160×90 (ours = frame with the LPV −
   frame without it; the reference = Mitsuba full − direct, 4096 spp, cached — the same as
@@ -54,20 +54,21 @@ from serenity.scene import load  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 WALL = time.perf_counter
-BEFORE = {"clamp_faces": False, "lookup_occlusion": False, "scene_cells": 0.0}
+BEFORE = {"clamp_faces": False, "lookup_occlusion": False, "scene_cells": 0.0, "lookup_planes": False}
 VARIANTS = {
     "before (paper transfer, view-fitted cells)": BEFORE,
     "face clamp": {**BEFORE, "clamp_faces": True},
     "lookup occlusion": {**BEFORE, "lookup_occlusion": True},
     "scene-fitted coarsest cascade (6 cells)": {**BEFORE, "scene_cells": 6.0},
-    "default (all three)": {},
+    "all three (the previous default)": {"lookup_planes": False},
+    "default (all three + lookup planes)": {},
     "default, scene-fitted 8 cells": {"scene_cells": 8.0},
     "default + lookups without the injected lobes": {"accumulate_injected": False},
     "default + injection offset 1 cell": {"injection_offset": 1.0},
 }
 
 COST_VARIANTS = {k: VARIANTS[k] for k in ("before (paper transfer, view-fitted cells)", "face clamp",
-                                          "default (all three)")}
+                                          "all three (the previous default)", "default (all three + lookup planes)")}
 
 
 def _reference(scene, w, h, spp, component):
@@ -240,7 +241,8 @@ def main(argv=None) -> int:
         out["synthetic_cost"] = synthetic_cost(COST_VARIANTS)
         write_results(args.json, out)
         return 0
-    keys = ("clamp_faces", "lookup_occlusion", "scene_cells", "accumulate_injected", "injection_offset")
+    keys = ("clamp_faces", "lookup_occlusion", "lookup_planes", "scene_cells", "accumulate_injected",
+            "injection_offset")
     out = {"benchmark": "lpv_room", "default_lpv": {k: getattr(LPVConfig(), k) for k in keys},
            "plane_self_illumination": plane_self_illumination(VARIANTS),
            "cornell_indirect": cornell_indirect(VARIANTS), "open_ground": open_ground(VARIANTS)}

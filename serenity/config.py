@@ -249,6 +249,11 @@ class LPVConfig:
     """With the leak guard and the geometry volume: a lookup also drops the trilinear cells that lie
     across a blocking face of the geometry volume from the cell just in front of the surface (the light
     above a sunlit roof does not reach the top of the wall below its ceiling; compiled in/out)."""
+    lookup_planes: bool = True
+    """With the lookup occlusion: the geometry volume also records where its blockers lie inside their
+    cells (the surfels' mean offset along each axis), and a surface on the far side of a blocker that
+    shares its cell takes its home cell across it (a wall row just under a ceiling that lies in a
+    cell's lower half no longer reads the light above the roof; compiled in/out)."""
     view_distance: float = 64.0
     """Metres the outermost cascade reaches along the view direction (capped by the scene size)."""
     cascade_scale: float = 2.0

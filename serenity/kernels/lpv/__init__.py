@@ -43,9 +43,17 @@ Lookup (units):
         which it differs from the home cell h = ⌊u_s + n/4⌋, by the openness 1 − clamp(C0·b0 +
         C1·|b_axis|, 0, 1) of the geometry volume's face between them (taken in h's row): the light
         above a sunlit roof no longer reaches the top of the wall under the ceiling (the bright
-        lines along the Cornell box's ceiling edges). Limit: a blocker in a cell's lower half blocks
-        the face below it, so a point between that face and the blocker shares the far side's
-        cell and is not helped. (An earlier +1 in g let cells up to 1/4 cell behind count:
+        lines along the Cornell box's ceiling edges). Lookup planes (``lookup_planes``, default on):
+        a blocker in a cell's lower half blocks the face below it, so a point between that face
+        and the blocker shared the far side's cell. The geometry volume therefore also keeps,
+        per geometry cell and axis a, Σ w_a·d_a and Σ w_a (w_a = A/s²·n_a², d_a the surfel's
+        offset from the cell's corner, in [−½, ½)); a face's blocker lies t_a = Σ d_a·w_a / Σ w_a
+        (mean over its 4 corners; quantised to 1/254 cell, as the GL twin reads it) from the face.
+        The home cell h moves one cell down axis a when h's low face there is blocked and its
+        blocker lies inside h beyond q = u_s + n/4 (t_a > q_a − h_a), up when its high face is
+        and q lies beyond that blocker. The face's openness for lookups is also at most
+        1 − clamp(Σ w_a, 0, 1) (projected coverage, whichever side the surfels face; the L1
+        blocking of a two-sided slab is only 2/3). (An earlier +1 in g let cells up to 1/4 cell behind count:
         in the Cornell box that lit the ceiling's underside with the sunlit roof's VPLs, relMSE
         of the indirect image 467 → 260 at 32³ when removed.)
     glossy    mean over k = 1..glossy_steps of max(0, C0·l0 + A1·C1·(l.xyz·(−r))) at
