@@ -95,6 +95,12 @@ propagating along d through the face shared with the source is attenuated by
 1 − clamp(B_face(−d), 0, 1), B_face the mean of the 4 geometry cells at the face's corners.
 Two-sided walls: surfels of both sides sum to an isotropic 2/3 block (L1 cannot do better).
 
+Coverage blocking (``coverage_blocking``, off by default): the transmittance of a face is also at most
+1 − clamp(Σ w_a) (the projected coverage of the lookup planes, either side), so a two-sided wall
+thinner than a cell blocks all of the light, not 2/3 (thin-wall leak 0.095 → 0.006 of the lit side).
+Off because in the Cornell box most of the ceiling's LPV light was the sunlit roof's, crossing the
+two-sided ceiling: without it the ceiling gets 0.17× the reference (``bench_lpv_room.py``).
+
 Cascades: ``fit_cascades`` — see its docstring (``scene_cells``: the cascade that holds the whole
 scene has at most that many cells across it, default 6, so light crosses a closed room). Skipped:
 cascades whose box misses the scene, and (after injection) cascades that received no light: they

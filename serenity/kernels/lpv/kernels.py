@@ -483,11 +483,15 @@ def eval_face_transmittance(
     opn: wp.array(dtype=wp.vec3),
     plane: wp.array(dtype=wp.vec3),
     planes: int,
+    flags: int,
     offset: int,
 ):
     """Per receiving cell: transmittance of the face shared with the source at −d, for d = ±x, ±y, ±z;
     and the openness of its three high faces (+x, +y, +z) for the lookup occlusion: 1 − clamp(B(d) or
-    B(−d), whichever blocks more) = 1 − clamp(C0·b0 + C1·|b_axis|, 0, 1)."""
+    B(−d), whichever blocks more) = 1 − clamp(C0·b0 + C1·|b_axis|, 0, 1). With ``planes`` (the offset
+    of the blockers' moments in ``gv``, 0: none) and ``flags`` & 2 (lookup planes) also where each high
+    face's blocker lies (``plane``), and the openness is at most 1 − clamp(Σ w_axis) (projected
+    coverage); with ``flags`` & 1 the transmittances are too (package doc, "Coverage blocking")."""
     i = wp.tid() + offset
     l = find_level(i, levels, n_levels)
     if l < 0:
@@ -508,6 +512,15 @@ def eval_face_transmittance(
     tn[1] = eval_transmittance(gv_face(gv, b, r1, 1, x, y + 1, z), 1, -1.0)
     tp[2] = eval_transmittance(gv_face(gv, b, r1, 2, x, y, z), 2, 1.0)
     tn[2] = eval_transmittance(gv_face(gv, b, r1, 2, x, y, z + 1), 2, -1.0)
+    if planes > 0 and flags % 2 == 1:
+        # an opaque face blocks light from either side: at most 1 − its projected coverage Σ A·n_a²/s²
+        c2 = b + 2 * planes
+        tp[0] = wp.min(tp[0], 1.0 - wp.clamp(gv_face(gv, c2, r1, 0, x, y, z)[0], 0.0, 1.0))
+        tn[0] = wp.min(tn[0], 1.0 - wp.clamp(gv_face(gv, c2, r1, 0, x + 1, y, z)[0], 0.0, 1.0))
+        tp[1] = wp.min(tp[1], 1.0 - wp.clamp(gv_face(gv, c2, r1, 1, x, y, z)[1], 0.0, 1.0))
+        tn[1] = wp.min(tn[1], 1.0 - wp.clamp(gv_face(gv, c2, r1, 1, x, y + 1, z)[1], 0.0, 1.0))
+        tp[2] = wp.min(tp[2], 1.0 - wp.clamp(gv_face(gv, c2, r1, 2, x, y, z)[2], 0.0, 1.0))
+        tn[2] = wp.min(tn[2], 1.0 - wp.clamp(gv_face(gv, c2, r1, 2, x, y, z + 1)[2], 0.0, 1.0))
     trans_pos[i] = tp
     trans_neg[i] = tn
     o = wp.vec3()
@@ -518,7 +531,7 @@ def eval_face_transmittance(
     o[1] = 1.0 - wp.clamp(C0 * by[0] + C1 * wp.abs(by[2]), 0.0, 1.0)
     o[2] = 1.0 - wp.clamp(C0 * bz[0] + C1 * wp.abs(bz[3]), 0.0, 1.0)
     opn[i] = o
-    if planes > 0:
+    if planes > 0 and flags >= 2:
         # where the blocker of each high face lies, relative to the face (cells, in [−½, ½]; 0: none)
         t = wp.vec3()
         px = gv_face(gv, b + planes, r1, 0, x + 1, y, z)

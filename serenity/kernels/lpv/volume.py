@@ -83,6 +83,8 @@ class LightPropagationVolume:
         self._propagate = propagate_kernel(bool(self.config.geometry_volume), bool(self.config.clamp_faces))
         self._occlusion = bool(self.config.leak_guard and self.config.lookup_occlusion and self.config.geometry_volume)
         self._planes = self._occlusion and bool(self.config.lookup_planes)
+        self._coverage = bool(self.config.geometry_volume and self.config.coverage_blocking)
+        self._moments = self._planes or self._coverage  # the geometry volume keeps the blockers' moments
         self._lookup_irradiance = lookup_irradiance_kernel(bool(self.config.leak_guard), self._occlusion,
                                                            self._planes)
         dev = self.device
@@ -94,7 +96,7 @@ class LightPropagationVolume:
         self._n_vec, self._n_cells, self._n_gv = base, cbase, gbase
         self._inj = ScatterGrid(base, dev, threads)
         # the geometry volume: blocking SH, then (lookup_planes) Σ w·offset and Σ w per axis (inject_geometry)
-        self._gv = ScatterGrid(gbase * (3 if self._planes else 1), dev, threads)
+        self._gv = ScatterGrid(gbase * (3 if self._moments else 1), dev, threads)
         self._ping = wp.zeros(base, dtype=wp.vec4, device=dev)
         self._pong = wp.zeros(base, dtype=wp.vec4, device=dev)
         self._accum = wp.zeros(base, dtype=wp.vec4, device=dev)
@@ -189,7 +191,7 @@ class LightPropagationVolume:
         if not (p.shape[0] == n.shape[0] == a.shape[0]):
             raise ValueError(f"surfel arrays differ in length: {p.shape[0]}, {n.shape[0]}, {a.shape[0]}")
         self._gv.scatter(inject_geometry, p.shape[0], [p, n, a, self._fit_table, len(self.fitted),
-                                                      self._n_gv if self._planes else 0])
+                                                      self._n_gv if self._moments else 0])
         self._gv_dirty = True
         self._timed("inject_geometry", t0)
 
@@ -222,7 +224,7 @@ class LightPropagationVolume:
         if cfg.geometry_volume and self._gv_dirty:
             launch(eval_face_transmittance, self._n_cells,
                    [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open, self._plane,
-                    self._n_gv if self._planes else 0],
+                    self._n_gv if self._moments else 0, int(self._coverage) + 2 * int(self._planes)],
                    device=dev, threads=self.threads)
             self._gv_dirty = False
         # hand-over: a cascade's iterations past the finer one's reach (in its own cells) go to "far"
