@@ -129,8 +129,9 @@ light from sources within N of its (small) cells. Two measures, both on by defau
 Known error (measured, ``tests/kernels/test_lpv.py::test_self_illumination_of_a_lit_plane`` and
 ``benchmarks/bench_lpv_room.py``): L1 lobes are wide and propagation is diffusive, so light a lit
 plane's VPLs send sideways reaches the plane itself: a plane of exitance M receives 0.5–0.6·M from
-itself with the paper's transfer and no geometry volume, 0.20–0.41·M with its surfels in the geometry
-volume and the defaults (exact: 0). With the faces next to a lit patch that share its cells, this
+itself with the paper's transfer and no geometry volume, 0.33–0.41·M with its surfels in the geometry
+volume and the defaults (0.20–0.41·M without the lookup planes: the old home cell dropped the cells
+above a plane at 0.6 of a cell; exact: 0). With the faces next to a lit patch that share its cells, this
 is most of what is left of the Cornell box's error (README, "The LPV in a closed room").
 
 Early stop: per cascade, after each iteration the change Σ|ΔDC| is compared with
