@@ -2,9 +2,9 @@
 
     python benchmarks/bench_lpv_room.py [--json FILE] [--quick]
 
-For each LPV setting (``VARIANTS``: the settings before this change, each of the three changes alone
-— ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — the new default with all three, and two
-near-field alternatives that were measured and not adopted):
+For each LPV setting (``VARIANTS``: the settings before the closed-room work, each of its three changes
+alone — ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — all three, the default (all three +
+``lookup_planes``), and near-field / coverage-blocking alternatives that were measured and not adopted):
 
 - ``cornell_indirect``: the Cornell box's indirect light alone at 160×90 (ours = frame with the LPV −
   frame without it; the reference = Mitsuba full − direct, 4096 spp, cached — the same as
@@ -19,6 +19,7 @@ near-field alternatives that were measured and not adopted):
 - ``plane_self_illumination``: E_self/M of a lit plane (the kernel test's set-up: one 16³ cascade
   of 1 m cells, 8 iterations, plane heights 3.01/3.3/3.6/3.9 m, with its surfels in the geometry
   volume as in a frame); exact 0;
+- ``thin_wall``: the worst E_dark/E_lit of the stability suite's thin wall (exact 0);
 - ``synthetic_cost``: CPU-ms of one update on ``bench_lpv.py``'s synthetic workload, before / face
   clamp / default, interleaved (``--cost-only`` re-measures just this into an existing JSON);
 - ``lpv_update_ms``: the frame's LPV update (Σ ``frame.LPV_UPDATE_STAGES``) in the courtyard at 320×180,
@@ -54,20 +55,24 @@ from serenity.scene import load  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 WALL = time.perf_counter
-BEFORE = {"clamp_faces": False, "lookup_occlusion": False, "scene_cells": 0.0}
+BEFORE = {"clamp_faces": False, "lookup_occlusion": False, "scene_cells": 0.0, "lookup_planes": False}
 VARIANTS = {
     "before (paper transfer, view-fitted cells)": BEFORE,
     "face clamp": {**BEFORE, "clamp_faces": True},
     "lookup occlusion": {**BEFORE, "lookup_occlusion": True},
     "scene-fitted coarsest cascade (6 cells)": {**BEFORE, "scene_cells": 6.0},
-    "default (all three)": {},
+    "all three (the previous default)": {"lookup_planes": False},
+    "default (all three + lookup planes)": {},
     "default, scene-fitted 8 cells": {"scene_cells": 8.0},
     "default + lookups without the injected lobes": {"accumulate_injected": False},
     "default + injection offset 1 cell": {"injection_offset": 1.0},
+    "default + coverage blocking": {"coverage_blocking": True},
+    "default + coverage blocking, coarsest cascade 24 iterations": {"coverage_blocking": True,
+                                                                    "iterations": (8, 24, 24)},
 }
 
 COST_VARIANTS = {k: VARIANTS[k] for k in ("before (paper transfer, view-fitted cells)", "face clamp",
-                                          "default (all three)")}
+                                          "all three (the previous default)", "default (all three + lookup planes)")}
 
 
 def _reference(scene, w, h, spp, component):
@@ -190,6 +195,21 @@ def plane_self_illumination(variants):
     return out
 
 
+def thin_wall(variants):
+    """``serenity.eval.stability.lpv_thin_wall`` (a 5 cm two-sided wall lit on one side, 1 m cells, the
+    wall at 5 positions across a cell) per setting: the worst E_dark/E_lit (exact 0) — the figure of
+    ``tests/stability/test_lpv.py`` and bench_stability's LPV thin-wall case."""
+    from serenity.eval.stability import lpv_thin_wall
+
+    out = {}
+    for label, kw in variants.items():
+        kw = {k: v for k, v in kw.items() if k != "iterations"}
+        r = [lpv_thin_wall(f, True, True, **kw) for f in (0.1, 0.3, 0.5, 0.7, 0.9)]
+        out[label] = [d / lit for d, lit in r]
+        print(f"thin wall E_d/E_l {label:<48} worst {max(out[label]):.4f}", flush=True)
+    return out
+
+
 def synthetic_cost(variants, reps=7):
     """CPU-ms (process time, summed over the worker threads) of one LPV update — clear, inject,
     inject_geometry, propagate — on ``bench_lpv.py``'s synthetic courtyard-sized workload (107 k VPLs,
@@ -240,9 +260,10 @@ def main(argv=None) -> int:
         out["synthetic_cost"] = synthetic_cost(COST_VARIANTS)
         write_results(args.json, out)
         return 0
-    keys = ("clamp_faces", "lookup_occlusion", "scene_cells", "accumulate_injected", "injection_offset")
+    keys = ("clamp_faces", "lookup_occlusion", "lookup_planes", "coverage_blocking", "scene_cells",
+            "accumulate_injected", "injection_offset")
     out = {"benchmark": "lpv_room", "default_lpv": {k: getattr(LPVConfig(), k) for k in keys},
-           "plane_self_illumination": plane_self_illumination(VARIANTS),
+           "plane_self_illumination": plane_self_illumination(VARIANTS), "thin_wall": thin_wall(VARIANTS),
            "cornell_indirect": cornell_indirect(VARIANTS), "open_ground": open_ground(VARIANTS)}
     if not args.quick:
         out["courtyard"] = courtyard(VARIANTS)

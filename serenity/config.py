@@ -249,6 +249,18 @@ class LPVConfig:
     """With the leak guard and the geometry volume: a lookup also drops the trilinear cells that lie
     across a blocking face of the geometry volume from the cell just in front of the surface (the light
     above a sunlit roof does not reach the top of the wall below its ceiling; compiled in/out)."""
+    lookup_planes: bool = True
+    """With the lookup occlusion: the geometry volume also records where its blockers lie inside their
+    cells (the surfels' mean offset along each axis), and a surface on the far side of a blocker that
+    shares its cell takes its home cell across it (a wall row just under a ceiling that lies in a
+    cell's lower half no longer reads the light above the roof; compiled in/out)."""
+    coverage_blocking: bool = False
+    """With the geometry volume: propagation through a face is also attenuated by the projected coverage
+    of its surfels (Σ A·n²/s² along the axis, either side): a two-sided wall thinner than a cell blocks
+    all of the light, not the 2/3 its L1 blocking lobe can (``kernels/lpv``, "Coverage blocking"). Off:
+    it takes the thin-wall leak from 0.095 to 0.006 of the lit side, but the Cornell box's ceiling got
+    most of its light through the ceiling from the sunlit roof, and without that leak 0.17× the
+    reference (README, "The LPV in a closed room")."""
     view_distance: float = 64.0
     """Metres the outermost cascade reaches along the view direction (capped by the scene size)."""
     cascade_scale: float = 2.0

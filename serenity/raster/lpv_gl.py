@@ -6,7 +6,8 @@ arbitrary points (tests, debugging).
 .LightPropagationVolume`` (``grids``, ``textures(c)``, ``config``, ``glossy_step_length()``) — this
 module never imports a kernel module (docs/architecture.md, Layers). Per active cascade: three RGBA32F textures
 (R, G, B), RGBA = L1 SH (Y0, x, y, z) of intensity in W/sr, LINEAR, CLAMP_TO_EDGE, and one of face
-openness (``openness(c)``, the lookup occlusion; RGB = +x, +y, +z faces of each cell).
+openness (``openness(c)``, the lookup occlusion; RGB = +x, +y, +z faces of each cell, A = where their
+blockers lie, packed).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ class LPVTexturesGL:
         self.lookup_offset = 0.5
         self.leak_guard = True
         self.occlusion = False
+        self.planes = False
         self.margin = 0.5
         self.band = 2.0
         self.glossy_steps = 8
@@ -66,6 +68,7 @@ class LPVTexturesGL:
         self.lookup_offset = float(cfg.lookup_offset)
         self.leak_guard = bool(cfg.leak_guard)
         self.occlusion = bool(cfg.leak_guard and cfg.lookup_occlusion and cfg.geometry_volume)
+        self.planes = self.occlusion and bool(cfg.lookup_planes)
         self.margin = float(cfg.edge_margin)
         self.band = float(cfg.blend_cells)
         self.glossy_steps = int(cfg.glossy_steps)
@@ -90,7 +93,7 @@ class LPVTexturesGL:
         self._write(program, "u_lpv_geom", self.geom, 4)
         self._write(program, "u_lpv_res", self.res, 1)
         for name, value in (("u_lpv_count", int(self.count)), ("u_lpv_leak_guard", self.leak_guard),
-                            ("u_lpv_occlusion", self.occlusion),
+                            ("u_lpv_occlusion", self.occlusion), ("u_lpv_planes", self.planes),
                             ("u_lpv_glossy_steps", int(self.glossy_steps)),
                             ("u_lpv_lookup_offset", self.lookup_offset), ("u_lpv_margin", self.margin),
                             ("u_lpv_band", self.band), ("u_lpv_glossy_step", self.glossy_step)):

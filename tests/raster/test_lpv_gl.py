@@ -11,9 +11,9 @@ from serenity.kernels import lpv as L
 from serenity.raster.lpv_gl import LPVProbeGL
 
 
-def _volume(leak_guard: bool, cascades: int = 3, occlusion: bool = True):
+def _volume(leak_guard: bool, cascades: int = 3, occlusion: bool = True, planes: bool = True):
     cfg = LPVConfig(resolution=16, cascades=cascades, iterations=6, early_stop=0.0, view_distance=12.0,
-                      leak_guard=leak_guard, lookup_occlusion=occlusion)
+                      leak_guard=leak_guard, lookup_occlusion=occlusion, lookup_planes=planes)
     v = L.LightPropagationVolume(cfg, device="cpu")
     bounds = np.array([[-10.0, 0.0, -10.0], [10.0, 6.0, 10.0]])
     v.fit((np.array([0.0, 2.0, -3.0]), np.array([0.2, 0.0, 1.0])), bounds)
@@ -26,10 +26,11 @@ def _volume(leak_guard: bool, cascades: int = 3, occlusion: bool = True):
     return v, bounds, rng
 
 
-@pytest.mark.parametrize("leak_guard,cascades,occlusion", [(True, 3, True), (True, 3, False), (False, 3, True),
-                                                           (True, 1, True)])
-def test_glsl_lookups_match_warp(gl_ctx, leak_guard, cascades, occlusion):
-    v, bounds, rng = _volume(leak_guard, cascades, occlusion)
+@pytest.mark.parametrize("leak_guard,cascades,occlusion,planes", [(True, 3, True, True), (True, 3, True, False),
+                                                                  (True, 3, False, True), (False, 3, True, True),
+                                                                  (True, 1, True, True)])
+def test_glsl_lookups_match_warp(gl_ctx, leak_guard, cascades, occlusion, planes):
+    v, bounds, rng = _volume(leak_guard, cascades, occlusion, planes)
     assert len(v.grids) == cascades
     m = 3000
     q = rng.uniform(bounds[0] - 1, bounds[1] + 1, (m, 3)).astype(np.float32)

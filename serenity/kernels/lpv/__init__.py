@@ -43,9 +43,17 @@ Lookup (units):
         which it differs from the home cell h = ⌊u_s + n/4⌋, by the openness 1 − clamp(C0·b0 +
         C1·|b_axis|, 0, 1) of the geometry volume's face between them (taken in h's row): the light
         above a sunlit roof no longer reaches the top of the wall under the ceiling (the bright
-        lines along the Cornell box's ceiling edges). Limit: a blocker in a cell's lower half blocks
-        the face below it, so a point between that face and the blocker shares the far side's
-        cell and is not helped. (An earlier +1 in g let cells up to 1/4 cell behind count:
+        lines along the Cornell box's ceiling edges). Lookup planes (``lookup_planes``, default on):
+        a blocker in a cell's lower half blocks the face below it, so a point between that face
+        and the blocker shared the far side's cell. The geometry volume therefore also keeps,
+        per geometry cell and axis a, Σ w_a·d_a and Σ w_a (w_a = A/s²·n_a², d_a the surfel's
+        offset from the cell's corner, in [−½, ½)); a face's blocker lies t_a = Σ d_a·w_a / Σ w_a
+        (mean over its 4 corners; quantised to 1/254 cell, as the GL twin reads it) from the face.
+        The home cell h moves one cell down axis a when h's low face there is blocked and its
+        blocker lies inside h beyond q = u_s + n/4 (t_a > q_a − h_a), up when its high face is
+        and q lies beyond that blocker. The face's openness for lookups is also at most
+        1 − clamp(Σ w_a, 0, 1) (projected coverage, whichever side the surfels face; the L1
+        blocking of a two-sided slab is only 2/3). (An earlier +1 in g let cells up to 1/4 cell behind count:
         in the Cornell box that lit the ceiling's underside with the sunlit roof's VPLs, relMSE
         of the indirect image 467 → 260 at 32³ when removed.)
     glossy    mean over k = 1..glossy_steps of max(0, C0·l0 + A1·C1·(l.xyz·(−r))) at
@@ -87,6 +95,12 @@ propagating along d through the face shared with the source is attenuated by
 1 − clamp(B_face(−d), 0, 1), B_face the mean of the 4 geometry cells at the face's corners.
 Two-sided walls: surfels of both sides sum to an isotropic 2/3 block (L1 cannot do better).
 
+Coverage blocking (``coverage_blocking``, off by default): the transmittance of a face is also at most
+1 − clamp(Σ w_a) (the projected coverage of the lookup planes, either side), so a two-sided wall
+thinner than a cell blocks all of the light, not 2/3 (thin-wall leak 0.095 → 0.006 of the lit side).
+Off because in the Cornell box most of the ceiling's LPV light was the sunlit roof's, crossing the
+two-sided ceiling: without it the ceiling gets 0.17× the reference (``bench_lpv_room.py``).
+
 Cascades: ``fit_cascades`` — see its docstring (``scene_cells``: the cascade that holds the whole
 scene has at most that many cells across it, default 6, so light crosses a closed room). Skipped:
 cascades whose box misses the scene, and (after injection) cascades that received no light: they
@@ -115,8 +129,9 @@ light from sources within N of its (small) cells. Two measures, both on by defau
 Known error (measured, ``tests/kernels/test_lpv.py::test_self_illumination_of_a_lit_plane`` and
 ``benchmarks/bench_lpv_room.py``): L1 lobes are wide and propagation is diffusive, so light a lit
 plane's VPLs send sideways reaches the plane itself: a plane of exitance M receives 0.5–0.6·M from
-itself with the paper's transfer and no geometry volume, 0.20–0.41·M with its surfels in the geometry
-volume and the defaults (exact: 0). With the faces next to a lit patch that share its cells, this
+itself with the paper's transfer and no geometry volume, 0.33–0.41·M with its surfels in the geometry
+volume and the defaults (0.20–0.41·M without the lookup planes: the old home cell dropped the cells
+above a plane at 0.6 of a cell; exact: 0). With the faces next to a lit patch that share its cells, this
 is most of what is left of the Cornell box's error (README, "The LPV in a closed room").
 
 Early stop: per cascade, after each iteration the change Σ|ΔDC| is compared with

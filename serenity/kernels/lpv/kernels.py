@@ -170,16 +170,49 @@ def guard_weight(n: wp.vec3, us: wp.vec3, x: int, y: int, z: int) -> float:
 
 
 @wp.func
-def open_weight(opn: wp.array(dtype=wp.vec3), cell_base: int, res: int, us: wp.vec3, n: wp.vec3, x: int, y: int,
+def home_cell(opn: wp.array(dtype=wp.vec3), plane: wp.array(dtype=wp.vec3), cell_base: int, res: int, us: wp.vec3,
+              n: wp.vec3, planes: bool) -> wp.vec3i:
+    """The cell on the surface's side of the geometry volume (package doc, "Lookup occlusion"): the cell
+    h = ⌊q⌋ of q = us + n/4 (just in front of the surface), moved one cell down an axis when h's low face
+    there is blocked and its blocker lies inside h beyond q (q is then on the far side of the blocker: a
+    wall row just under a ceiling that lies in a cell's lower half), or up when its high face is and q
+    lies beyond that blocker. ``planes``: the blocker offsets are known (else h)."""
+    q = us + 0.25 * n
+    hx = wp.clamp(int(wp.floor(q[0])), 0, res - 1)
+    hy = wp.clamp(int(wp.floor(q[1])), 0, res - 1)
+    hz = wp.clamp(int(wp.floor(q[2])), 0, res - 1)
+    h0 = wp.vec3i(hx, hy, hz)
+    if not planes:
+        return h0
+    hi = plane[cell_base + (hz * res + hy) * res + hx]
+    oh = opn[cell_base + (hz * res + hy) * res + hx]
+    step = wp.vec3i(0, 0, 0)
+    for a in range(3):
+        f = q[a] - float(h0[a])
+        moved = False
+        if h0[a] > 0:
+            lo = wp.vec3i(hx, hy, hz)
+            lo[a] = h0[a] - 1
+            j = cell_base + (lo[2] * res + lo[1]) * res + lo[0]
+            t = plane[j][a]
+            if t > 0.0 and f < t and opn[j][a] < 1.0:
+                step[a] = -1
+                moved = True
+        if not moved and h0[a] < res - 1:
+            if hi[a] < 0.0 and f > 1.0 + hi[a] and oh[a] < 1.0:
+                step[a] = 1
+    return wp.vec3i(hx + step[0], hy + step[1], hz + step[2])
+
+
+@wp.func
+def open_weight(opn: wp.array(dtype=wp.vec3), cell_base: int, res: int, h: wp.vec3i, x: int, y: int,
                 z: int) -> float:
-    """Π over the axes where cell (x, y, z) differs from the home cell h = ⌊us + n/4⌋ (the cell just in
-    front of the surface) of the openness of the face between them on that axis, taken in h's row:
-    a cell behind a wall, floor or ceiling of the geometry volume does not light the surface
-    (package doc, "Lookup occlusion")."""
-    h = us + 0.25 * n
-    hx = wp.clamp(int(wp.floor(h[0])), 0, res - 1)
-    hy = wp.clamp(int(wp.floor(h[1])), 0, res - 1)
-    hz = wp.clamp(int(wp.floor(h[2])), 0, res - 1)
+    """Π over the axes where cell (x, y, z) differs from the home cell h (``home_cell``) of the openness
+    of the face between them on that axis, taken in h's row: a cell behind a wall, floor or ceiling of
+    the geometry volume does not light the surface (package doc, "Lookup occlusion")."""
+    hx = h[0]
+    hy = h[1]
+    hz = h[2]
     f = float(1.0)
     if x != hx:
         f = f * opn[cell_base + (hz * res + hy) * res + wp.min(x, hx)][0]
@@ -192,11 +225,11 @@ def open_weight(opn: wp.array(dtype=wp.vec3), cell_base: int, res: int, us: wp.v
 
 @wp.func
 def trilinear_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3, us: wp.vec3, n: wp.vec3,
-                 guard: bool, opn: wp.array(dtype=wp.vec3), cell_base: int, occlusion: bool) -> wp.vec4:
+                 guard: bool, opn: wp.array(dtype=wp.vec3), cell_base: int, occlusion: bool, h: wp.vec3i) -> wp.vec4:
     """Trilinear SH at grid coordinate u (cells), cell centres at i + 0.5, clamp to edge (GL_LINEAR).
     With ``guard`` (a compile-time constant at every call), each of the 8 cells' weights is also
     multiplied by ``guard_weight`` for a surface at us with normal n and, with ``occlusion``, by
-    ``open_weight`` (the faces of the geometry volume between the surface's home cell and it; ``opn``
+    ``open_weight`` (the faces of the geometry volume between the surface's home cell h and it; ``opn``
     the cascade's face openness from ``cell_base`` on), and renormalised (package doc), plain
     trilinear where they sum below 1e-4."""
     p = u - wp.vec3(0.5, 0.5, 0.5)
@@ -237,7 +270,7 @@ def trilinear_sh(grid: wp.array(dtype=wp.vec4), base: int, res: int, u: wp.vec3,
         if guard:
             gw = w * guard_weight(n, us, xi, yi, zi)
             if occlusion:
-                gw = gw * open_weight(opn, cell_base, res, us, n, xi, yi, zi)
+                gw = gw * open_weight(opn, cell_base, res, h, xi, yi, zi)
             acc += gw * s
             wsum += gw
     if not guard or wsum < 1.0e-4:
@@ -297,7 +330,8 @@ def eval_radiance(s: wp.vec4, w: wp.vec3, a1: float, inv_area: float) -> float:
 @wp.func
 def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p: wp.vec3, n: wp.vec3,
                        lookup_offset: float, leak_guard: bool, margin: float, band: float, keep: float,
-                       opn: wp.array(dtype=wp.vec3), occlusion: bool) -> wp.vec4:
+                       opn: wp.array(dtype=wp.vec3), occlusion: bool, plane: wp.array(dtype=wp.vec3),
+                       planes: bool) -> wp.vec4:
     """Cascade g's share of the irradiance at p (normal n): (α·E_rgb, α), α its blend weight times
     what the finer cascades left (``keep``). The twin of lpv.glsl's lpv_cascade_irradiance."""
     us = grid_coord(g, p)
@@ -307,9 +341,12 @@ def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p
         return wp.vec4()
     inv_area = 1.0 / (g.cell * g.cell)
     n3 = g.res * g.res * g.res
-    sr = trilinear_sh(grids, g.base, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion)
-    sg = trilinear_sh(grids, g.base + n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion)
-    sb = trilinear_sh(grids, g.base + 2 * n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion)
+    h = wp.vec3i()
+    if occlusion:
+        h = home_cell(opn, plane, g.cell_base, g.res, us, n, planes)
+    sr = trilinear_sh(grids, g.base, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion, h)
+    sg = trilinear_sh(grids, g.base + n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion, h)
+    sb = trilinear_sh(grids, g.base + 2 * n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion, h)
     return wp.vec4(alpha * eval_irradiance(sr, n, inv_area), alpha * eval_irradiance(sg, n, inv_area),
                    alpha * eval_irradiance(sb, n, inv_area), alpha)
 
@@ -379,13 +416,16 @@ def inject_geometry(
     areas: wp.array(dtype=float),
     cascades: wp.array(dtype=Cascade),
     n_cascades: int,
+    planes: int,
     slot_starts: wp.array(dtype=int),
     slot_stride: int,
     # outputs
     gv: wp.array(dtype=wp.vec4),
     offset: int,
 ):
-    """Add each surfel's blocking lobe to the geometry cell centred on its nearest cell corner."""
+    """Add each surfel's blocking lobe to the geometry cell centred on its nearest cell corner; with
+    ``planes`` > 0 (the geometry volume's size) also its weighted offset from that corner along each axis
+    at ``planes`` + cell and its weight at 2·``planes`` + cell (where the blocker lies in the cell)."""
     i = wp.tid() + offset
     n = normals[i]
     ln = wp.length(n)
@@ -401,6 +441,13 @@ def inject_geometry(
             cover = areas[i] / (g.cell * g.cell)
             cell = sbase + g.gv_base + (int(u[2]) * r1 + int(u[1])) * r1 + int(u[0])
             wp.atomic_add(gv, cell, wp.vec4(G0 * cover, G1 * cover * n[0], G1 * cover * n[1], G1 * cover * n[2]))
+            if planes > 0:
+                # where the blocker lies along each axis: Σ w_a·d_a and Σ w_a, w_a = cover·n_a², d_a ∈ [−½, ½)
+                # the surfel's offset from the corner (package doc, "Lookup occlusion")
+                d = u - wp.vec3(wp.floor(u[0]), wp.floor(u[1]), wp.floor(u[2])) - wp.vec3(0.5, 0.5, 0.5)
+                w = wp.vec3(cover * n[0] * n[0], cover * n[1] * n[1], cover * n[2] * n[2])
+                wp.atomic_add(gv, cell + planes, wp.vec4(w[0] * d[0], w[1] * d[1], w[2] * d[2], 0.0))
+                wp.atomic_add(gv, cell + 2 * planes, wp.vec4(w[0], w[1], w[2], 0.0))
 
 
 @wp.kernel(enable_backward=False)
@@ -434,11 +481,17 @@ def eval_face_transmittance(
     trans_pos: wp.array(dtype=wp.vec3),
     trans_neg: wp.array(dtype=wp.vec3),
     opn: wp.array(dtype=wp.vec3),
+    plane: wp.array(dtype=wp.vec3),
+    planes: int,
+    flags: int,
     offset: int,
 ):
     """Per receiving cell: transmittance of the face shared with the source at −d, for d = ±x, ±y, ±z;
     and the openness of its three high faces (+x, +y, +z) for the lookup occlusion: 1 − clamp(B(d) or
-    B(−d), whichever blocks more) = 1 − clamp(C0·b0 + C1·|b_axis|, 0, 1)."""
+    B(−d), whichever blocks more) = 1 − clamp(C0·b0 + C1·|b_axis|, 0, 1). With ``planes`` (the offset
+    of the blockers' moments in ``gv``, 0: none) and ``flags`` & 2 (lookup planes) also where each high
+    face's blocker lies (``plane``), and the openness is at most 1 − clamp(Σ w_axis) (projected
+    coverage); with ``flags`` & 1 the transmittances are too (package doc, "Coverage blocking")."""
     i = wp.tid() + offset
     l = find_level(i, levels, n_levels)
     if l < 0:
@@ -459,6 +512,15 @@ def eval_face_transmittance(
     tn[1] = eval_transmittance(gv_face(gv, b, r1, 1, x, y + 1, z), 1, -1.0)
     tp[2] = eval_transmittance(gv_face(gv, b, r1, 2, x, y, z), 2, 1.0)
     tn[2] = eval_transmittance(gv_face(gv, b, r1, 2, x, y, z + 1), 2, -1.0)
+    if planes > 0 and flags % 2 == 1:
+        # an opaque face blocks light from either side: at most 1 − its projected coverage Σ A·n_a²/s²
+        c2 = b + 2 * planes
+        tp[0] = wp.min(tp[0], 1.0 - wp.clamp(gv_face(gv, c2, r1, 0, x, y, z)[0], 0.0, 1.0))
+        tn[0] = wp.min(tn[0], 1.0 - wp.clamp(gv_face(gv, c2, r1, 0, x + 1, y, z)[0], 0.0, 1.0))
+        tp[1] = wp.min(tp[1], 1.0 - wp.clamp(gv_face(gv, c2, r1, 1, x, y, z)[1], 0.0, 1.0))
+        tn[1] = wp.min(tn[1], 1.0 - wp.clamp(gv_face(gv, c2, r1, 1, x, y + 1, z)[1], 0.0, 1.0))
+        tp[2] = wp.min(tp[2], 1.0 - wp.clamp(gv_face(gv, c2, r1, 2, x, y, z)[2], 0.0, 1.0))
+        tn[2] = wp.min(tn[2], 1.0 - wp.clamp(gv_face(gv, c2, r1, 2, x, y, z + 1)[2], 0.0, 1.0))
     trans_pos[i] = tp
     trans_neg[i] = tn
     o = wp.vec3()
@@ -469,6 +531,31 @@ def eval_face_transmittance(
     o[1] = 1.0 - wp.clamp(C0 * by[0] + C1 * wp.abs(by[2]), 0.0, 1.0)
     o[2] = 1.0 - wp.clamp(C0 * bz[0] + C1 * wp.abs(bz[3]), 0.0, 1.0)
     opn[i] = o
+    if planes > 0 and flags >= 2:
+        # where the blocker of each high face lies, relative to the face (cells, in [−½, ½]; 0: none)
+        t = wp.vec3()
+        px = gv_face(gv, b + planes, r1, 0, x + 1, y, z)
+        wx = gv_face(gv, b + 2 * planes, r1, 0, x + 1, y, z)
+        py = gv_face(gv, b + planes, r1, 1, x, y + 1, z)
+        wy = gv_face(gv, b + 2 * planes, r1, 1, x, y + 1, z)
+        pz = gv_face(gv, b + planes, r1, 2, x, y, z + 1)
+        wz = gv_face(gv, b + 2 * planes, r1, 2, x, y, z + 1)
+        if wx[0] > 1.0e-6:
+            t[0] = wp.clamp(px[0] / wx[0], -0.5, 0.5)
+        if wy[1] > 1.0e-6:
+            t[1] = wp.clamp(py[1] / wy[1], -0.5, 0.5)
+        if wz[2] > 1.0e-6:
+            t[2] = wp.clamp(pz[2] / wz[2], -0.5, 0.5)
+        # quantised to 1/254 cell: what the GL twin unpacks (LightPropagationVolume.openness)
+        for a in range(3):
+            t[a] = wp.round((t[a] + 0.5) * 254.0) / 254.0 - 0.5
+        plane[i] = t
+        # a lookup is blocked by a face's projected coverage Σ A·n_a²/s² too, whichever side the surfels
+        # face (two-sided, the L1 blocking above is only 2/3)
+        o[0] = wp.min(o[0], 1.0 - wp.clamp(wx[0], 0.0, 1.0))
+        o[1] = wp.min(o[1], 1.0 - wp.clamp(wy[1], 0.0, 1.0))
+        o[2] = wp.min(o[2], 1.0 - wp.clamp(wz[2], 0.0, 1.0))
+        opn[i] = o
 
 
 @kernel_factory(geometry_volume=(False, True), clamp_faces=(False, True))
@@ -610,10 +697,11 @@ def hand_over_far(
     accum[j + 2 * n3] = accum[j + 2 * n3] + add_b
 
 
-@kernel_factory(leak_guard=(False, True), occlusion=(False, True))
-def lookup_irradiance_kernel(leak_guard: bool, occlusion: bool = False):
+@kernel_factory(leak_guard=(False, True), occlusion=(False, True), planes=(False, True))
+def lookup_irradiance_kernel(leak_guard: bool, occlusion: bool = False, planes: bool = False):
     """Irradiance lookups (W/m², RGB) at points with unit normals, cascades blended finest first; the
-    leak guard and its lookup occlusion (package doc) compiled in or out."""
+    leak guard, its lookup occlusion and the blockers' positions in the home cell (package doc)
+    compiled in or out."""
 
     @wp.kernel(enable_backward=False, module="unique")
     def lookup_irradiance(
@@ -622,6 +710,7 @@ def lookup_irradiance_kernel(leak_guard: bool, occlusion: bool = False):
         normals: wp.array(dtype=wp.vec3),
         grids: wp.array(dtype=wp.vec4),
         opn: wp.array(dtype=wp.vec3),
+        plane: wp.array(dtype=wp.vec3),
         cascades: wp.array(dtype=Cascade),
         n_cascades: int,
         lookup_offset: float,
@@ -639,7 +728,7 @@ def lookup_irradiance_kernel(leak_guard: bool, occlusion: bool = False):
         for c in range(n_cascades):
             r = cascade_irradiance(grids, cascades[c], c == n_cascades - 1, p, n, lookup_offset,
                                    wp.static(leak_guard), margin, band, keep, opn,
-                                   wp.static(occlusion))
+                                   wp.static(occlusion), plane, wp.static(planes))
             e += wp.vec3(r[0], r[1], r[2])
             keep = keep - r[3]
         out[i] = e

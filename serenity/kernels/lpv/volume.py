@@ -82,7 +82,11 @@ class LightPropagationVolume:
         self.iterations_run: list[int] = []
         self._propagate = propagate_kernel(bool(self.config.geometry_volume), bool(self.config.clamp_faces))
         self._occlusion = bool(self.config.leak_guard and self.config.lookup_occlusion and self.config.geometry_volume)
-        self._lookup_irradiance = lookup_irradiance_kernel(bool(self.config.leak_guard), self._occlusion)
+        self._planes = self._occlusion and bool(self.config.lookup_planes)
+        self._coverage = bool(self.config.geometry_volume and self.config.coverage_blocking)
+        self._moments = self._planes or self._coverage  # the geometry volume keeps the blockers' moments
+        self._lookup_irradiance = lookup_irradiance_kernel(bool(self.config.leak_guard), self._occlusion,
+                                                           self._planes)
         dev = self.device
         self._levels: list[_Level] = []
         base = cbase = gbase = 0
@@ -91,7 +95,8 @@ class LightPropagationVolume:
             base, cbase, gbase = base + 3 * r**3, cbase + r**3, gbase + (r + 1) ** 3
         self._n_vec, self._n_cells, self._n_gv = base, cbase, gbase
         self._inj = ScatterGrid(base, dev, threads)
-        self._gv = ScatterGrid(gbase, dev, threads)
+        # the geometry volume: blocking SH, then (lookup_planes) Σ w·offset and Σ w per axis (inject_geometry)
+        self._gv = ScatterGrid(gbase * (3 if self._moments else 1), dev, threads)
         self._ping = wp.zeros(base, dtype=wp.vec4, device=dev)
         self._pong = wp.zeros(base, dtype=wp.vec4, device=dev)
         self._accum = wp.zeros(base, dtype=wp.vec4, device=dev)
@@ -100,6 +105,7 @@ class LightPropagationVolume:
         self._trans_pos = wp.ones(cbase, dtype=wp.vec3, device=dev)
         self._trans_neg = wp.ones(cbase, dtype=wp.vec3, device=dev)
         self._open = wp.ones(cbase, dtype=wp.vec3, device=dev)
+        self._plane = wp.zeros(cbase, dtype=wp.vec3, device=dev)
         self._change = wp.zeros(cbase, dtype=float, device=dev)
         self._total = wp.zeros(cbase, dtype=float, device=dev)
         self._level_table = wp.array([v.struct() for v in self._levels], dtype=Cascade, device=dev)
@@ -184,7 +190,8 @@ class LightPropagationVolume:
         a = self._staging.input(areas, "gv_a", float, 1)
         if not (p.shape[0] == n.shape[0] == a.shape[0]):
             raise ValueError(f"surfel arrays differ in length: {p.shape[0]}, {n.shape[0]}, {a.shape[0]}")
-        self._gv.scatter(inject_geometry, p.shape[0], [p, n, a, self._fit_table, len(self.fitted)])
+        self._gv.scatter(inject_geometry, p.shape[0], [p, n, a, self._fit_table, len(self.fitted),
+                                                      self._n_gv if self._moments else 0])
         self._gv_dirty = True
         self._timed("inject_geometry", t0)
 
@@ -216,7 +223,8 @@ class LightPropagationVolume:
         self._tables(self.grids, self._cas_table)
         if cfg.geometry_volume and self._gv_dirty:
             launch(eval_face_transmittance, self._n_cells,
-                   [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open],
+                   [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open, self._plane,
+                    self._n_gv if self._moments else 0, int(self._coverage) + 2 * int(self._planes)],
                    device=dev, threads=self.threads)
             self._gv_dirty = False
         # hand-over: a cascade's iterations past the finer one's reach (in its own cells) go to "far"
@@ -335,7 +343,7 @@ class LightPropagationVolume:
         out = self._staging.buffer("out", p.shape[0], wp.vec3)
         cfg = self.config
         launch(self._lookup_irradiance, p.shape[0],
-               [p, n, self._accum, self._open, self._cas_table, len(self.grids), float(cfg.lookup_offset),
+               [p, n, self._accum, self._open, self._plane, self._cas_table, len(self.grids), float(cfg.lookup_offset),
                 float(cfg.edge_margin), float(cfg.blend_cells if blend else 0.0), out],
                device=self.device, threads=self.threads)
         res = out.numpy().copy()
@@ -376,10 +384,15 @@ class LightPropagationVolume:
     def openness(self, cascade: int) -> np.ndarray:
         """Face openness of active cascade ``cascade`` for GL upload: float32 (Z, Y, X, 4), RGB = 1 − the
         geometry volume's blocking of the cell's +x, +y, +z faces (1 = open; all 1 without a geometry
-        volume), A = 1."""
+        volume); A = where the blockers of those faces lie (``lookup_planes``), t ∈ [−½, ½] cells from
+        the face, packed as the integer qx + 256·qy + 65536·qz, q = round((t + ½)·254) (exact in float32;
+        lpv.glsl unpacks it; 127 per axis = on the face)."""
         lv = self._levels[self.grids[cascade].level]
-        o = self._open.numpy()[lv.cell_base:lv.cell_base + lv.res**3].reshape(lv.res, lv.res, lv.res, 3)
-        return np.concatenate([o, np.ones(o.shape[:3] + (1,), np.float32)], axis=-1)
+        sl = slice(lv.cell_base, lv.cell_base + lv.res**3)
+        o = self._open.numpy()[sl].reshape(lv.res, lv.res, lv.res, 3)
+        q = np.rint((self._plane.numpy()[sl].reshape(o.shape).astype(np.float64) + 0.5) * 254.0).clip(0, 254)
+        a = (q[..., 0] + 256.0 * q[..., 1] + 65536.0 * q[..., 2]).astype(np.float32)
+        return np.concatenate([o, a[..., None]], axis=-1)
 
     def level_grid(self, level: int, which: str = "accum") -> np.ndarray:
         """A config level's grid as numpy: (3, res, res, res, 4) float32 (RGB, z, y, x, SH) for

@@ -26,6 +26,7 @@ uniform sampler3D u_lpv_o0;           // per cascade: RGB = openness of the cell
 uniform sampler3D u_lpv_o1;           // (1 - the geometry volume's blocking; lookup occlusion)
 uniform sampler3D u_lpv_o2;
 uniform bool u_lpv_occlusion;         // the leak guard also drops cells across a blocking face
+uniform bool u_lpv_planes;            // the home cell crosses a blocker inside it (A of u_lpv_o*)
 uniform vec4 u_lpv_geom[3];           // xyz: grid min corner (m), w: cell size (m)
 uniform int u_lpv_res[3];             // cells per axis
 uniform int u_lpv_count;              // active cascades, 0..3 (0: the LPV adds nothing)
@@ -64,9 +65,43 @@ void lpv_fetch(sampler3D tr, sampler3D tg, sampler3D tb, int res, vec3 u, out ve
     sr = textureLod(tr, t, 0.0); sg = textureLod(tg, t, 0.0); sb = textureLod(tb, t, 0.0);
 }
 
+// Where the blockers of cell i's +x, +y, +z faces lie, in cells from the face (0: on it): the openness
+// texel's A, qx + 256 qy + 65536 qz with q = round((t + 1/2) 254) (LightPropagationVolume.openness).
+vec3 lpv_planes(sampler3D to, ivec3 i) {
+    float a = texelFetch(to, i, 0).a;
+    float qz = floor(a * (1.0 / 65536.0));
+    a -= qz * 65536.0;
+    float qy = floor(a * (1.0 / 256.0));
+    float qx = a - qy * 256.0;
+    return vec3(qx, qy, qz) * (1.0 / 254.0) - 0.5;
+}
+
+// The home cell (the twin of kernels.home_cell): h = floor(q), q = us + n/4, moved down an axis when
+// h's low face there is blocked and its blocker lies inside h beyond q, up when the high face's does.
+ivec3 lpv_home(sampler3D to, int res, vec3 us, vec3 n) {
+    vec3 q = us + 0.25 * n;
+    ivec3 h = clamp(ivec3(floor(q)), ivec3(0), ivec3(res - 1));
+    if (!u_lpv_planes) return h;
+    ivec3 h0 = h;
+    vec4 oh = texelFetch(to, h0, 0);
+    vec3 thi = lpv_planes(to, h0);
+    for (int a = 0; a < 3; ++a) {
+        float f = q[a] - float(h0[a]);
+        bool moved = false;
+        if (h0[a] > 0) {
+            ivec3 lo = h0;
+            lo[a] -= 1;
+            float t = lpv_planes(to, lo)[a];
+            if (t > 0.0 && f < t && texelFetch(to, lo, 0)[a] < 1.0) { h[a] -= 1; moved = true; }
+        }
+        if (!moved && h0[a] < res - 1 && thi[a] < 0.0 && f > 1.0 + thi[a] && oh[a] < 1.0) h[a] += 1;
+    }
+    return h;
+}
+
 // Trilinear with each of the 8 cells also weighted by g = clamp(4 n.(centre - us), 0, 1):
 // cells whose centre lies behind the surface point us (cells) do not light it; with u_lpv_occlusion
-// also by the openness of the faces between the home cell h = floor(us + n/4) and the cell, one per
+// also by the openness of the faces between the home cell h (lpv_home) and the cell, one per
 // axis where they differ, taken in h's row (the twin of kernels.open_weight).
 void lpv_fetch_guarded(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D to, int res, vec3 u, vec3 us, vec3 n,
                        out vec4 sr, out vec4 sg, out vec4 sb) {
@@ -75,7 +110,7 @@ void lpv_fetch_guarded(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D to, i
     vec3 t = p - f;
     ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1));
     ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1));
-    ivec3 h = clamp(ivec3(floor(us + 0.25 * n)), ivec3(0), ivec3(res - 1));
+    ivec3 h = u_lpv_occlusion ? lpv_home(to, res, us, n) : ivec3(0);
     // openness of the face between h and i0 / i1 on each axis (1 where they coincide)
     vec3 o0 = vec3(1.0), o1 = vec3(1.0);
     if (u_lpv_occlusion) {
