@@ -13,6 +13,7 @@ above the geometric horizon (:func:`sun_disc_fraction`: it fades over ±0.27° i
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -105,11 +106,18 @@ def sample_sky_map_np(sky_map: np.ndarray, directions) -> np.ndarray:
     return top * (1 - ay) + bot * ay
 
 
+@functools.lru_cache(maxsize=8)
+def _horizontal_weights(size: int) -> np.ndarray:
+    """(size², ) float64 solid angle × cosθ of every texel (read-only; cached per size)."""
+    w = (sky_map_solid_angles(size) * np.maximum(sky_map_directions(size)[..., 1], 0.0)).reshape(-1)
+    w.setflags(write=False)
+    return w
+
+
 def horizontal_irradiance(sky_map: np.ndarray) -> np.ndarray:
     """(3,) W·m⁻² the sky map delivers to an upward-facing horizontal surface (∫ L cosθ dω)."""
     size = sky_map.shape[0]
-    w = sky_map_solid_angles(size) * np.maximum(sky_map_directions(size)[..., 1], 0.0)
-    return np.einsum("ij,ijc->c", w, np.asarray(sky_map, np.float64))
+    return _horizontal_weights(size) @ np.asarray(sky_map, np.float64).reshape(-1, 3)
 
 
 
