@@ -119,7 +119,8 @@ def fullscreen_vao(ctx, program):
 class FullscreenPass:
     """A fullscreen-triangle program (``SHADER``, which includes ``fullscreen.glsl``) drawing into
     its own colour targets, named with (components, dtype) in ``TARGETS`` and (re)allocated as
-    attributes of those names, plus ``fbo``, by :meth:`resize`."""
+    attributes of those names, plus ``fbo``, by :meth:`resize` — at :meth:`target_size` of the
+    view (the view's size unless a pass says otherwise)."""
 
     SHADER: str = ""
     TARGETS: dict[str, tuple[int, str]] = {}
@@ -139,11 +140,15 @@ class FullscreenPass:
                 getattr(self, name).release()
         targets = []
         for name, (components, dtype) in self.TARGETS.items():
-            tex = self.ctx.texture((width, height), components, dtype=dtype)
+            tex = self.ctx.texture(self.target_size(width, height), components, dtype=dtype)
             setattr(self, name, tex)
             targets.append(tex)
         self.fbo = self.ctx.framebuffer(color_attachments=targets)
         self.size = (width, height)
+
+    def target_size(self, width: int, height: int) -> tuple[int, int]:
+        """Size of the targets for a width×height view."""
+        return width, height
 
 
 def low_res_size(width: int, height: int, scale: int) -> tuple[int, int]:

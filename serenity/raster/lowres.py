@@ -8,31 +8,22 @@ gathered on the GL side, so the LPV's sky VPLs read back 1/n² of the G-buffer."
 
 from __future__ import annotations
 
-import moderngl
 import numpy as np
 
-from serenity.raster.context import fullscreen_vao, load_program, low_res_size
+from serenity.raster.context import FullscreenPass, low_res_size
 from serenity.raster.interop import read_texture
 
 
-class LowResGuide:
-    def __init__(self, ctx, scale: int):
-        self.ctx = ctx
-        self.scale = max(1, int(scale))
-        self.program = load_program(ctx, "lowres_guide.glsl")
-        self.vao = fullscreen_vao(ctx, self.program)
-        self.size = None
+class LowResGuide(FullscreenPass):
+    SHADER = "lowres_guide.glsl"
+    TARGETS = {"guide": (4, "f4")}
 
-    def resize(self, width: int, height: int) -> None:
-        if self.size == (width, height):
-            return
-        if self.size is not None:
-            self.fbo.release()
-            self.guide.release()
-        self.guide = self.ctx.texture(low_res_size(width, height, self.scale), 4, dtype="f4")
-        self.guide.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.fbo = self.ctx.framebuffer(color_attachments=[self.guide])
-        self.size = (width, height)
+    def __init__(self, ctx, scale: int):
+        super().__init__(ctx)
+        self.scale = max(1, int(scale))
+
+    def target_size(self, width: int, height: int) -> tuple[int, int]:
+        return low_res_size(width, height, self.scale)
 
     def render(self, gbuffer, camera_pos, camera_forward):
         """The (W/scale, H/scale) RGBA32F guide texture of ``gbuffer``."""
@@ -50,32 +41,22 @@ class LowResGuide:
         return self.guide
 
 
-class GBufferSamples:
+class GBufferSamples(FullscreenPass):
     """Every ``stride``-th pixel of the G-buffer's position, normal and albedo, starting at ``stride // 2``
     (``glsl/gbuffer_samples.glsl``), read back as (rows, cols, 4) float32 images, top row first — the
     same arrays as ``read_texture(target)[c::s, c::s]`` at 1/stride² of the read-back."""
 
-    NAMES = ("position", "normal", "albedo")
+    SHADER = "gbuffer_samples.glsl"
+    TARGETS = {"position": (4, "f4"), "normal": (4, "f4"), "albedo": (4, "f4")}
+    NAMES = tuple(TARGETS)
 
     def __init__(self, ctx, stride: int):
-        self.ctx = ctx
+        super().__init__(ctx)
         self.stride = max(1, int(stride))
-        self.program = load_program(ctx, "gbuffer_samples.glsl")
-        self.vao = fullscreen_vao(ctx, self.program)
-        self.size = None
 
-    def resize(self, width: int, height: int) -> None:
-        if self.size == (width, height):
-            return
-        if self.size is not None:
-            self.fbo.release()
-            for t in self.targets:
-                t.release()
+    def target_size(self, width: int, height: int) -> tuple[int, int]:
         first = self.stride // 2
-        self.out_size = (len(range(first, width, self.stride)), len(range(first, height, self.stride)))
-        self.targets = [self.ctx.texture(self.out_size, 4, dtype="f4") for _ in self.NAMES]
-        self.fbo = self.ctx.framebuffer(color_attachments=self.targets)
-        self.size = (width, height)
+        return len(range(first, width, self.stride)), len(range(first, height, self.stride))
 
     def read(self, gbuffer) -> dict[str, np.ndarray]:
         """{"position", "normal", "albedo"}: the sampled pixels, (rows, cols, 4) float32."""
@@ -87,6 +68,6 @@ class GBufferSamples:
                 p[f"g_{name}"].value = loc
             p["u_first"].value = self.stride // 2
             p["u_stride"].value = self.stride
-            p["u_rows_out"].value = self.out_size[1]
+            p["u_rows_out"].value = self.position.height
             self.vao.render(vertices=3)
-        return {name: read_texture(t, 4) for name, t in zip(self.NAMES, self.targets, strict=True)}
+        return {name: read_texture(getattr(self, name), 4) for name in self.NAMES}
