@@ -33,12 +33,25 @@ import numpy as np
 
 from serenity.config import KdBuildConfig
 from serenity.device import init_warp
+from serenity.io.results import write_results
 from serenity.scene.procedural import lumpy_mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_kdtree import camera_rays  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def module_from_source(name: str, src: str, tmp: Path):
+    """Python source ``src`` written to ``tmp`` and imported as module ``name`` (Warp needs its
+    kernels in a real file)."""
+    path = tmp / f"{name}.py"
+    path.write_text(src)
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def load_version(rev: str, tmp: Path, k: int):
@@ -48,14 +61,7 @@ def load_version(rev: str, tmp: Path, k: int):
     else:
         src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:serenity/kernels/kdtree.py"],
                              check=True, capture_output=True, text=True).stdout
-    name = f"kdtree_step{k}"
-    path = tmp / f"{name}.py"
-    path.write_text(src)
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return module_from_source(f"kdtree_step{k}", src, tmp)
 
 
 def main(argv=None) -> dict:
@@ -121,9 +127,7 @@ def main(argv=None) -> dict:
            "triangles": len(f), "threads": 1, "timing": "process CPU seconds, median over rounds",
            "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
            "versions": out_versions}
-    with open(args.json, "w") as fh:
-        json.dump(out, fh, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, out)
     return out
 
 

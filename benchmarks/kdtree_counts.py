@@ -12,7 +12,6 @@ against the real traversal on the same tree. Rays as in ``bench_kdtree.py``.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import sys
 import tempfile
@@ -22,10 +21,12 @@ import numpy as np
 
 from serenity.config import KdBuildConfig
 from serenity.device import init_warp
+from serenity.io.results import write_results
 from serenity.scene.procedural import lumpy_mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_kdtree import camera_rays  # noqa: E402
+from bench_kdtree_steps import module_from_source  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -52,13 +53,7 @@ def counting_module(tmp: Path):
         if src.count(old) != 1:
             raise SystemExit(f"kdtree_counts: the traversal changed, cannot place a counter at:\n{old}")
         src = src.replace(old, new)
-    path = tmp / "kdtree_counting.py"
-    path.write_text(src)
-    spec = importlib.util.spec_from_file_location("kdtree_counting", path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["kdtree_counting"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return module_from_source("kdtree_counting", src, tmp)
 
 
 def main(argv=None) -> dict:
@@ -110,9 +105,7 @@ def main(argv=None) -> dict:
                       f"{leaves.mean():4.2f}, triangle tests {tris.mean():4.2f}, pops {pops.mean():4.2f}", flush=True)
             rows.append(row)
     out = {"benchmark": "kdtree_counts", "triangles": len(f), "size": [width, height], "per_ray_means": rows}
-    with open(args.json, "w") as fh:
-        json.dump(out, fh, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, out)
     return out
 
 

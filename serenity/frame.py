@@ -183,7 +183,6 @@ class Renderer:
             self.tonemap_pass = TonemapPass(self.ctx)
             self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect_scale)
             self.lowres_guide = LowResGuide(self.ctx, cfg.indirect_scale)
-            self._guide = None
             for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass, self.lowres_guide):
                 p.resize(self.width, self.height)
             self.fxaa_pass = FXAAPass(self.ctx) if cfg.antialiasing == "fxaa" else None
@@ -288,9 +287,9 @@ class Renderer:
         with self._stage("g-buffer"):
             gbuf = self.gbuffer_pass.render(view_proj, self.scene.camera.position)
         rcb, join = self._start_ray_tracing(view_proj, gbuf)            # sync 1
-        shadow, ao = self._main_view(view_proj, gbuf)
+        shadow, ao, guide = self._main_view(view_proj, gbuf)
         self._update_volumes(gbuf, light)
-        lit = self._light_main_view(gbuf, shadow, light, ao)
+        lit = self._light_main_view(gbuf, shadow, light, ao, guide)
         out_hdr = self._ray_traced_views(rcb, join, gbuf, lit, light)  # sync 2
         if self.fxaa_pass is not None:
             with self._stage("anti-aliasing"):
@@ -362,22 +361,23 @@ class Renderer:
 
     def _main_view(self, view_proj, gbuf):
         """Sun shadow cascades (paper §6) and SSAO (paper §3) of the main view (its G-buffer is
-        drawn first: the ray-casting buffer is drawn against its depth)."""
+        drawn first: the ray-casting buffer is drawn against its depth), and the low-res guide the
+        SSAO blur and the indirect light's upsampling share. Returns (shadow maps, AO or None, guide
+        or None)."""
         cfg, scene, cam = self.config, self.scene, self.scene.camera
         with self._stage("shadow maps (CSM)"):
             sc = cfg.shadow
             cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
                                            sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
             shadow = self.shadow_pass.render(cascades)
-        ao = None
-        self._guide = None
+        ao = guide = None
         if cfg.ssao.enabled or self.lowres is not None:
             with self._stage("low-res guide"):
-                self._guide = self.lowres_guide.render(gbuf, cam.position, cam.forward)
+                guide = self.lowres_guide.render(gbuf, cam.position, cam.forward)
         if cfg.ssao.enabled:
             with self._stage("ssao"):
-                ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward, self._guide)
-        return shadow, ao
+                ao = self.ssao_pass.render(gbuf, view_proj, cam.position, cam.forward, guide)
+        return shadow, ao, guide
 
     def _update_volumes(self, gbuf, light: LightingInputs) -> None:
         """The sky irradiance volume (paper §7) and the light propagation volumes (paper §8), each
@@ -392,7 +392,7 @@ class Renderer:
             if changed:
                 self._update_lpv(gbuf, light.sun_irradiance)
 
-    def _light_main_view(self, gbuf, shadow, light: LightingInputs, ao):
+    def _light_main_view(self, gbuf, shadow, light: LightingInputs, ao, guide):
         """Phong + CSM/PCSS, then the sky volume's and the LPV's light (at 1/indirect_scale
         resolution, upsampled) added on."""
         sky_gl = self.sky_gl if self.sky_volume is not None else None
@@ -414,7 +414,7 @@ class Renderer:
                                                                            cam.position, ao, **terms)
         if lo is not None:
             with self._stage("indirect upsample"):
-                lo.upsample(lit.hdr, gbuf, cam.position, cam.forward, self._guide)
+                lo.upsample(lit.hdr, gbuf, cam.position, cam.forward, guide)
         return lit
 
     def _ray_traced_views(self, rcb, join, gbuf, lit, light: LightingInputs):

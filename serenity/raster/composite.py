@@ -6,14 +6,14 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from serenity.raster.context import load_program
+from serenity.raster.context import BlendedTargets, load_program
 
 
 class CompositePass:
     def __init__(self, ctx):
         self.ctx = ctx
         self.program = load_program(ctx, "composite.glsl")
-        self._fbos: dict[int, object] = {}
+        self._targets = BlendedTargets(ctx, (moderngl.ONE, moderngl.SRC_ALPHA))  # premultiplied over
         self._vbo = None
         self._vao = None
 
@@ -32,22 +32,12 @@ class CompositePass:
             self._vbo = ctx.buffer(reserve=max(data.nbytes, 4096))
             self._vao = ctx.vertex_array(p, [(self._vbo, "3f", "in_point")])
         self._vbo.write(data)
-        fbo = self._fbos.get(surface.glo)
-        if fbo is None:
-            fbo = self._fbos[surface.glo] = ctx.framebuffer(color_attachments=[surface])
-        with ctx.debug_scope("composite"):
-            fbo.use()
+        with ctx.debug_scope("composite"), self._targets.adding_to(surface):
             for loc, (name, tex) in enumerate((("u_effects", effects), ("g_normal", gbuffer.normal),
                                                ("g_position", gbuffer.position), ("g_material", gbuffer.material))):
                 tex.use(location=loc)
                 p[name].value = loc
             p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
             p["u_size"].value = (surface.width, surface.height)
-            ctx.enable(moderngl.BLEND)
-            ctx.blend_func = moderngl.ONE, moderngl.SRC_ALPHA
-            ctx.blend_equation = moderngl.FUNC_ADD
-            try:
-                self._vao.render(moderngl.POINTS, vertices=len(data))
-            finally:
-                ctx.disable(moderngl.BLEND)
+            self._vao.render(moderngl.POINTS, vertices=len(data))
         return surface

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import threading
+from contextlib import contextmanager
 from importlib import resources
 
 import moderngl
@@ -149,6 +150,37 @@ class FullscreenPass:
     def target_size(self, width: int, height: int) -> tuple[int, int]:
         """Size of the targets for a width×height view."""
         return width, height
+
+
+class BlendedTargets:
+    """One framebuffer per target texture (cached), drawn into with blending onto what it already
+    holds: additive (ONE, ONE) by default — the indirect light and its upsampling add onto an image
+    that holds the rest — or any ``blend_func`` (the composite's premultiplied (ONE, SRC_ALPHA))."""
+
+    def __init__(self, ctx, blend_func=(moderngl.ONE, moderngl.ONE)):
+        self.ctx = ctx
+        self.blend_func = blend_func
+        self._fbos: dict[int, object] = {}
+
+    def adding_to(self, target):
+        """Context: draw into ``target`` (a texture), blending onto what it holds."""
+        fbo = self._fbos.get(target.glo)
+        if fbo is None:
+            fbo = self._fbos[target.glo] = self.ctx.framebuffer(color_attachments=[target])
+        return self.adding_to_framebuffer(fbo)
+
+    @contextmanager
+    def adding_to_framebuffer(self, fbo):
+        """Context: draw into ``fbo``, blending onto what its targets hold."""
+        ctx = self.ctx
+        fbo.use()
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = self.blend_func
+        ctx.blend_equation = moderngl.FUNC_ADD
+        try:
+            yield
+        finally:
+            ctx.disable(moderngl.BLEND)
 
 
 def low_res_size(width: int, height: int, scale: int) -> tuple[int, int]:

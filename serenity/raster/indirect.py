@@ -16,44 +16,11 @@ of the pixels carry it; texture detail comes back from the full-resolution albed
 
 from __future__ import annotations
 
-from contextlib import contextmanager
-
-import moderngl
-
-from serenity.raster.context import draw_fullscreen, fullscreen_vao, load_program, low_res_size
+from serenity.raster.context import BlendedTargets, draw_fullscreen, fullscreen_vao, load_program, low_res_size
 
 TECHNIQUES = {"sky": 1, "lpv": 2}
 #: texture units 0..5 are the G-buffer, eye and AO; the volume's own textures start here
 FIRST_VOLUME_UNIT = 6
-
-
-class _AdditiveTargets:
-    """One framebuffer per target texture (cached), drawn into with additive blending: both the
-    techniques and the upsampling add their light onto an image that already holds the rest."""
-
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self._fbos: dict[int, object] = {}
-
-    def adding_to(self, target):
-        """Context: draw into ``target`` (a texture), adding to what it holds."""
-        fbo = self._fbos.get(target.glo)
-        if fbo is None:
-            fbo = self._fbos[target.glo] = self.ctx.framebuffer(color_attachments=[target])
-        return self.adding_to_framebuffer(fbo)
-
-    @contextmanager
-    def adding_to_framebuffer(self, fbo):
-        """Context: draw into ``fbo``, adding to what its targets hold."""
-        ctx = self.ctx
-        fbo.use()
-        ctx.enable(moderngl.BLEND)
-        ctx.blend_func = moderngl.ONE, moderngl.ONE
-        ctx.blend_equation = moderngl.FUNC_ADD
-        try:
-            yield
-        finally:
-            ctx.disable(moderngl.BLEND)
 
 
 class IndirectPass:
@@ -66,7 +33,7 @@ class IndirectPass:
         self.program = load_program(ctx, "indirect.glsl",
                                     defines={"TECHNIQUE": TECHNIQUES[technique], "LOWRES": int(lowres)})
         self.vao = fullscreen_vao(ctx, self.program)
-        self._targets = _AdditiveTargets(ctx)
+        self._targets = BlendedTargets(ctx)
 
     def render(self, target, gbuffer, bind, camera_pos, ao=None, rt_view=None, diffuse: bool = True,
                glossy: bool = True) -> None:
@@ -110,7 +77,7 @@ class LowResIndirect:
         self.program = load_program(ctx, "upsample.glsl")
         self.vao = fullscreen_vao(ctx, self.program)
         self.size = None
-        self._targets = _AdditiveTargets(ctx)
+        self._targets = BlendedTargets(ctx)
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
