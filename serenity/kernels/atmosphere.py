@@ -263,6 +263,14 @@ def eval_paraboloid_direction(u: float, v: float) -> wp.vec3:
 
 
 @wp.func
+def eval_texel_direction(i: int, size: int):
+    """(row, column, unit direction) of the ``i``-th texel, row-major, of a ``size``² sky map."""
+    row = i // size
+    col = i - row * size
+    return row, col, eval_paraboloid_direction((float(col) + 0.5) / float(size), (float(row) + 0.5) / float(size))
+
+
+@wp.func
 def eval_paraboloid_uv(d: wp.vec3) -> wp.vec2:
     """Sky-map (u, v) of a unit direction; d.y is clamped to ≥ 0 (below the horizon → the horizon)."""
     y = wp.max(d[1], 0.0)
@@ -310,10 +318,7 @@ def bake_sky_map_texels(
     sky_map: wp.array2d(dtype=wp.vec3),
     offset: int,
 ):
-    i = wp.tid() + offset
-    row = i // size
-    col = i - row * size
-    d = eval_paraboloid_direction((float(col) + 0.5) / float(size), (float(row) + 0.5) / float(size))
+    row, col, d = eval_texel_direction(wp.tid() + offset, size)
     sky_map[row, col] = eval_sky(d, sun, steps)
 
 
@@ -371,10 +376,7 @@ def bake_sky_map_from_table(
     sky_map: wp.array2d(dtype=wp.vec3),
     offset: int,
 ):
-    i = wp.tid() + offset
-    row = i // size
-    col = i - row * size
-    d = eval_paraboloid_direction((float(col) + 0.5) / float(size), (float(row) + 0.5) / float(size))
+    row, col, d = eval_texel_direction(wp.tid() + offset, size)
     fy = wp.sqrt(wp.max(d[1], 0.0)) * float(rayleigh.shape[0] - 1)
     phi = wp.atan2(wp.abs(wp.dot(d, side)), wp.dot(d, towards))  # 0..π: the sky is symmetric about the sun's plane
     fx = phi / _PI * float(rayleigh.shape[1] - 1)
