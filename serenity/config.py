@@ -72,6 +72,12 @@ class ShadowConfig:
     """Constant depth bias, in shadow-map texels (converted to depth units in the shader)."""
     normal_offset: float = 1.0
     """Normal offset of the lookup point, in texels, scaled by the slope tan θ (clamped 1–4)."""
+    stagger: bool = False
+    """Redraw the cascades after the first in turn, one per frame, while each still covers its slice
+    (tiles fitted 10 % larger to leave room), instead of every cascade whose light matrix moved: with
+    the sun moving every frame, 2 tiles are drawn per frame instead of 4 and the far cascades' shadows
+    lag the sun by up to 3 frames. The same for the overlapped shadow maps. A still frame is
+    unchanged apart from the 10 % coarser tiles (``ShadowPass.render``)."""
 
     def __post_init__(self):
         if not 16 <= self.size <= MAX_IMAGE_SIZE:
@@ -471,14 +477,14 @@ PRESETS: dict[str, dict] = {
     "high": {},
     # what `serenity render` and `serenity bench` use unless told: 1024² shadow cascades, fewer
     # PCSS, SSAO and glossy-LPV taps, a 96² sky map baked in 12 steps, coarser RSM and sky VPLs
-    "medium": {"shadow": {"size": 1024, "blocker_samples": 8, "filter_samples": 16},
+    "medium": {"shadow": {"size": 1024, "blocker_samples": 8, "filter_samples": 16, "stagger": True},
                "ssao": {"directions": 8, "steps": 3},
                "sky": {"sky_map_size": 96, "sky_steps": 12},
                "lpv": {"glossy_steps": 4},
                "rsm_size": 128, "sky_vpl_stride": 8},
     # the cheapest: indirect light at quarter resolution, 3 cascades, an 8³ LPV, coarse sky
     "low": {"indirect_scale": 4,
-            "shadow": {"size": 1024, "cascades": 3, "blocker_samples": 8, "filter_samples": 12},
+            "shadow": {"size": 1024, "cascades": 3, "blocker_samples": 8, "filter_samples": 12, "stagger": True},
             "ssao": {"directions": 6, "steps": 2, "blur_radius": 4},
             "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_bands": 4},
             "lpv": {"resolution": 8, "iterations": 16},

@@ -57,7 +57,7 @@ from serenity.raster.raycast import RayCastingBuffer, RayCastPass
 from serenity.raster.rsm import RSMPass
 from serenity.raster.rt_gbuffer import RTGBufferUpload
 from serenity.raster.scene_gl import SceneGL
-from serenity.raster.shadow import ShadowPass, fit_overlapped, fit_shadow_cascades
+from serenity.raster.shadow import STAGGER_PAD, ShadowPass, fit_overlapped, fit_shadow_cascades
 from serenity.raster.sky import SkyTexturesGL
 from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
@@ -368,8 +368,9 @@ class Renderer:
         with self._stage("shadow maps (CSM)"):
             sc = cfg.shadow
             cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
-                                           sc.cascades, sc.size, sc.split_lambda, sc.max_distance)
-            shadow = self.shadow_pass.render(cascades)
+                                           sc.cascades, sc.size, sc.split_lambda, sc.max_distance,
+                                           pad=STAGGER_PAD if sc.stagger else 0.0)
+            shadow = self.shadow_pass.render(cascades, stagger=sc.stagger)
         ao = guide = None
         if cfg.ssao.enabled or self.lowres is not None:
             with self._stage("low-res guide"):
@@ -429,8 +430,10 @@ class Renderer:
         with self._stage("rt g-buffer upload"):
             view_rt = self.rt_upload.upload(rcb, *traced)
         with self._stage("shadow maps (OSM)"):
+            stagger = cfg.shadow.stagger
             osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, scene.bounds, 3,
-                                                      cfg.osm_size))
+                                                      cfg.osm_size, pad=STAGGER_PAD if stagger else 0.0),
+                                       stagger=stagger)
         with self._stage("rt direct lighting"):
             rt_lit = self.rt_deferred.render(view_rt, osm, light, None, rt_view=view_rt, sky=sky_gl)
         if sky_gl is not None:

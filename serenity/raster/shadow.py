@@ -31,6 +31,8 @@ import numpy as np
 from serenity.raster.context import load_program
 
 MAX_CASCADES = 4
+#: how much larger than its sphere a tile is fitted when tiles are staggered (fraction of the radius)
+STAGGER_PAD = 0.1
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
@@ -72,6 +74,21 @@ class Cascade:
     far: float             # view depth (m) where this cascade ends
     texel_world: float     # one texel, metres
     depth_range: float     # light-space depth extent (m) of the [0,1] depth
+    #: what the tile must cover: (centre (3,) m, radius m) of the region it is fitted to (the
+    #: slice's bounding sphere; for overlapped maps the sphere around the camera)
+    sphere: tuple[np.ndarray, float] | None = None
+    #: the tile as drawn: (light rotation (3,3), light-space centre (2,), half width m)
+    tile: tuple[np.ndarray, np.ndarray, float] | None = None
+
+    def covers(self, other: Cascade) -> bool:
+        """Whether this tile, as drawn, still holds every texel ``other`` needs: ``other``'s sphere,
+        seen from this tile's light direction, lies inside the tile (the depth range spans the whole
+        scene either way). Used to keep a tile a few frames while the camera and the sun move."""
+        if self.tile is None or other.sphere is None:
+            return False
+        rot, centre, half = self.tile
+        p = (rot @ np.asarray(other.sphere[0], np.float64))[:2]
+        return bool(np.all(np.abs(p - centre) + other.sphere[1] <= half))
 
 
 @dataclass
@@ -82,7 +99,10 @@ class ShadowMaps:
 
 
 def fit_shadow_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, count: int,
-                 size: int, lam: float, max_distance: float) -> list[Cascade]:
+                 size: int, lam: float, max_distance: float, pad: float = 0.0) -> list[Cascade]:
+    """The cascades of the camera's view (module doc). ``pad``: each tile covers its slice's sphere
+    enlarged by this fraction of its radius, so that the tile stays usable while the camera moves
+    that far (``ShadowPass.render``'s ``stagger``); 0 = tight."""
     sun = np.asarray(sun_direction, np.float64)
     center_scene = bounds.mean(axis=0)
     scene_radius = max(float(np.linalg.norm(bounds[1] - bounds[0])) / 2, 1e-3)
@@ -110,25 +130,28 @@ def fit_shadow_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds
         centre = camera.position + camera.forward * c
         if radius >= scene_radius:  # the scene fits: centre on it (still texel-snapped)
             centre = center_scene
-        texel = 2 * radius / size
+        half = radius * (1.0 + pad)
+        texel = 2 * half / size
         lc = light_view[:3, :3] @ centre
         lc[:2] = np.floor(lc[:2] / texel) * texel  # snap to whole texels
         depth_lo, depth_hi = z_min - 1e-3 - 0.01 * scene_radius, z_max + 1e-3 + 0.01 * scene_radius
-        proj = ortho(lc[0] - radius, lc[0] + radius, lc[1] - radius, lc[1] + radius, depth_lo, depth_hi)
+        proj = ortho(lc[0] - half, lc[0] + half, lc[1] - half, lc[1] + half, depth_lo, depth_hi)
         # the light view looks down -z: a point at distance d along -sun from the origin has z = -d
-        out.append(Cascade(proj @ light_view, float(f), texel, depth_hi - depth_lo))
+        out.append(Cascade(proj @ light_view, float(f), texel, depth_hi - depth_lo, sphere=(centre, radius),
+                           tile=(light_view[:3, :3], lc[:2].copy(), half)))
     return out
 
 
 def fit_overlapped(camera_position, sun_direction: np.ndarray, bounds: np.ndarray, count: int = 3,
-                   size: int = 512, ratio: float = 4.0) -> list[Cascade]:
+                   size: int = 512, ratio: float = 4.0, pad: float = 0.0) -> list[Cascade]:
     """Overlapped shadow maps (paper §9, Fig. 17): ``count`` concentric spheres around the camera,
     each ``ratio`` times the radius of the previous, the largest reaching the farthest scene corner.
 
     Unlike view-fitted cascades they cover every direction, so surfaces seen only in a reflection
     or refraction (behind the camera, off screen) still get sun shadows; the price is the overlap
     (each map re-covers the smaller ones). ``Cascade.far`` is here a *distance* from the camera:
-    the shader picks the first map whose sphere contains the point.
+    the shader picks the first map whose sphere contains the point. ``pad`` as in
+    :func:`fit_shadow_cascades` (the map covers its sphere enlarged by that fraction).
     """
     sun = np.asarray(sun_direction, np.float64)
     cam = np.asarray(camera_position, np.float64)
@@ -142,11 +165,13 @@ def fit_overlapped(camera_position, sun_direction: np.ndarray, bounds: np.ndarra
     out = []
     for i in range(count):
         radius = reach / ratio ** (count - 1 - i)
-        texel = 2 * radius / size
+        half = radius * (1.0 + pad)
+        texel = 2 * half / size
         lc = light_view[:3, :3] @ cam
         lc[:2] = np.floor(lc[:2] / texel) * texel
-        proj = ortho(lc[0] - radius, lc[0] + radius, lc[1] - radius, lc[1] + radius, depth_lo, depth_hi)
-        out.append(Cascade(proj @ light_view, float(radius), texel, depth_hi - depth_lo))
+        proj = ortho(lc[0] - half, lc[0] + half, lc[1] - half, lc[1] + half, depth_lo, depth_hi)
+        out.append(Cascade(proj @ light_view, float(radius), texel, depth_hi - depth_lo, sphere=(cam, radius),
+                           tile=(light_view[:3, :3], lc[:2].copy(), half)))
     return out
 
 
@@ -169,36 +194,65 @@ class ShadowPass:
         self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF/PCSS)
         self.fbo = ctx.framebuffer(depth_attachment=self.depth)
         self._drawn: list[bytes | None] = [None] * cascades
+        self._kept: list[Cascade | None] = [None] * cascades   # the cascade each tile was drawn for
+        self._age = [0] * cascades                               # frames since each tile was drawn
         #: tiles drawn by the last ``render`` (the others were still valid)
         self.redrawn = 0
 
     def invalidate(self) -> None:
         """Redraw every tile next time (after the scene's geometry changed in place)."""
         self._drawn = [None] * self.count
+        self._kept = [None] * self.count
 
-    def render(self, cascades: list[Cascade]) -> ShadowMaps:
+    def render(self, cascades: list[Cascade], stagger: bool = False) -> ShadowMaps:
         """Draw the scene's depth into one atlas tile per cascade (from ``fit_shadow_cascades`` or
         ``fit_overlapped``). A tile whose cascade is the same as when it was last drawn (same light
         matrix: the cascades are texel-snapped bounding spheres, so they stay put while the sun
-        does and the camera moves within them) is kept, not redrawn."""
+        does and the camera moves within them) is kept, not redrawn.
+
+        ``stagger``: tiles after the first are also kept while they still cover their cascade's
+        sphere (``Cascade.covers``; fit with ``pad`` > 0 to leave room), and at most one of those
+        is redrawn per frame, the one kept longest: with the sun moving every frame, the first
+        tile follows it each frame and the others within ``count − 1`` frames (their shadows lag
+        the sun by as many frames), so 2 tiles are drawn per frame instead of ``count``. The
+        returned cascades are the tiles as drawn, with this frame's split depths."""
         ctx = self.ctx
         self.redrawn = 0
+        cascades = list(cascades[: self.count])
+        draw = []
+        stale = []
+        for i, c in enumerate(cascades):
+            key = np.asarray(c.view_proj, np.float32).tobytes()
+            kept = self._kept[i]
+            if key == self._drawn[i]:
+                continue
+            if stagger and i > 0 and kept is not None and kept.covers(c):
+                stale.append(i)
+            else:
+                draw.append(i)
+        if stale:  # the tile kept longest (ties: the nearest cascade)
+            draw.append(max(stale, key=lambda i: (self._age[i], -i)))
         with ctx.debug_scope("shadow"):
             self.fbo.use()
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
-            for i, c in enumerate(cascades[: self.count]):
-                key = np.asarray(c.view_proj, np.float32).tobytes()
-                if key == self._drawn[i]:
-                    continue
+            for i in sorted(draw):
+                c = cascades[i]
                 tile = ((i % 2) * self.size, (i // 2) * self.size, self.size, self.size)
                 self.fbo.clear(depth=1.0, viewport=tile)
                 self.fbo.viewport = tile
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
                 if self.caster_index_count:  # the casters: the bottom plane shadows nothing
                     self.vao.render(moderngl.TRIANGLES, vertices=self.caster_index_count)
-                self._drawn[i] = key
+                self._drawn[i] = np.asarray(c.view_proj, np.float32).tobytes()
+                self._kept[i] = c
                 self.redrawn += 1
             self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)
             ctx.disable(moderngl.DEPTH_TEST)
-        return ShadowMaps(self.depth, list(cascades[: self.count]), self.size)
+        used = []
+        for i, c in enumerate(cascades):
+            self._age[i] = 0 if i in draw else self._age[i] + 1
+            k = self._kept[i]
+            used.append(c if k is c or k is None else
+                        Cascade(k.view_proj, c.far, k.texel_world, k.depth_range, sphere=c.sphere, tile=k.tile))
+        return ShadowMaps(self.depth, used, self.size)

@@ -155,3 +155,58 @@ def test_bottom_plane_is_left_out_of_the_shadow_maps():
     wall = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     assert not bottom_plane_triangles(wall, np.array([[0, 1, 2], [0, 2, 3]])).any()
     assert bottom_plane_triangles(np.zeros((3, 3)), np.array([[0, 1, 2]])).all()  # flat scene: all ground
+
+
+def test_staggered_cascades_cover_their_slices_and_follow_the_sun(gl_ctx):
+    """ShadowConfig.stagger: with the sun moving every frame, the first tile is redrawn every frame
+    and the others in turn (2 tiles a frame, none older than count − 1 frames); every tile used
+    still covers its slice's sphere; a camera jump out of a tile redraws it at once; and the image
+    stays close to the one with every tile redrawn."""
+    from serenity.raster.shadow import STAGGER_PAD, fit_shadow_cascades
+
+    scene = plane_scene(zenith_deg=50.0, azimuth_deg=40.0, with_box=True)
+    w, h = 160, 90
+    base = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False))
+    every = Renderer(scene, w, h, config=base)
+    stag = Renderer(scene, w, h, config=replace(base, shadow=replace(base.shadow, stagger=True)))
+    sp = stag.shadow_pass
+    sun0 = np.array(scene.sun.direction)
+    for k in range(8):
+        ang = math.radians(0.9 * k)  # the sun turns about the vertical by 0.9 degrees a frame
+        c, s = math.cos(ang), math.sin(ang)
+        scene.sun.direction = np.array([c * sun0[0] + s * sun0[2], sun0[1], -s * sun0[0] + c * sun0[2]])
+        a, b = every.render(), stag.render()
+        if k == 0:
+            assert sp.redrawn == 4
+            continue
+        assert every.shadow_pass.redrawn == 4 and sp.redrawn == 2, k
+        assert sp._age[0] == 0 and max(sp._age) <= 3
+        fitted = fit_shadow_cascades(scene.camera, w / h, scene.sun.direction, scene.bounds, 4, base.shadow.size,
+                                     base.shadow.split_lambda, base.shadow.max_distance, pad=STAGGER_PAD)
+        for kept, now in zip(sp._kept, fitted, strict=True):
+            assert kept.covers(now)
+        da, db = a.aovs["direct"], b.aovs["direct"]
+        assert np.mean(np.abs(da - db)) < 0.01 * np.mean(da), k
+    # a jump the kept tiles do not cover: every moved tile is redrawn in the same frame
+    cam = scene.camera
+    scene.camera = Camera(cam.position + [30.0, 0, 0], cam.target + [30.0, 0, 0], fov_y_deg=cam.fov_y_deg)
+    stag.render()
+    fitted = fit_shadow_cascades(scene.camera, w / h, scene.sun.direction, scene.bounds, 4, base.shadow.size,
+                                 base.shadow.split_lambda, base.shadow.max_distance, pad=STAGGER_PAD)
+    assert all(kept.covers(now) for kept, now in zip(sp._kept, fitted, strict=True))
+    scene.camera = cam
+
+
+def test_cascade_covers_is_the_tile_containment():
+    bounds = np.array([[-50.0, 0.0, -50.0], [50.0, 20.0, 50.0]])
+    sun = np.array([0.3, 0.8, 0.52]) / np.linalg.norm([0.3, 0.8, 0.52])
+    cam = Camera(position=(0.0, 2.0, 10.0), target=(0.0, 1.0, 0.0))
+    tight = fit_shadow_cascades(cam, 16 / 9, sun, bounds, 4, 1024, 0.75, 200.0)
+    padded = fit_shadow_cascades(cam, 16 / 9, sun, bounds, 4, 1024, 0.75, 200.0, pad=0.1)
+    for t, p in zip(tight, padded, strict=True):
+        assert p.covers(t) and p.covers(p)
+        assert p.texel_world == pytest.approx(1.1 * t.texel_world)
+        # moved by more than the padding along the light's x axis: no longer covered
+        r = t.sphere[1]
+        moved = replace(t, sphere=(t.sphere[0] + p.tile[0][0] * 0.2 * r, r))
+        assert not p.covers(moved)
