@@ -121,8 +121,9 @@ def gather_clamped(out: wp.vec4, s: wp.vec4, axis: int, sign: float) -> wp.vec4:
     clamped at 0: Φ_f = Δω_f·max(0, I_s(ω_f)) (package doc, "Clamped faces"). The explicit 5-face sum
     of the package docstring, which ``gather_pair`` collapses to a linear 4×4 transfer without the clamp."""
     sd = sign * s[axis + 1]
-    if C0 * s[0] >= C1 * wp.sqrt(s[1] * s[1] + s[2] * s[2] + s[3] * s[3]):
-        # I_s ≥ 0 in every direction: no face is clamped, the linear transfer is exact (and cheaper)
+    if s[0] >= 0.0 and C0 * C0 * s[0] * s[0] >= C1 * C1 * (s[1] * s[1] + s[2] * s[2] + s[3] * s[3]):
+        # I_s ≥ 0 in every direction (C0·s0 ≥ C1·|s_xyz|, squared: no square root on this hot path):
+        # no face is clamped, the linear transfer is exact (and cheaper)
         lin = wp.vec4(T_DC_DC * s[0] + T_DC_AX * sd, T_PERP * s[1], T_PERP * s[2], T_PERP * s[3])
         lin[axis + 1] = sign * (T_AX_DC * s[0] + T_AX_AX * sd)
         return out + lin
