@@ -98,6 +98,9 @@ class Frame:
     timings: stage name → milliseconds, in pipeline order (the worker's stages included).
     wall_ms: the frame's duration; below ``sum(timings)`` when ray tracing overlapped GL work.
     events: (lane, stage, start_ms, end_ms) from the frame's start — the timeline.
+    cpu_ms: CPU time the frame took on every core, ms: this process's threads (the GL driver's, the
+    Warp launches', Python's) plus the tracer process's work. ``cpu_ms / cores`` bounds the wall
+    time from below whatever the schedule (``serenity bench`` reports it).
 
     With ``render(read_back=False)`` nothing leaves the GL context: hdr and ldr are None, aovs is
     empty, and the images stay in ``Renderer.outputs``.
@@ -111,6 +114,7 @@ class Frame:
     wall_ms: float = 0.0
     events: list[tuple[str, str, float, float]] = field(default_factory=list)
     rays: int = 0
+    cpu_ms: float = 0.0
 
     @property
     def total_ms(self) -> float:
@@ -328,16 +332,19 @@ class Renderer:
         self._timings, self._events = {}, []
         self._gbuffer_images = {}
         self._t_frame = time.perf_counter()
+        self._cpu_frame = time.process_time()
+        self._child_cpu_ms = 0.0
         if self._first:
             self._timings["upload"] = self._upload_ms
             self._first = False
 
     def _end_frame(self, hdr, ldr, aovs, rcb) -> Frame:
         wall = (time.perf_counter() - self._t_frame) * 1e3 + self._timings.get("upload", 0.0)
+        cpu = (time.process_time() - self._cpu_frame) * 1e3 + self._child_cpu_ms
         timings = {k: self._timings[k] for k in sorted(self._timings, key=STAGES.index)}  # pipeline order
         return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=timings, exposure=self.config.exposure,
                      wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
-                     rays=0 if rcb is None else rcb.count)
+                     rays=0 if rcb is None else rcb.count, cpu_ms=cpu)
 
     def _start_ray_tracing(self, view_proj, gbuf):
         """The ray-casting buffer (which pixels reflect or refract, and their rays; drawn against the
@@ -554,6 +561,7 @@ class Renderer:
         proc = self._tracer_proc
         first = proc.build_seconds is None
         results, t0, t1 = proc.result()
+        self._child_cpu_ms += proc.cpu_seconds * 1e3
         if first:
             self._timings["kd-tree build"] = proc.build_seconds * 1e3
         self._record(RT_LANE, "cpu ray tracing", t0, t1)

@@ -90,6 +90,10 @@ def test_overlapped_and_serial_schedules_agree(scene_name):
             f = r.render(read_back={"hdr"})
             assert f.rays > 0
             assert "cpu ray tracing" in f.timings
+            # the frame's CPU time counts every thread, and the tracer process's work when it has one
+            assert f.cpu_ms > 0.0
+            if overlap:
+                assert r._tracer_proc is not None and r._tracer_proc.cpu_seconds > 0.0
             images.append(f.hdr)
         finally:
             r.close()

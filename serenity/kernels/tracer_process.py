@@ -4,14 +4,16 @@ In a thread, the tracer stalls while the GL thread renders: moderngl holds the G
 wait for Mesa's llvmpipe (``finish()``, texture reads), and the tracer's Python between its Warp
 launches then waits for it (measured: 5 ms of tracing took 130–220 ms beside the GL work). A child
 process has its own interpreter and GIL: the frame hands it the rays at sync 1 and collects the
-hits at sync 2, and nothing in between needs the parent's GIL.
+hits at sync 2, and nothing in between needs the parent's GIL. The child's CPU time for each frame
+comes back too (``cpu_seconds``), so a frame's CPU cost counts both processes.
 
 Protocol (private): the child is ``python -m serenity.kernels.tracer_process IN OUT`` with two pipe
 file descriptors; messages are length-prefixed pickles. First message in: (scene, device); the child
 builds its :class:`~serenity.kernels.raytrace.RayTracer` (the kd-tree comes from the disk cache when
 the parent built it before) and answers ("ready", build seconds). Then per frame: a list of ray
 batches ``(origins, directions, cone_width, cone_spread, transmissions)`` in, ("ok", results, t0,
-t1) out, where results are the tracer's dicts (None for an empty batch) and t0/t1 the child's
+t1, cpu) out, where cpu is the child's CPU seconds (``time.process_time``) for the work, results
+are the tracer's dicts (None for an empty batch) and t0/t1 the child's
 ``time.perf_counter()`` around the work — the same monotonic clock as the parent's on Linux, so the
 frame's timeline places the child's work exactly. Errors come back as ("error", message). An empty
 message (None) stops the child.
@@ -74,6 +76,8 @@ class TracerProcess:
         self._pending = False
         self.build_seconds: float | None = None
         """Seconds the child took to build its tracer (None until it has said it is ready)."""
+        self.cpu_seconds = 0.0
+        """CPU seconds the child spent on the last frame's rays (all its threads)."""
         _write(self._out, (scene, device))
 
     def _wait_ready(self) -> None:
@@ -99,7 +103,7 @@ class TracerProcess:
         """(list of per-batch results, t0, t1) of the last ``submit``."""
         self._wait_ready()
         self._pending = False
-        _, results, t0, t1 = self._receive()
+        _, results, t0, t1, self.cpu_seconds = self._receive()
         return results, t0, t1
 
     def close(self) -> None:
@@ -137,13 +141,13 @@ def _serve_frames(fd_in: int, fd_out: int) -> None:
         batches = _read(fd_in)
         if batches is None:
             return
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             results = [None if b is None else tracer.trace(*b[:4], transmissions=b[4]) for b in batches]
         except Exception as e:
             _write(fd_out, ("error", f"{type(e).__name__}: {e}"))
             continue
-        _write(fd_out, ("ok", results, t0, time.perf_counter()))
+        _write(fd_out, ("ok", results, t0, time.perf_counter(), time.process_time() - c0))
 
 
 if __name__ == "__main__":
