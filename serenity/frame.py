@@ -609,11 +609,14 @@ class Renderer:
         }
 
     def _full_res(self, img: np.ndarray) -> np.ndarray:
-        """A 1/indirect_scale image (SSAO) as a full-size AOV: each texel repeated over its block."""
+        """A 1/indirect_scale image (SSAO) as a full-size AOV: each texel repeated over its block.
+        Texel (i, j) covers the pixels (i·s.., j·s..) counted from GL's bottom-left corner, so in the
+        top-down image a partial block row (height not a multiple of s) is the top one."""
         s = self.config.indirect_scale
         if s == 1:
             return img
-        return np.ascontiguousarray(np.repeat(np.repeat(img, s, axis=0), s, axis=1)[:self.height, :self.width])
+        full = np.repeat(np.repeat(img, s, axis=0), s, axis=1)
+        return np.ascontiguousarray(full[full.shape[0] - self.height:, :self.width])
 
     def close(self) -> None:
         """Stop the ray-tracing worker thread or process (the GL objects go with the process's

@@ -453,7 +453,10 @@ class Viewer:
         if shown is None:
             self._shown = False
             return  # a switched-off technique, or no reference yet: the panel says so
-        self.present.draw(fbo, vp, shown[0], shown[1], exposure=self.settings.exposure)
+        # a low-resolution image (SSAO) is shown as the AOV writes it: each texel over its block of pixels
+        block = self.renderer.config.indirect_scale if self.view == "ao" else 1
+        self.present.draw(fbo, vp, shown[0], shown[1], exposure=self.settings.exposure, block=block,
+                          render_size=(self.width, self.height))
         if self.view == "lpv cascades" and self.renderer.lpv is not None:
             cam = self.scene.camera
             vproj = cam.projection_matrix(self.width / self.height) @ cam.view_matrix()

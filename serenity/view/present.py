@@ -35,7 +35,11 @@ class PresentPass:
         self.vao = fullscreen_vao(ctx, self.program)
 
     def draw(self, fbo, viewport, a, mode_a: int, b=None, mode_b: int = DISPLAY, split: float = 2.0,
-             exposure: float = DEFAULT_EXPOSURE) -> None:
+             exposure: float = DEFAULT_EXPOSURE, block: int = 1, render_size=None) -> None:
+        """Draw ``a`` (and ``b`` right of ``split``) into ``viewport``. ``block`` > 1: ``a`` is a
+        1/block-resolution image of a ``render_size`` (w, h) render (SSAO), each texel shown over its
+        block×block pixels (texel = pixel // block, as ``Renderer`` writes such an AOV; the texture
+        is ⌈size / block⌉ texels, so a plain stretch would not line up)."""
         p = self.program
         fbo.use()
         fbo.viewport = tuple(int(v) for v in viewport)
@@ -46,6 +50,9 @@ class PresentPass:
         p["u_exposure"].value = float(exposure)
         p["u_split"].value = float(split) if b is not None else 2.0
         p["u_line_px"].value = 1.0 / max(1, int(viewport[2]))
+        p["u_block_a"].value = max(1, int(block))
+        rs = render_size if render_size is not None else a.size
+        p["u_render_size"].value = (int(rs[0]), int(rs[1]))
         self.vao.render(vertices=3)
 
 

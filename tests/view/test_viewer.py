@@ -296,7 +296,9 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
 
     taa_shot = np.asarray(Image.open(tmp_path / "taa.png").convert("RGB")).astype(np.int16)
     saved = str(tmp_path / "saved" / "courtyard_001")
-    assert np.array_equal(np.asarray(Image.open(saved + ".png").convert("RGB")), taa_shot), "F12 saves the mean"
+    # F12 saves the mean (tone-mapped on the host; the window tone-maps in GL: one 8-bit step apart at most)
+    saved_png = np.asarray(Image.open(saved + ".png").convert("RGB")).astype(np.int16)
+    assert np.abs(saved_png - taa_shot).max() <= 1 and np.mean(saved_png != taa_shot) < 1e-3, "F12 saves the mean"
     r = Renderer(load(saved + ".toml"), *SIZE, config=RenderConfig.preset("medium"))
     try:
         acc, one = r.render_accumulated(TAA).ldr.astype(np.int16), r.render().ldr.astype(np.int16)

@@ -13,11 +13,14 @@ uniform int u_mode_b;
 uniform float u_exposure;
 uniform float u_split;       // x in [0, 1] where B starts; > 1: A only
 uniform float u_line_px;     // split line half width, in uv units of x
+uniform int u_block_a;       // > 1: A is a 1/u_block_a resolution image of the render (texel = pixel / block)
+uniform ivec2 u_render_size; // the render's size in pixels (for u_block_a)
 out vec4 o_color;
 
-vec3 show(sampler2D tex, int mode) {
+vec3 show(sampler2D tex, int mode, int block) {
     ivec2 size = textureSize(tex, 0);
-    ivec2 t = clamp(ivec2(floor(v_uv * vec2(size))), ivec2(0), size - 1);
+    ivec2 t = block > 1 ? ivec2(floor(v_uv * vec2(u_render_size))) / block : ivec2(floor(v_uv * vec2(size)));
+    t = clamp(t, ivec2(0), size - 1);
     vec3 c = texelFetch(tex, t, 0).rgb;
     if (mode == 1) {
         c = max(c, vec3(0.0)) * u_exposure;
@@ -31,7 +34,7 @@ vec3 show(sampler2D tex, int mode) {
 }
 
 void main() {
-    vec3 c = v_uv.x < u_split ? show(u_a, u_mode_a) : show(u_b, u_mode_b);
+    vec3 c = v_uv.x < u_split ? show(u_a, u_mode_a, u_block_a) : show(u_b, u_mode_b, 1);
     if (u_split <= 1.0 && abs(v_uv.x - u_split) < u_line_px) c = vec3(1.0, 0.8, 0.2);
     o_color = vec4(c, 1.0);
 }
