@@ -526,37 +526,6 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
     return wp.array(order, dtype=wp.int32, device=device, copy=not device.startswith("cpu"))
 
 
-def _treelet_positions(head: np.ndarray) -> tuple[np.ndarray, int]:
-    """Cache-line treelets: the position of every node when 64-byte lines (8 nodes, 4 children
-    pairs) are filled breadth first from a seed pair (the root alone with a padding node and 3
-    pairs in line 0), the pairs that do not fit seeding later lines, depth first. Returns the
-    positions and the array size (padded to whole lines)."""
-    n = len(head)
-    inner = (head & 3) != 3
-    child = np.where(inner, head >> 2, 0).tolist()
-    inner = inner.tolist()
-    pos = [0] * n
-    cursor = 2
-    stack = [child[0]] if inner[0] else []
-    while stack:
-        queue = [stack.pop()]
-        k = 0
-        while k < len(queue) and cursor % 8 != 0 or k == 0:
-            pair = queue[k]
-            pos[pair] = cursor
-            pos[pair + 1] = cursor + 1
-            cursor += 2
-            for c in (pair, pair + 1):
-                if inner[c]:
-                    queue.append(child[c])
-            k += 1
-            if k >= len(queue):
-                break
-        stack.extend(reversed(queue[k:]))
-        cursor = (cursor + 7) // 8 * 8
-    return np.asarray(pos, np.int64), max(cursor, 8)
-
-
 class KdTree:
     """An SAH kd-tree over a static triangle mesh, traversed by Warp kernels.
 
@@ -622,11 +591,8 @@ class KdTree:
                 raise SerenityError(f"kd-tree of depth {self.stats.depth}: the traversal stack has {STACK_SIZE} slots")
             right = np.minimum(child + 1, len(head) - 1)
             flags = (empty[child].astype(np.int64) << 2) | (empty[right].astype(np.int64) << 3)
-            pos, size = _treelet_positions(head)
-            nodes = np.zeros(size, dtype=KdNode.numpy_dtype())  # padding: empty leaves nothing points at
-            nodes["head"] = 3
-            nodes["head"][pos] = np.where(leaf, ((off + 1) << 2) | 3, (pos[child] << 4) | flags | (head & 3))
-            nodes["split"][pos] = np.where(leaf, count, self.node_split).astype(np.float32)
+            nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, (child << 4) | flags | (head & 3))
+            nodes["split"] = np.where(leaf, count, self.node_split).astype(np.float32)
             data.nodes = wp_.array(nodes, dtype=KdNode, device=device)
             tri = np.ascontiguousarray(self.vertices[self.faces], np.float32)  # (F, 3, 3)
             slots = np.zeros(len(self.prims), bool)  # the slots that hold a triangle index (not a count)
