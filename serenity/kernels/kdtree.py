@@ -141,12 +141,13 @@ class KdNode:
 
 @wp.struct
 class KdRef:
-    """One triangle reference of a leaf, 36 bytes: its three vertices, so that a leaf's references
-    cost one stream of cache lines (the triangle's index is in ``KdTreeData.ref_prim``)."""
+    """One triangle reference of a leaf, 40 bytes: its three vertices and its triangle index,
+    together so that a leaf's references cost one stream of cache lines."""
 
     v0: wp.vec3
     v1: wp.vec3
     v2: wp.vec3
+    prim: wp.int32
 
 
 @wp.struct
@@ -155,7 +156,6 @@ class KdTreeData:
 
     nodes: wp.array(dtype=KdNode)
     refs: wp.array(dtype=KdRef)
-    ref_prim: wp.array(dtype=wp.int32)  # the triangle index of each reference (read on a hit)
     tri_verts: wp.array(dtype=wp.vec3)
     box_lo: wp.vec3  # padded root box
     box_hi: wp.vec3
@@ -344,7 +344,7 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                 hit, t, u, v = intersect_triangle(o, kx, ky, kz, sx, sy, sz, rf.v0, rf.v1, rf.v2, tlo, best_t)
                 f = int(-1)
                 if hit:
-                    f = tree.ref_prim[first_ref + j]
+                    f = rf.prim
                 if hit and (t < best_t or f < prim):
                     best_t = t
                     prim = f
@@ -591,27 +591,20 @@ class KdTree:
                 raise SerenityError(f"kd-tree of depth {self.stats.depth}: the traversal stack has {STACK_SIZE} slots")
             right = np.minimum(child + 1, len(head) - 1)
             flags = (empty[child].astype(np.int64) << 2) | (empty[right].astype(np.int64) << 3)
-            # references: the non-empty leaves' triangles one after the other, in node order (depth
-            # first, the order in which a descent meets the leaves), no count slots in between
-            full = np.flatnonzero(leaf & (count > 0))
-            counts = count[full]
-            starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-            n_refs = int(counts.sum())
-            if n_refs >= 1 << 29:
-                raise SerenityError(f"kd-tree of {n_refs:,} references: at most 2^29 fit the 8-byte node")
-            ref_tri = self.prims[np.repeat(off[full] + 1 - starts, counts) + np.arange(n_refs)]
-            first_ref = np.zeros(len(head), np.int64)
-            first_ref[full] = starts
-            nodes["head"] = np.where(leaf, (first_ref << 2) | 3, (child << 4) | flags | (head & 3))
+            nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, (child << 4) | flags | (head & 3))
             nodes["split"] = np.where(leaf, count, self.node_split).astype(np.float32)
             data.nodes = wp_.array(nodes, dtype=KdNode, device=device)
             tri = np.ascontiguousarray(self.vertices[self.faces], np.float32)  # (F, 3, 3)
-            refs = np.zeros(max(n_refs, 1), dtype=KdRef.numpy_dtype())  # Warp arrays in a struct: not empty
+            slots = np.zeros(len(self.prims), bool)  # the slots that hold a triangle index (not a count)
+            blocks = off[leaf & (count > 0)]
+            counts = self.prims[blocks]
+            first = blocks + 1 - np.cumsum(np.concatenate([[0], counts[:-1]]))
+            slots[np.repeat(first, counts) + np.arange(counts.sum())] = True
+            refs = np.zeros(len(self.prims), dtype=KdRef.numpy_dtype())
             for k, name in enumerate(("v0", "v1", "v2")):
-                refs[name][:n_refs] = tri[ref_tri, k]
+                refs[name][slots] = tri[self.prims[slots], k]
+            refs["prim"][slots] = self.prims[slots]
             data.refs = wp_.array(refs, dtype=KdRef, device=device)
-            data.ref_prim = wp_.array(np.concatenate([ref_tri, [0]])[:max(n_refs, 1)].astype(np.int32), dtype=wp.int32,
-                                      device=device)
             data.tri_verts = wp_.array(tri.reshape(-1, 3), dtype=wp.vec3, device=device)
             lo = self.box[0].astype(np.float64)
             hi = self.box[1].astype(np.float64)
