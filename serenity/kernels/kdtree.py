@@ -116,6 +116,7 @@ SORT_ORIGIN_BITS = 3
 
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 _stack_f = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
+_stack_p = wp.types.vector(length=8 * STACK_SIZE, dtype=wp.float32)  # a packet's 4 (t0, t1) per entry
 
 _INF = wp.constant(math.inf)
 _TOL = wp.constant(T_TOLERANCE)
@@ -458,6 +459,215 @@ def intersect_rays(
 
 
 @wp.kernel(enable_backward=False)
+def intersect_packets(
+    # inputs
+    tree: KdTreeData,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    tmin: float,
+    tmax: wp.array(dtype=float),
+    # outputs
+    hit_t: wp.array(dtype=float),
+    hit_prim: wp.array(dtype=wp.int32),
+    hit_u: wp.array(dtype=float),
+    hit_v: wp.array(dtype=float),
+    offset: int,
+):
+    """Closest hits of rays 4p .. 4p+3 as one packet (module docstring, "Packets"); rays that
+    cannot share the traversal (a direction sign differs, a component is zero, the batch ends)
+    are traced one by one with ``trace_kd``."""
+    base = (wp.tid() + offset) * 4
+    n = origins.shape[0]
+    ox = wp.vec4()
+    oy = wp.vec4()
+    oz = wp.vec4()
+    ix = wp.vec4()
+    iy = wp.vec4()
+    iz = wp.vec4()
+    kxs = wp.vec4i()
+    kys = wp.vec4i()
+    kzs = wp.vec4i()
+    sxs = wp.vec4()
+    sys_ = wp.vec4()
+    szs = wp.vec4()
+    lo = wp.vec4()  # per ray: t interval in the current cell, its overlap, the lower bound of hits
+    hi = wp.vec4()
+    te = wp.vec4()
+    tl = wp.vec4()
+    best = wp.vec4()
+    prim = wp.vec4i(-1, -1, -1, -1)
+    hu = wp.vec4()
+    hv = wp.vec4()
+    live = wp.vec4i()  # still searching
+    act = wp.vec4i()  # active in the current subtree
+    packet = base + 3 < n
+    sign = wp.vec3()
+    for k in range(4):
+        if packet:
+            o = origins[base + k]
+            d = directions[base + k]
+            kx, ky, kz, sx, sy, sz, inv, t0, t1, teps, tlo, done = start_ray(tree, o, d, tmin, tmax[base + k])
+            if k == 0:
+                sign = inv
+            for a in range(3):
+                if inv[a] == 0.0 or (inv[a] < 0.0) != (sign[a] < 0.0):
+                    packet = False
+            ox[k] = o[0]
+            oy[k] = o[1]
+            oz[k] = o[2]
+            ix[k] = inv[0]
+            iy[k] = inv[1]
+            iz[k] = inv[2]
+            kxs[k] = kx
+            kys[k] = ky
+            kzs[k] = kz
+            sxs[k] = sx
+            sys_[k] = sy
+            szs[k] = sz
+            lo[k] = t0
+            hi[k] = t1
+            te[k] = teps
+            tl[k] = tlo
+            best[k] = tmax[base + k]
+            if not done:
+                live[k] = 1
+                act[k] = 1
+    if not packet:
+        for k in range(4):
+            i = base + k
+            if i < n:
+                p1, t, u, v = trace_kd(tree, origins[i], directions[i], tmin, tmax[i], False)
+                hit_t[i] = t
+                hit_prim[i] = p1
+                hit_u[i] = u
+                hit_v[i] = v
+        return
+    node = int(0)
+    sp = int(0)
+    st_node = _stack_i()
+    st_act = _stack_i()
+    st_t = _stack_p()
+    finished = live[0] + live[1] + live[2] + live[3] == 0
+    while not finished:
+        nd = tree.nodes[node]
+        head = nd.head
+        axis = head & 3
+        leaf_end = False
+        if axis != 3:
+            split = nd.split
+            child = head >> 4
+            near = child
+            far = child + 1
+            empty_near = (head >> 2) & 1
+            empty_far = (head >> 3) & 1
+            if sign[axis] < 0.0:
+                near = child + 1
+                far = child
+                empty_near = (head >> 3) & 1
+                empty_far = (head >> 2) & 1
+            oa = ox
+            ia = ix
+            if axis == 1:
+                oa = oy
+                ia = iy
+            elif axis == 2:
+                oa = oz
+                ia = iz
+            # per ray, as trace_kd decides: near only, far only, or both (narrowed intervals)
+            want_near = wp.vec4i()
+            want_far = wp.vec4i()
+            ts = wp.vec4()
+            any_near = int(0)
+            any_far = int(0)
+            for k in range(4):
+                if act[k] != 0:
+                    s = (split - oa[k]) * ia[k]
+                    ts[k] = s
+                    if s <= 0.0 or s < lo[k] - te[k]:
+                        want_far[k] = 2  # far only, interval unchanged
+                    elif s > hi[k] + te[k]:
+                        want_near[k] = 2  # near only, interval unchanged
+                    else:
+                        want_near[k] = 1
+                        want_far[k] = 1
+                    any_near = any_near | want_near[k]
+                    any_far = any_far | want_far[k]
+            go_near = any_near != 0 and empty_near == 0
+            go_far = any_far != 0 and empty_far == 0
+            if go_far and go_near:
+                st_node[sp] = far
+                mask = int(0)
+                for k in range(4):
+                    if want_far[k] != 0:
+                        mask = mask | (1 << k)
+                        st_t[sp * 8 + k] = wp.where(want_far[k] == 1, wp.max(lo[k], ts[k] - te[k]), lo[k])
+                        st_t[sp * 8 + 4 + k] = hi[k]
+                st_act[sp] = mask
+                sp += 1
+            if go_near:
+                for k in range(4):
+                    if want_near[k] == 0:
+                        act[k] = 0
+                    elif want_near[k] == 1:
+                        hi[k] = wp.min(hi[k], ts[k] + te[k])
+                node = near
+            elif go_far:
+                for k in range(4):
+                    if want_far[k] == 0:
+                        act[k] = 0
+                    elif want_far[k] == 1:
+                        lo[k] = wp.max(lo[k], ts[k] - te[k])
+                node = far
+            else:
+                leaf_end = True
+        else:
+            first_ref = head >> 2
+            cnt = int(nd.split)
+            for j in range(cnt):
+                rf = tree.refs[first_ref + j]
+                for k in range(4):
+                    if act[k] != 0:
+                        hit, t, u, v = intersect_triangle(wp.vec3(ox[k], oy[k], oz[k]), kxs[k], kys[k], kzs[k],
+                                                          sxs[k], sys_[k], szs[k], rf.v0, rf.v1, rf.v2, tl[k], best[k])
+                        if hit:
+                            f = rf.prim
+                            if t < best[k] or f < prim[k]:
+                                best[k] = t
+                                prim[k] = f
+                                hu[k] = u
+                                hv[k] = v
+            leaf_end = True
+        if leaf_end:
+            for k in range(4):
+                if act[k] != 0 and prim[k] >= 0 and best[k] <= hi[k]:
+                    live[k] = 0
+            popped = int(0)
+            while sp > 0 and popped == 0:
+                sp -= 1
+                node = st_node[sp]
+                mask = st_act[sp]
+                for k in range(4):
+                    act[k] = 0
+                    if live[k] != 0 and (mask >> k) & 1 != 0:
+                        lo[k] = st_t[sp * 8 + k]
+                        hi[k] = st_t[sp * 8 + 4 + k]
+                        if lo[k] <= best[k]:
+                            act[k] = 1
+                            popped = 1
+            if popped == 0:
+                finished = True
+    for k in range(4):
+        i = base + k
+        t = best[k]
+        if prim[k] < 0:
+            t = _INF
+        hit_t[i] = t
+        hit_prim[i] = prim[k]
+        hit_u[i] = hu[k]
+        hit_v[i] = hv[k]
+
+
+@wp.kernel(enable_backward=False)
 def occlude_rays(
     # inputs
     tree: KdTreeData,
@@ -655,6 +865,10 @@ class KdTree:
         out_v = wp.empty(n, dtype=float, device=dev)
         if n:
             args = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
+            if args[-1].shape[0] == 0 and n >= SORT_MIN_RAYS and sort is None:  # coherent: packets of 4 rays
+                launch(intersect_packets, (n + 3) // 4, [*args[:-1], out_t, out_p, out_u, out_v], device=dev,
+                       threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+                return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
             args += [out_t, out_p, out_u, out_v]
             launch(intersect_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
