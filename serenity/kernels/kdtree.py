@@ -89,7 +89,7 @@ from serenity.kernels.kdtree_build import (
 )
 from serenity.kernels.launch import launch
 
-wp.set_module_options({"enable_backward": False, "optimization_level": 3})
+wp.set_module_options({"enable_backward": False})
 
 # ----------------------------------------------------------------------------------------------
 # constants
