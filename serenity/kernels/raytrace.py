@@ -55,7 +55,7 @@ from serenity.config import KdBuildConfig
 from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
 from serenity.gbuffer_layout import RT_GBUFFER_KEYS
-from serenity.kernels.kdtree import CHUNKS_PER_THREAD, KdTree, KdTreeData, ray_order, trace_kd
+from serenity.kernels.kdtree import CHUNKS_PER_THREAD, KdTree, KdTreeData, finite, ray_order, trace_kd
 from serenity.kernels.launch import launch
 
 wp.set_module_options({"enable_backward": False})
@@ -242,7 +242,7 @@ def trace_gbuffer(
     out_eye[j] = zero
     d = directions[i]
     len_d = wp.length(d)
-    if not (wp.isfinite(len_d) and len_d > 0.0):
+    if not (finite(len_d) and len_d > 0.0):
         return
     dn = d / len_d
     o = origins[i]
