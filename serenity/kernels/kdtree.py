@@ -251,6 +251,47 @@ def intersect_triangle(
 
 
 @wp.func
+def intersect_triangle_fixed(
+    o: wp.vec3,
+    kx: int,
+    ky: int,
+    kz: int,
+    sx: float,
+    sy: float,
+    sz: float,
+    p0: wp.vec3,
+    p1: wp.vec3,
+    p2: wp.vec3,
+    tmin: float,
+    tmax: float,
+):
+    """``intersect_triangle`` with the ray's axis permutation (kx, ky, kz) turned into constants:
+    one of its six forms is chosen per call, each inlined with literal axes, so the vertices'
+    components are registers instead of indexed loads from the stack (the same arithmetic, the
+    same bits)."""
+    hit = False
+    t = float(0.0)
+    u = float(0.0)
+    v = float(0.0)
+    if kz == 2:
+        if kx == 0:
+            hit, t, u, v = intersect_triangle(o, 0, 1, 2, sx, sy, sz, p0, p1, p2, tmin, tmax)
+        else:
+            hit, t, u, v = intersect_triangle(o, 1, 0, 2, sx, sy, sz, p0, p1, p2, tmin, tmax)
+    elif kz == 1:
+        if kx == 2:
+            hit, t, u, v = intersect_triangle(o, 2, 0, 1, sx, sy, sz, p0, p1, p2, tmin, tmax)
+        else:
+            hit, t, u, v = intersect_triangle(o, 0, 2, 1, sx, sy, sz, p0, p1, p2, tmin, tmax)
+    else:
+        if kx == 1:
+            hit, t, u, v = intersect_triangle(o, 1, 2, 0, sx, sy, sz, p0, p1, p2, tmin, tmax)
+        else:
+            hit, t, u, v = intersect_triangle(o, 2, 1, 0, sx, sy, sz, p0, p1, p2, tmin, tmax)
+    return hit, t, u, v
+
+
+@wp.func
 def start_ray(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float):
     """A ray's traversal set-up: Woop's (kx, ky, kz, sx, sy, sz), the inverse direction ``inv`` (0 on
     an axis the ray is parallel to), its segment (t0, t1) in the padded root box, the interval
@@ -349,7 +390,7 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
             n = int(nd.split)
             for j in range(n):
                 rf = tree.refs[first_ref + j]
-                hit, t, u, v = intersect_triangle(o, kx, ky, kz, sx, sy, sz, rf.v0, rf.v1, rf.v2, tlo, best_t)
+                hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, rf.v0, rf.v1, rf.v2, tlo, best_t)
                 f = int(-1)
                 if hit:
                     f = rf.prim
