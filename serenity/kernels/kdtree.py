@@ -176,13 +176,6 @@ def finite(x: float) -> bool:
 
 
 @wp.func
-def pick(v: wp.vec3, a: int) -> float:
-    """``v[a]`` by selects instead of an indexed load from the stack (the traversal's per-step
-    component of the origin and inverse direction along the node's axis)."""
-    return wp.where(a == 0, v[0], wp.where(a == 1, v[1], v[2]))
-
-
-@wp.func
 def setup_ray(d: wp.vec3):
     """Woop et al.'s ray set-up: the dominant axis kz, the other two (kx, ky, winding-preserving)
     and the shear constants (sx, sy, sz). sz is not finite for a zero/tiny/NaN direction."""
@@ -355,7 +348,7 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
         if axis != 3:
             split = nd.split
             child = head >> 4
-            oa = pick(o, axis)
+            oa = o[axis]
             first = child
             second = child + 1
             empty_first = (head >> 2) & 1  # the flags of the empty leaves among the children
@@ -365,7 +358,7 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                 second = child
                 empty_first = (head >> 3) & 1
                 empty_second = (head >> 2) & 1
-            ia = pick(inv, axis)
+            ia = inv[axis]
             if ia == 0.0:
                 # parallel to the plane: only the side of the origin, both when on the plane
                 if oa == split and empty_second == 0:
