@@ -58,10 +58,18 @@ the float64 edge functions. Per ray ~25 inner-node steps against ~6 triangle tes
 leaf (``benchmarks/kdtree_counts.py``): a chain of dependent, data-dependent steps, bound by load
 latency and branch mispredictions. Hence the count in the node, the leaf-contiguous ``refs`` and the
 empty-leaf flags, and fewer empty-space cuts in the build (``KdBuildConfig.min_empty_fraction``:
-12 % fewer steps, 16-22 % faster coherent rays). Tried without a measurable gain
-(``benchmarks/bench_kdtree_steps.py``): ordering the children by the direction's sign instead of
-the origin's side, a branch-free step, deeper trees; earlier, two rays per thread with interleaved
-steps, -O3 instead of Warp's CPU -O2, other SAH cost ratios.
+12 % fewer steps, 16-22 % faster coherent rays). Warp's CPU code (release mode: no bounds checks;
+-O2, -march=native): ``wp.isfinite`` is a call out of line into Warp's runtime, so the ray set-up
+uses :func:`finite` (inline, ~10 per ray); a vector component at a run-time index is a load from
+the stack, so the triangle test is inlined in its six axis permutations with literal axes
+(:func:`intersect_triangle_fixed`). Tried without a measurable gain
+(``benchmarks/bench_kdtree_steps.py``, ``benchmarks/results/kdtree_ab.json``): ordering the children
+by the direction's sign instead of the origin's side, a branch-free step, selects instead of the
+step's indexed loads, deeper trees, nodes in 64-byte cache-line treelets, 36-byte leaf records
+(the index in its own array) packed in depth-first leaf order, packets of 4 coherent rays sharing
+one traversal (without SIMD lanes Warp's scalar code does each ray's work anyway, plus the
+packet's bookkeeping: slower), -O3 instead of -O2; earlier, two rays per thread with interleaved
+steps, other SAH cost ratios.
 """
 
 from __future__ import annotations
@@ -724,5 +732,5 @@ class KdTree:
 
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "PROGRESS_MIN_TRIANGLES", "SORT_MIN_RAYS", "Hits",
            "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_rays",
-           "intersect_rays", "intersect_triangle", "occlude_rays", "ray_order", "ray_sort_key", "setup_ray",
-           "sort_keys", "start_ray", "trace_kd"]
+           "intersect_rays", "intersect_triangle", "intersect_triangle_fixed", "occlude_rays", "ray_order",
+           "ray_sort_key", "setup_ray", "sort_keys", "start_ray", "trace_kd"]
