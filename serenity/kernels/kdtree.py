@@ -46,7 +46,8 @@ separate pass: a random read per ray inside the traversal costs more than the pa
 each result written back to the ray's own index, so the results do not depend on the order. Rays
 already in a coherent order (camera rays; the default ``sort=None`` looks at how often the key
 changes along the batch) and batches below ``SORT_MIN_RAYS`` are traced as they come. On the
-benchmark's incoherent rays: +11-18 % rays per CPU-second, sort and gather included.
+benchmark's incoherent rays: +14-18 % rays per CPU-second, sort and gather included
+(``benchmarks/results/kdtree_ab_final.json``).
 
 On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
 ``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
