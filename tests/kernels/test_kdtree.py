@@ -188,7 +188,8 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
     oc, dc = camera_rays(320, 180, position=(0.0, 0.6, 3.5))
     o2, d2 = random_rays(rng, SORT_MIN_RAYS + 1000, extent=2.0)
     for o, d, sorted_by_default in ((oc, dc, False), (o2, d2, True)):
-        order = ray_order(data.box_lo, data.box_hi, wp.array(o, dtype=wp.vec3), wp.array(d, dtype=wp.vec3), len(o),
+        order = ray_order(data.box_lo, data.box_hi, wp.array(o, dtype=wp.vec3, device="cpu"),
+                          wp.array(d, dtype=wp.vec3, device="cpu"), len(o),
                           None, "cpu")
         assert (order.shape[0] == len(o)) == sorted_by_default
         plain = tree.intersect(o, d, device="cpu", threads=1, sort=False)
@@ -197,7 +198,8 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
             assert _hits_equal(tree.intersect(o, d, device="cpu", threads=threads, sort=True), plain), threads
             assert np.array_equal(tree.occluded(o, d, 1.5, device="cpu", threads=threads, sort=True), occ), threads
     # the order is a permutation, grouped by the direction's octant first
-    order = ray_order(data.box_lo, data.box_hi, wp.array(o2, dtype=wp.vec3), wp.array(d2, dtype=wp.vec3), len(o2),
+    order = ray_order(data.box_lo, data.box_hi, wp.array(o2, dtype=wp.vec3, device="cpu"),
+                      wp.array(d2, dtype=wp.vec3, device="cpu"), len(o2),
                       True, "cpu").numpy()
     assert np.array_equal(np.sort(order), np.arange(len(o2)))
     octant = (d2[order] < 0) @ np.array([1, 2, 4])
