@@ -38,7 +38,7 @@ below ~1e-30), a NaN origin, tmax ≤ tmin or NaN — are misses.
 Ray reordering (``sort`` in :meth:`KdTree.intersect` / :meth:`KdTree.occluded`, :func:`ray_order`;
 Pharr et al., "Rendering complex scenes with memory-coherent ray tracing", 1997; Garanzha & Loop,
 "Fast ray sorting and breadth-first packet traversal for GPU ray tracing", 2010): a batch of
-incoherent rays is traced in the order of a 15-bit key — the direction's octant, then the Morton
+incoherent rays is traced in the order of a 12-bit key — the direction's octant, then the Morton
 code of the origin's cell on an 8³ grid over the root box — so that consecutive rays on a thread
 walk the same nodes and triangles while they are still in the caches. The keys are a Warp kernel,
 the sort numpy's radix sort of 16-bit keys; the rays are gathered into the sorted order (a
@@ -116,12 +116,12 @@ TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is
 #: at 1.45-1.48x one on the benchmark's rays, 1.95-1.99x with 16 (``serenity.kernels.launch``)
 CHUNKS_PER_THREAD = 16
 #: ray reordering (``sort=None`` in the queries): batches of at least this many rays are traced in
-#: the order of a 15-bit key, the direction's octant then the origin's Morton code on a
+#: the order of a 12-bit key, the direction's octant then the origin's Morton code on a
 #: ``SORT_ORIGIN_BITS``-bit grid per axis over the root box, so that consecutive rays walk the same
 #: nodes and triangles (module docstring, "Ray reordering")
 SORT_MIN_RAYS = 1 << 15
 SORT_MIN_RUN = 4  # ... whose keys change on average more often than every this many rays (``ray_order``)
-SORT_ORIGIN_BITS = 3
+SORT_ORIGIN_BITS = 3  # at most 4: octant + 3 × bits must fit the 16-bit keys numpy radix-sorts
 
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 _stack_f = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
