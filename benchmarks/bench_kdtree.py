@@ -8,11 +8,14 @@ Rays (the same arrays for every tracer):
 - coherent: camera primary rays, one per pixel of ``--size``;
 - incoherent: from the camera rays' hit points (nudged back 1 mm), uniformly random directions
   (secondary rays as a reflection pass would cast them, without any coherence).
-Tracers: ours (:class:`serenity.kernels.kdtree.KdTree`, closest hit), Embree (``embreex``, closest
-hit, one ``run`` call over all rays) and Warp's BVH (``wp.mesh_query_ray``, SAH constructor). Ours
-and Warp's run on 1, 2, ... all threads (through ``serenity.kernels.launch``); Embree on 1 thread,
-and its calls split over all threads as Python threads (embreex holds the GIL, so that is shown
-only as it measures). Times are medians of ``--repeats`` runs after a warm-up (compilation, first
+Tracers: ours (:class:`serenity.kernels.kdtree.KdTree`, closest hit; the default call, which
+reorders incoherent batches before the launch — ``sort=None``, ``serenity.kernels.kdtree.ray_order``
+— with the sort, the gather and the write-back inside the timed call; ``reordered`` per ray set says
+whether it did), Embree (``embreex``, closest hit, one ``run`` call over all rays) and Warp's BVH
+(``wp.mesh_query_ray``, SAH constructor; both take the rays as they come). Ours and Warp's run on
+1, 2, ... all threads (through ``serenity.kernels.launch``); Embree on 1 thread, and its calls
+split over all threads as Python threads (embreex holds the GIL, so that is shown only as it
+measures). Times are medians of ``--repeats`` runs after a warm-up (compilation, first
 touch) outside the timed region.
 
 Figures (ratios of this run's own measurements; incoherent rays unless ``_coherent``):
@@ -58,7 +61,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from serenity.device import cpu_threads, init_warp
-from serenity.kernels.kdtree import KdTree, intersect_rays
+from serenity.kernels.kdtree import KdTree, intersect_rays, ray_order
 from serenity.kernels.launch import launch
 from serenity.scene.procedural import lumpy_mesh
 
@@ -297,7 +300,8 @@ def main(argv=None) -> dict:
         # the same with one contiguous chunk per thread (the split before chunks_per_thread)
         args_1 = [tree.device_data("cpu"), wp.array(o, dtype=wp.vec3, device="cpu"),
                   wp.array(d, dtype=wp.vec3, device="cpu"), 0.0,
-                  wp.array(np.full(n, np.inf, np.float32), dtype=float, device="cpu")]
+                  wp.array(np.full(n, np.inf, np.float32), dtype=float, device="cpu"),
+                  wp.empty(0, dtype=wp.int32, device="cpu")]  # unsorted
         outs_1 = [wp.empty(n, dtype=t, device="cpu") for t in (float, wp.int32, float, float)]
         cpu_bound_halves = thread_cpu_split(
             wp, lambda n=n, a=[*args_1, *outs_1]: launch(intersect_rays, n, a, device="cpu", threads=2))
@@ -315,7 +319,11 @@ def main(argv=None) -> dict:
         # down through the shared caches and memory); times the balance = the 2-thread speed-up
         # when each thread has a core of its own
         efficiency = cpu_rates["ours_2t"] / cpu_rates["ours_1t"]
-        figures[name] = {"rays": n, "hit_fraction": float(ours.hit.mean()), "mrays_per_s": rates,
+        data = tree.device_data("cpu")
+        reordered = ray_order(data.box_lo, data.box_hi, wp.array(o, dtype=wp.vec3, device="cpu"),
+                              wp.array(d, dtype=wp.vec3, device="cpu"), n, None, "cpu").shape[0] > 0
+        figures[name] = {"rays": n, "reordered": reordered, "hit_fraction": float(ours.hit.mean()),
+                         "mrays_per_s": rates,
                          "mrays_per_cpu_s": cpu_rates, "thread_cpu_efficiency": efficiency,
                          "thread_scaling_projected": cpu_bound * efficiency,
                          "agreement_with_embree": agree, "thread_scaling_cpu_bound": cpu_bound,

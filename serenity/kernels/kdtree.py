@@ -35,6 +35,20 @@ within a leaf. Any-hit (``occluded``): (N,) bool, a hit with tmin < t < tmax.
 Degenerate rays — a zero, NaN or infinite direction (or a direction whose largest component is
 below ~1e-30), a NaN origin, tmax ≤ tmin or NaN — are misses.
 
+Ray reordering (``sort`` in :meth:`KdTree.intersect` / :meth:`KdTree.occluded`, :func:`ray_order`;
+Pharr et al., "Rendering complex scenes with memory-coherent ray tracing", 1997; Garanzha & Loop,
+"Fast ray sorting and breadth-first packet traversal for GPU ray tracing", 2010): a batch of
+incoherent rays is traced in the order of a 12-bit key — the direction's octant, then the Morton
+code of the origin's cell on an 8³ grid over the root box — so that consecutive rays on a thread
+walk the same nodes and triangles while they are still in the caches. The keys are a Warp kernel,
+the sort numpy's radix sort of 16-bit keys; the rays are gathered into the sorted order (a
+separate pass: a random read per ray inside the traversal costs more than the pass), traced, and
+each result written back to the ray's own index, so the results do not depend on the order. Rays
+already in a coherent order (camera rays; the default ``sort=None`` looks at how often the key
+changes along the batch) and batches below ``SORT_MIN_RAYS`` are traced as they come. On the
+benchmark's incoherent rays: +14-18 % rays per CPU-second, sort and gather included
+(``benchmarks/results/kdtree_ab_final.json``).
+
 On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
 ``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
 
@@ -45,10 +59,18 @@ the float64 edge functions. Per ray ~25 inner-node steps against ~6 triangle tes
 leaf (``benchmarks/kdtree_counts.py``): a chain of dependent, data-dependent steps, bound by load
 latency and branch mispredictions. Hence the count in the node, the leaf-contiguous ``refs`` and the
 empty-leaf flags, and fewer empty-space cuts in the build (``KdBuildConfig.min_empty_fraction``:
-12 % fewer steps, 16-22 % faster coherent rays). Tried without a measurable gain
-(``benchmarks/bench_kdtree_steps.py``): ordering the children by the direction's sign instead of
-the origin's side, a branch-free step, deeper trees; earlier, two rays per thread with interleaved
-steps, -O3 instead of Warp's CPU -O2, other SAH cost ratios.
+12 % fewer steps, 16-22 % faster coherent rays). Warp's CPU code (release mode: no bounds checks;
+-O2, -march=native): ``wp.isfinite`` is a call out of line into Warp's runtime, so the ray set-up
+uses :func:`finite` (inline, ~10 per ray); a vector component at a run-time index is a load from
+the stack, so the triangle test is inlined in its six axis permutations with literal axes
+(:func:`intersect_triangle_fixed`). Tried without a measurable gain
+(``benchmarks/bench_kdtree_steps.py``, ``benchmarks/results/kdtree_ab.json``): ordering the children
+by the direction's sign instead of the origin's side, a branch-free step, selects instead of the
+step's indexed loads, deeper trees, nodes in 64-byte cache-line treelets, 36-byte leaf records
+(the index in its own array) packed in depth-first leaf order, packets of 4 coherent rays sharing
+one traversal (without SIMD lanes Warp's scalar code does each ray's work anyway, plus the
+packet's bookkeeping: slower), -O3 instead of -O2; earlier, two rays per thread with interleaved
+steps, other SAH cost ratios.
 """
 
 from __future__ import annotations
@@ -93,6 +115,13 @@ TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is
 #: rays differ a lot in cost (sky vs geometry), and one contiguous chunk per thread left 2 threads
 #: at 1.45-1.48x one on the benchmark's rays, 1.95-1.99x with 16 (``serenity.kernels.launch``)
 CHUNKS_PER_THREAD = 16
+#: ray reordering (``sort=None`` in the queries): batches of at least this many rays are traced in
+#: the order of a 12-bit key, the direction's octant then the origin's Morton code on a
+#: ``SORT_ORIGIN_BITS``-bit grid per axis over the root box, so that consecutive rays walk the same
+#: nodes and triangles (module docstring, "Ray reordering")
+SORT_MIN_RAYS = 1 << 15
+SORT_MIN_RUN = 4  # ... whose keys change on average more often than every this many rays (``ray_order``)
+SORT_ORIGIN_BITS = 3  # at most 4: octant + 3 × bits must fit the 16-bit keys numpy radix-sorts
 
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 _stack_f = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
@@ -100,6 +129,9 @@ _stack_f = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
 _INF = wp.constant(math.inf)
 _TOL = wp.constant(T_TOLERANCE)
 _TINY = wp.constant(TINY_DIRECTION)
+_FLT_MAX = wp.constant(float(np.finfo(np.float32).max))
+_SORT_BITS = wp.constant(SORT_ORIGIN_BITS)
+_SORT_CELLS = wp.constant(float(1 << SORT_ORIGIN_BITS))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -143,6 +175,13 @@ class KdTreeData:
 # ----------------------------------------------------------------------------------------------
 # functions
 # ----------------------------------------------------------------------------------------------
+
+
+@wp.func
+def finite(x: float) -> bool:
+    """``wp.isfinite`` for float32, inline: false for ±inf and NaN (every comparison with NaN is
+    false). Warp's CPU ``isfinite`` is a call into its runtime, ~10 per ray in ``start_ray``."""
+    return wp.abs(x) <= _FLT_MAX
 
 
 @wp.func
@@ -221,6 +260,47 @@ def intersect_triangle(
 
 
 @wp.func
+def intersect_triangle_fixed(
+    o: wp.vec3,
+    kx: int,
+    ky: int,
+    kz: int,
+    sx: float,
+    sy: float,
+    sz: float,
+    p0: wp.vec3,
+    p1: wp.vec3,
+    p2: wp.vec3,
+    tmin: float,
+    tmax: float,
+):
+    """``intersect_triangle`` with the ray's axis permutation (kx, ky, kz) turned into constants:
+    one of its six forms is chosen per call, each inlined with literal axes, so the vertices'
+    components are registers instead of indexed loads from the stack (the same arithmetic, the
+    same bits)."""
+    hit = False
+    t = float(0.0)
+    u = float(0.0)
+    v = float(0.0)
+    if kz == 2:
+        if kx == 0:
+            hit, t, u, v = intersect_triangle(o, 0, 1, 2, sx, sy, sz, p0, p1, p2, tmin, tmax)
+        else:
+            hit, t, u, v = intersect_triangle(o, 1, 0, 2, sx, sy, sz, p0, p1, p2, tmin, tmax)
+    elif kz == 1:
+        if kx == 2:
+            hit, t, u, v = intersect_triangle(o, 2, 0, 1, sx, sy, sz, p0, p1, p2, tmin, tmax)
+        else:
+            hit, t, u, v = intersect_triangle(o, 0, 2, 1, sx, sy, sz, p0, p1, p2, tmin, tmax)
+    else:
+        if kx == 1:
+            hit, t, u, v = intersect_triangle(o, 1, 2, 0, sx, sy, sz, p0, p1, p2, tmin, tmax)
+        else:
+            hit, t, u, v = intersect_triangle(o, 2, 1, 0, sx, sy, sz, p0, p1, p2, tmin, tmax)
+    return hit, t, u, v
+
+
+@wp.func
 def start_ray(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float):
     """A ray's traversal set-up: Woop's (kx, ky, kz, sx, sy, sz), the inverse direction ``inv`` (0 on
     an axis the ray is parallel to), its segment (t0, t1) in the padded root box, the interval
@@ -229,15 +309,15 @@ def start_ray(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float
     tlo = wp.max(tmin, 0.0)
     t0 = tlo
     t1 = tmax
-    valid = wp.isfinite(o[0]) and wp.isfinite(o[1]) and wp.isfinite(o[2])
-    valid = valid and wp.isfinite(d[0]) and wp.isfinite(d[1]) and wp.isfinite(d[2])
-    valid = valid and wp.abs(d[kz]) >= _TINY and wp.isfinite(sz) and t1 > t0
+    valid = finite(o[0]) and finite(o[1]) and finite(o[2])
+    valid = valid and finite(d[0]) and finite(d[1]) and finite(d[2])
+    valid = valid and wp.abs(d[kz]) >= _TINY and finite(sz) and t1 > t0
     inv = wp.vec3(0.0, 0.0, 0.0)  # 0 marks an axis the ray is parallel to
     if valid:
         for a in range(3):
             if d[a] != 0.0:
                 r = 1.0 / d[a]
-                if wp.isfinite(r):
+                if finite(r):
                     inv[a] = r
         # root box clip
         for a in range(3):
@@ -319,7 +399,7 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
             n = int(nd.split)
             for j in range(n):
                 rf = tree.refs[first_ref + j]
-                hit, t, u, v = intersect_triangle(o, kx, ky, kz, sx, sy, sz, rf.v0, rf.v1, rf.v2, tlo, best_t)
+                hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, rf.v0, rf.v1, rf.v2, tlo, best_t)
                 f = int(-1)
                 if hit:
                     f = rf.prim
@@ -355,6 +435,59 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
 # ----------------------------------------------------------------------------------------------
 
 
+@wp.func
+def ray_sort_key(box_lo: wp.vec3, box_hi: wp.vec3, o: wp.vec3, d: wp.vec3) -> int:
+    """The reordering key of a ray: its direction's octant (bits 3·SORT_ORIGIN_BITS and up), then
+    the Morton code of its origin's cell on a 2^SORT_ORIGIN_BITS grid per axis over the root box
+    (origins outside it, or NaN, clamp to the border cells)."""
+    key = int(0)
+    for a in range(3):
+        f = (o[a] - box_lo[a]) / (box_hi[a] - box_lo[a]) * _SORT_CELLS
+        if not (f >= 0.0):
+            f = 0.0
+        q = int(wp.min(f, _SORT_CELLS - 1.0))
+        for b in range(_SORT_BITS):
+            key = key | (((q >> b) & 1) << (3 * b + a))
+    octant = wp.where(d[0] < 0.0, 1, 0) | wp.where(d[1] < 0.0, 2, 0) | wp.where(d[2] < 0.0, 4, 0)
+    return key | (octant << (3 * _SORT_BITS))
+
+
+@wp.kernel(enable_backward=False)
+def sort_keys(
+    # inputs
+    box_lo: wp.vec3,
+    box_hi: wp.vec3,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    # outputs
+    keys: wp.array(dtype=wp.uint16),
+    offset: int,
+):
+    i = wp.tid() + offset
+    keys[i] = wp.uint16(ray_sort_key(box_lo, box_hi, origins[i], directions[i]))
+
+
+@wp.kernel(enable_backward=False)
+def gather_rays(
+    # inputs
+    order: wp.array(dtype=wp.int32),
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    tmax: wp.array(dtype=float),
+    # outputs
+    sorted_origins: wp.array(dtype=wp.vec3),
+    sorted_directions: wp.array(dtype=wp.vec3),
+    sorted_tmax: wp.array(dtype=float),
+    offset: int,
+):
+    """The rays in their traced order (``sorted_*[i]`` = ray ``order[i]``)."""
+    i = wp.tid() + offset
+    j = order[i]
+    sorted_origins[i] = origins[j]
+    sorted_directions[i] = directions[j]
+    sorted_tmax[i] = tmax[j]
+
+
 @wp.kernel(enable_backward=False)
 def intersect_rays(
     # inputs
@@ -363,6 +496,7 @@ def intersect_rays(
     directions: wp.array(dtype=wp.vec3),
     tmin: float,
     tmax: wp.array(dtype=float),
+    order: wp.array(dtype=wp.int32),
     # outputs
     hit_t: wp.array(dtype=float),
     hit_prim: wp.array(dtype=wp.int32),
@@ -371,11 +505,14 @@ def intersect_rays(
     offset: int,
 ):
     i = wp.tid() + offset
+    j = i  # where the result goes: the caller's index of a reordered ray
+    if order.shape[0] > 0:
+        j = order[i]
     prim, t, u, v = trace_kd(tree, origins[i], directions[i], tmin, tmax[i], False)
-    hit_t[i] = t
-    hit_prim[i] = prim
-    hit_u[i] = u
-    hit_v[i] = v
+    hit_t[j] = t
+    hit_prim[j] = prim
+    hit_u[j] = u
+    hit_v[j] = v
 
 
 @wp.kernel(enable_backward=False)
@@ -386,13 +523,17 @@ def occlude_rays(
     directions: wp.array(dtype=wp.vec3),
     tmin: float,
     tmax: wp.array(dtype=float),
+    order: wp.array(dtype=wp.int32),
     # outputs
     occluded: wp.array(dtype=wp.int32),
     offset: int,
 ):
     i = wp.tid() + offset
+    j = i
+    if order.shape[0] > 0:
+        j = order[i]
     prim, t, u, v = trace_kd(tree, origins[i], directions[i], tmin, tmax[i], True)
-    occluded[i] = wp.where(prim >= 0, 1, 0)
+    occluded[j] = wp.where(prim >= 0, 1, 0)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -421,6 +562,26 @@ def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: fl
     copy = not dev.startswith("cpu")
     return [wp.array(o, dtype=wp.vec3, device=dev, copy=copy), wp.array(d, dtype=wp.vec3, device=dev, copy=copy),
             float(tmin), wp.array(tm, dtype=float, device=dev, copy=copy)]
+
+
+def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: wp.array, n: int, sort: bool | None,
+              device: str, threads: int | None = None) -> wp.array:
+    """The order in which to trace ``n`` rays: their indices sorted by :func:`ray_sort_key` (stable:
+    ties keep the caller's order), or an empty array = as they come. ``sort=None`` sorts batches of
+    ≥ ``SORT_MIN_RAYS`` whose keys change, in the caller's order, on average more often than every
+    ``SORT_MIN_RUN`` rays (already coherent batches — camera rays, reflections of a smooth surface in
+    pixel order — are left as they are); ``True`` always, ``False`` never. The keys come from a Warp
+    kernel (over all cores on the CPU) and are sorted by numpy's radix sort of 16-bit integers on
+    the host (~10 ms per million rays; on CUDA the keys and the order make a round trip)."""
+    if (sort is False) or n < 2 or (sort is None and n < SORT_MIN_RAYS):
+        return wp.empty(0, dtype=wp.int32, device=device)
+    keys = wp.empty(n, dtype=wp.uint16, device=device)
+    launch(sort_keys, n, [box_lo, box_hi, origins, directions, keys], device=device, threads=threads)
+    k = keys.numpy()
+    if sort is None and np.count_nonzero(k[1:] != k[:-1]) * SORT_MIN_RUN < n:
+        return wp.empty(0, dtype=wp.int32, device=device)
+    order = np.argsort(k, kind="stable").astype(np.int32)
+    return wp.array(order, dtype=wp.int32, device=device, copy=not device.startswith("cpu"))
 
 
 class KdTree:
@@ -523,10 +684,26 @@ class KdTree:
         tm = np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, np.float32), (len(o),)))
         return o, d, tm
 
+    def _query_inputs(self, o, d, tm, dev: str, tmin: float, sort: bool | None, threads: int | None) -> list:
+        """The query kernels' inputs: the tree, the rays (in their traced order) and that order
+        (empty: as given; else ray i of the kernel is the caller's ray ``order[i]``)."""
+        data = self.device_data(dev)
+        origins, directions, tmin, tmax = _ray_arrays(o, d, tm, dev, tmin)
+        n = len(o)
+        order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads)
+        if order.shape[0]:
+            rays = [wp.empty(n, dtype=wp.vec3, device=dev), wp.empty(n, dtype=wp.vec3, device=dev),
+                    wp.empty(n, dtype=float, device=dev)]
+            launch(gather_rays, n, [order, origins, directions, tmax, *rays], device=dev, threads=threads)
+            origins, directions, tmax = rays
+        return [data, origins, directions, tmin, tmax, order]
+
     def intersect(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
-                  threads: int | None = None) -> Hits:
+                  threads: int | None = None, sort: bool | None = None) -> Hits:
         """Closest hits of rays ``origins`` (N,3), ``directions`` (N,3) with tmin < t < tmax
-        (scalar or (N,)); t in units of |direction|."""
+        (scalar or (N,)); t in units of |direction|. ``sort``: trace the rays in the reordered
+        order (:func:`ray_order`; None = for batches of ≥ ``SORT_MIN_RAYS``); the results are the
+        same either way, in the caller's order."""
         dev = resolve_device(device)
         o, d, tm = self._rays(origins, directions, tmax)
         n = len(o)
@@ -535,23 +712,26 @@ class KdTree:
         out_u = wp.empty(n, dtype=float, device=dev)
         out_v = wp.empty(n, dtype=float, device=dev)
         if n:
-            args = [self.device_data(dev), *_ray_arrays(o, d, tm, dev, tmin), out_t, out_p, out_u, out_v]
+            args = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
+            args += [out_t, out_p, out_u, out_v]
             launch(intersect_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
-                 threads: int | None = None) -> np.ndarray:
-        """(N,) bool: does anything lie on each ray with tmin < t < tmax?"""
+                 threads: int | None = None, sort: bool | None = None) -> np.ndarray:
+        """(N,) bool: does anything lie on each ray with tmin < t < tmax? (any hit: the traversal
+        stops at the first one; ``sort`` as for :meth:`intersect`)"""
         dev = resolve_device(device)
         o, d, tm = self._rays(origins, directions, tmax)
         n = len(o)
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
-            args = [self.device_data(dev), *_ray_arrays(o, d, tm, dev, tmin), out]
+            args = [*self._query_inputs(o, d, tm, dev, tmin, sort, threads), out]
             launch(occlude_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return out.numpy().astype(bool)
 
 
-__all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "PROGRESS_MIN_TRIANGLES", "Hits", "KdBuildConfig", "KdNode",
-           "KdStats", "KdTree", "KdTreeData", "cache_dir", "intersect_rays", "intersect_triangle", "occlude_rays",
-           "setup_ray", "start_ray", "trace_kd"]
+__all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "PROGRESS_MIN_TRIANGLES", "SORT_MIN_RAYS", "Hits",
+           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_rays",
+           "intersect_rays", "intersect_triangle", "intersect_triangle_fixed", "occlude_rays", "ray_order",
+           "ray_sort_key", "setup_ray", "sort_keys", "start_ray", "trace_kd"]

@@ -42,7 +42,8 @@ Inputs to :meth:`RayTracer.trace`: origins (N,3) m, directions (N,3) (any length
 here), cone_width (N,) or scalar m, cone_spread (N,) or scalar rad. Host class
 :class:`RayTracer` packs the merged scene (geometry, materials and every texture's mip chain) into
 Warp arrays once — the geometry is static — and owns the kd-tree. On the CPU launches are split
-over all cores (:func:`serenity.kernels.launch.launch`).
+over all cores (:func:`serenity.kernels.launch.launch`); big incoherent batches are traced in a
+reordered order and written back in the caller's (``sort``, as :meth:`KdTree.intersect` does).
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ from serenity.config import KdBuildConfig
 from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
 from serenity.gbuffer_layout import RT_GBUFFER_KEYS
-from serenity.kernels.kdtree import CHUNKS_PER_THREAD, KdTree, KdTreeData, trace_kd
+from serenity.kernels.kdtree import CHUNKS_PER_THREAD, KdTree, KdTreeData, finite, ray_order, trace_kd
 from serenity.kernels.launch import launch
 
 wp.set_module_options({"enable_backward": False})
@@ -184,6 +185,30 @@ def bend(d: wp.vec3, n_out: wp.vec3, ior: float) -> wp.vec3:
 
 
 @wp.kernel(enable_backward=False)
+def gather_cone_rays(
+    # inputs
+    order: wp.array(dtype=wp.int32),
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    cone_width: wp.array(dtype=float),
+    cone_spread: wp.array(dtype=float),
+    # outputs
+    sorted_origins: wp.array(dtype=wp.vec3),
+    sorted_directions: wp.array(dtype=wp.vec3),
+    sorted_width: wp.array(dtype=float),
+    sorted_spread: wp.array(dtype=float),
+    offset: int,
+):
+    """The rays and their cones in their traced order (``sorted_*[i]`` = ray ``order[i]``)."""
+    i = wp.tid() + offset
+    j = order[i]
+    sorted_origins[i] = origins[j]
+    sorted_directions[i] = directions[j]
+    sorted_width[i] = cone_width[j]
+    sorted_spread[i] = cone_spread[j]
+
+
+@wp.kernel(enable_backward=False)
 def trace_gbuffer(
     # inputs
     scene: SceneData,
@@ -194,6 +219,7 @@ def trace_gbuffer(
     tmin: float,
     tmax: float,
     transmissions: int,
+    order: wp.array(dtype=wp.int32),
     # outputs
     out_albedo: wp.array(dtype=wp.vec4),
     out_normal: wp.array(dtype=wp.vec4),
@@ -203,17 +229,20 @@ def trace_gbuffer(
     out_eye: wp.array(dtype=wp.vec4),
     offset: int,
 ):
-    i = wp.tid() + offset
+    i = wp.tid() + offset  # the ray's index in the traced order (inputs)
+    j = i  # its index in the caller's order (outputs)
+    if order.shape[0] > 0:
+        j = order[i]
     zero = wp.vec4(0.0, 0.0, 0.0, 0.0)
-    out_albedo[i] = zero
-    out_normal[i] = zero
-    out_position[i] = zero
-    out_material[i] = zero
-    out_ray[i] = zero
-    out_eye[i] = zero
+    out_albedo[j] = zero
+    out_normal[j] = zero
+    out_position[j] = zero
+    out_material[j] = zero
+    out_ray[j] = zero
+    out_eye[j] = zero
     d = directions[i]
     len_d = wp.length(d)
-    if not (wp.isfinite(len_d) and len_d > 0.0):
+    if not (finite(len_d) and len_d > 0.0):
         return
     dn = d / len_d
     o = origins[i]
@@ -221,9 +250,9 @@ def trace_gbuffer(
     # pass through up to ``transmissions`` transparent interfaces, then shade the hit
     for k in range(transmissions + 1):
         prim, t, u, v = trace_kd(scene.tree, o, dn, tmin, tmax, False)
-        out_eye[i] = wp.vec4(o[0], o[1], o[2], 0.0)
+        out_eye[j] = wp.vec4(o[0], o[1], o[2], 0.0)
         if prim < 0:
-            out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], 0.0)
+            out_ray[j] = wp.vec4(dn[0], dn[1], dn[2], 0.0)
             return
         f = scene.faces[prim]
         b0 = 1.0 - u - v
@@ -246,7 +275,7 @@ def trace_gbuffer(
             travelled += t
             continue
         t_all = travelled + t
-        out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], t_all)
+        out_ray[j] = wp.vec4(dn[0], dn[1], dn[2], t_all)
         if wp.dot(n, dn) > 0.0:  # two-sided: face the viewer of this ray, as the G-buffer pass does
             n = -n
         albedo = scene.mat_albedo[m]
@@ -259,10 +288,10 @@ def trace_gbuffer(
             cone = cone_width[i] + cone_spread[i] * t_all
             lod = eval_texture_lod(scene, tex, p0, p1, p2, uv0, uv1, uv2, cone, wp.abs(wp.dot(ng, dn)))
             albedo = wp.cw_mul(albedo, sample_trilinear(scene, tex, uv, lod))
-        out_albedo[i] = wp.vec4(albedo[0], albedo[1], albedo[2], float(m))
-        out_normal[i] = wp.vec4(n[0], n[1], n[2], scene.mat_specular[m])
-        out_position[i] = wp.vec4(p[0], p[1], p[2], 1.0)
-        out_material[i] = prm
+        out_albedo[j] = wp.vec4(albedo[0], albedo[1], albedo[2], float(m))
+        out_normal[j] = wp.vec4(n[0], n[1], n[2], scene.mat_specular[m])
+        out_position[j] = wp.vec4(p[0], p[1], p[2], 1.0)
+        out_material[j] = prm
         return
 
 
@@ -352,12 +381,15 @@ class RayTracer:
         self.textures = textures
 
     def trace(self, origins, directions, cone_width=0.0, cone_spread=0.0, *, tmin: float | None = None,
-              tmax: float = np.inf, threads: int | None = None, transmissions: int = 0) -> dict[str, np.ndarray]:
+              tmax: float = np.inf, threads: int | None = None, transmissions: int = 0,
+              sort: bool | None = None) -> dict[str, np.ndarray]:
         """Trace N rays; returns the G-buffer as a dict of (N,4) float32 arrays (``RT_GBUFFER_KEYS``).
 
         ``tmin`` (m) defaults to ``ray_epsilon`` (hits closer than that are ignored: rays start on
         the reflecting surface). ``transmissions``: how many transparent interfaces a ray is bent
-        through (module doc) before the hit it reports; 0 = the first hit, as the paper does."""
+        through (module doc) before the hit it reports; 0 = the first hit, as the paper does.
+        ``sort``: ray reordering (:func:`serenity.kernels.kdtree.ray_order`; None = big incoherent
+        batches only); the results are the same either way, in the caller's order."""
         dev = self.device
         o = np.ascontiguousarray(np.asarray(origins, np.float32).reshape(-1, 3))
         d = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
@@ -368,9 +400,16 @@ class RayTracer:
         cs = np.ascontiguousarray(np.broadcast_to(np.asarray(cone_spread, np.float32), (n,)))
         outs = [wp.empty(n, dtype=wp.vec4, device=dev) for _ in RT_GBUFFER_KEYS]
         if n:
-            args = [self.data, wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
-                    wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev),
-                    float(self.ray_epsilon if tmin is None else tmin), float(tmax), int(max(0, transmissions)), *outs]
+            rays = [wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
+                    wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev)]
+            tree = self.data.tree
+            order = ray_order(tree.box_lo, tree.box_hi, rays[0], rays[1], n, sort, dev, threads)
+            if order.shape[0]:
+                gathered = [wp.empty(n, dtype=a.dtype, device=dev) for a in rays]
+                launch(gather_cone_rays, n, [order, *rays, *gathered], device=dev, threads=threads)
+                rays = gathered
+            args = [self.data, *rays, float(self.ray_epsilon if tmin is None else tmin), float(tmax),
+                    int(max(0, transmissions)), order, *outs]
             launch(trace_gbuffer, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
         return {k: a.numpy().reshape(n, 4) for k, a in zip(RT_GBUFFER_KEYS, outs, strict=True)}
 

@@ -10,7 +10,7 @@ import trimesh
 
 from serenity.device import init_warp
 from serenity.errors import SerenityError
-from serenity.kernels.kdtree import KdBuildConfig, KdTree, intersect_triangle, setup_ray
+from serenity.kernels.kdtree import SORT_MIN_RAYS, KdBuildConfig, KdTree, intersect_triangle, ray_order, setup_ray
 from serenity.scene.procedural import lumpy_mesh
 
 wp = init_warp()
@@ -175,6 +175,35 @@ def test_multi_threaded_trace_equals_single_threaded_bit_for_bit():
         for threads in (2, 3, 8):
             assert _hits_equal(tree.intersect(o, d, device="cpu", threads=threads), one), threads
             assert np.array_equal(tree.occluded(o, d, 1.5, device="cpu", threads=threads), occ), threads
+
+
+def test_reordered_rays_give_the_same_bits_in_the_callers_order():
+    """Ray reordering (``sort``) traces the rays in another order and scatters the results back:
+    the same bits at the same indices as without it, on one thread and on several. ``sort=None``
+    reorders a big batch of random rays and leaves camera rays (already coherent) as they come."""
+    v, f = lumpy_mesh(4)
+    tree = KdTree.build(v, f)
+    data = tree.device_data("cpu")
+    rng = np.random.default_rng(7)
+    oc, dc = camera_rays(320, 180, position=(0.0, 0.6, 3.5))
+    o2, d2 = random_rays(rng, SORT_MIN_RAYS + 1000, extent=2.0)
+    for o, d, sorted_by_default in ((oc, dc, False), (o2, d2, True)):
+        order = ray_order(data.box_lo, data.box_hi, wp.array(o, dtype=wp.vec3, device="cpu"),
+                          wp.array(d, dtype=wp.vec3, device="cpu"), len(o),
+                          None, "cpu")
+        assert (order.shape[0] == len(o)) == sorted_by_default
+        plain = tree.intersect(o, d, device="cpu", threads=1, sort=False)
+        occ = tree.occluded(o, d, 1.5, device="cpu", threads=1, sort=False)
+        for threads in (1, 3):
+            assert _hits_equal(tree.intersect(o, d, device="cpu", threads=threads, sort=True), plain), threads
+            assert np.array_equal(tree.occluded(o, d, 1.5, device="cpu", threads=threads, sort=True), occ), threads
+    # the order is a permutation, grouped by the direction's octant first
+    order = ray_order(data.box_lo, data.box_hi, wp.array(o2, dtype=wp.vec3, device="cpu"),
+                      wp.array(d2, dtype=wp.vec3, device="cpu"), len(o2),
+                      True, "cpu").numpy()
+    assert np.array_equal(np.sort(order), np.arange(len(o2)))
+    octant = (d2[order] < 0) @ np.array([1, 2, 4])
+    assert np.all(np.diff(octant) >= 0)
 
 
 def test_build_does_not_depend_on_the_thread_count():
