@@ -362,6 +362,10 @@ class RenderConfig:
     traces inline first (the serial schedule, for comparison)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
+    rt_sun_shadows: str = "traced"
+    """Sun shadows of what reflections and refractions show: "traced" (one shadow ray per traced hit
+    in the CPU tracer, a hard shadow; no overlapped shadow maps are drawn) or "osm" (the paper's
+    overlapped shadow maps, ``osm_size``; their coarse texels light a wall a few cm behind a window)."""
     sky_layers_per_frame: int = 1
     """Probe layers re-integrated per frame while the sun moves (paper: one); the first frame
     builds the whole volume."""
@@ -390,6 +394,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.transmissions must be an int in 0..16, got {self.transmissions!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):
             raise ConfigError(f"RenderConfig.osm_size must be in 16..{MAX_IMAGE_SIZE}, got {self.osm_size}")
+        if self.rt_sun_shadows not in ("traced", "osm"):
+            raise ConfigError(f"RenderConfig.rt_sun_shadows must be traced or osm, got {self.rt_sun_shadows!r}")
         if not (isinstance(self.indirect_scale, int) and 1 <= self.indirect_scale <= 8):
             raise ConfigError(f"RenderConfig.indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
         if self.ambient not in ("none", "constant"):

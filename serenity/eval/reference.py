@@ -28,9 +28,11 @@ What is exported, and how faithfully:
   (1-R)·surface. Our composite uses Schlick's F(R, cos θ) instead of R, so the reference lacks the
   reflectance rise towards grazing angles (at most (1-R)(1-cos θ)⁵, < 1% below 50°).
 - **Glass** (``transparency`` T > 0): ``blendbsdf(weight=T, phong, dielectric(ior))`` — T·(Fresnel
-  reflection + refraction) + (1-T)·surface; our composite weighs the reflection by F rather than
-  T·F (0.04 vs 0.036 at normal incidence for ior 1.5, T 0.9). The opaque part is one-sided (a
-  dielectric cannot be wrapped in ``twosided``): light reaching it from inside the glass is absorbed.
+  reflection + refraction) + (1-T)·surface, the formula of our composite (``raster/glsl/composite.glsl``;
+  Mitsuba's exact Fresnel where we use Schlick's). The opaque part is one-sided (a dielectric cannot
+  be wrapped in ``twosided``): light reaching it from inside the glass is absorbed. Shadow rays do
+  not pass a dielectric, so glass casts a full sun shadow here as in our shadow maps and the
+  tracer's shadow rays (no caustics: the sun's disc is too small to be found through glass).
 - **Sun**: a sphere area emitter of radiance ``Sun.radiance`` at distance D = 10⁴ × the scene's
   radius, in direction ``Sun.direction``, with radius D·sin(θ_d/2), so that it subtends exactly the
   cone of ``angular_diameter_deg`` (0.53°) and delivers ``Sun.irradiance`` to a surface facing it.

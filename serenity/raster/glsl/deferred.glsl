@@ -1,7 +1,8 @@
 // Deferred lighting of a G-buffer (paper §3, §6, §9): Phong + sun shadows, the indirect terms, and
 // the sky behind uncovered pixels. Linear HDR radiance out. The same program lights the main view
 // (rasterised G-buffer, view-fitted cascades, SSAO) and the ray-traced views (ray-traced G-buffer,
-// overlapped shadow maps, no SSAO; the viewer of a pixel is its ray's origin).
+// the tracer's shadow rays or the overlapped shadow maps, no SSAO; the viewer of a pixel is its
+// ray's origin).
 //
 // Radiance of a lit pixel (W m^-2 sr^-1 per channel), E = sun irradiance facing the sun:
 //   L = (albedo/pi + k_s (n+2)/(2 pi) max(0, r.v)^n) * E * max(0, N.L) * visibility + indirect
@@ -28,7 +29,9 @@ uniform vec3 u_ambient_irradiance;  // constant ambient term (baseline hack; 0 =
 uniform bool u_use_ao;
 uniform sampler2D u_ao;             // SSAO, 1 = open (multiplies indirect light only)
 uniform bool u_rt_view;             // lighting a ray-traced G-buffer
-uniform sampler2D g_eye;            // rt view: xyz = ray origin (the viewer of this pixel)
+uniform sampler2D g_eye;            // rt view: xyz = ray origin (the viewer of this pixel);
+                                    // w = the sun's visibility from the tracer's shadow ray
+uniform bool u_traced_sun;          // rt view: use g_eye.w, not the (overlapped) shadow maps
 uniform sampler2D g_ray_dir;        // rt view: xyz = ray direction (0 = pixel not traced)
 layout(location = 0) out vec4 o_hdr;
 layout(location = 1) out vec4 o_direct;
@@ -65,7 +68,7 @@ void main() {
     if (ndl > 0.0 && u_sun_dir.y > -0.02) {
         // cascades are chosen by view depth; overlapped maps (rt views) by distance to the camera
         float metric = u_rt_view ? length(p - u_camera_pos) : dot(p - u_camera_pos, u_camera_forward);
-        float vis = sun_visibility(p, n, ndl, metric);
+        float vis = (u_rt_view && u_traced_sun) ? texture(g_eye, v_uv).w : sun_visibility(p, n, ndl, metric);
         vec3 r = reflect(-u_sun_dir, n);
         float spec = nrm.w * (mat.x + 2.0) / (2.0 * PI) * pow(max(dot(r, v), 0.0), mat.x);
         direct = (albedo / PI + vec3(spec)) * u_sun_irradiance * ndl * vis;
