@@ -577,15 +577,16 @@ def glass_slab_case(count: int = 64, device=None) -> Case:
                         "error": b[0][None]})
 
 
-def mirror_shadow_case(size=(160, 90), device=None) -> Case:
+def mirror_shadow_case(size=(160, 90), device=None, rt_sun_shadows: str = "traced") -> Case:
     """Off-screen geometry seen in the ``mirror-box`` mirror (behind the camera, outside the main view's
     shadow cascades): is it shadowed? For the reflection rays, the exact sun-disc visibility at their
-    hits (the kd-tree) vs the overlapped shadow maps' answer as the RT direct-lighting pass uses it
-    (its direct term over the unshadowed one). Error: fraction of hits whose shadow state (exact
+    hits (the kd-tree) vs the answer the RT direct-lighting pass uses (its direct term over the
+    unshadowed one): the tracer's shadow ray by default, ``rt_sun_shadows="osm"`` the overlapped
+    shadow maps. Error: fraction of hits whose shadow state (exact
     visibility < 0.5) differs; "without" lights every hit as unshadowed."""
     scene = load("mirror-box")
     cfg = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ssao=SSAOConfig(enabled=False),
-                       overlap=False)
+                       overlap=False, rt_sun_shadows=rt_sun_shadows)
     r = Renderer(scene, *size, device=device, config=cfg)
     r.render()
     f, ms = _timed(r.render)
@@ -616,8 +617,9 @@ def mirror_shadow_case(size=(160, 90), device=None) -> Case:
     ex_img = np.full(h * w, np.nan)
     img[pix] = np.clip(ours, 0, 1.5)
     ex_img[pix] = vis
+    shadows = "overlapped shadow maps" if rt_sun_shadows == "osm" else "traced sun shadow rays"
     return Case("mirror: off-screen geometry in shadow", "ray tracing",
-                "fraction of reflected hits with the wrong shadow state", "overlapped shadow maps (vs unshadowed)",
+                "fraction of reflected hits with the wrong shadow state", f"{shadows} (vs unshadowed)",
                 err_without, err_with, 0.0, f.timings.get("shadow maps (OSM)", 0.0), exact=0.0,
                 images={"exact": ex_img.reshape(h, w), "without": np.where(np.isnan(img), np.nan, 1.0).reshape(h, w),
                         "with": img.reshape(h, w), "error": np.abs(img - ex_img).reshape(h, w)},
