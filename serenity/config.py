@@ -78,6 +78,13 @@ class ShadowConfig:
     the sun moving every frame, 2 tiles are drawn per frame instead of 4 and the far cascades' shadows
     lag the sun by up to 3 frames. The same for the overlapped shadow maps. A still frame is
     unchanged apart from the 10 % coarser tiles (``ShadowPass.render``)."""
+    contact_steps: int = 12
+    """Steps of the screen-space contact-shadow march towards the sun (main view; 0 = off): a
+    receiver touching a blocker closer than the map's texels (``glsl/deferred.glsl``)."""
+    contact_pixels: float = 12.0
+    """Length of the contact-shadow march, in pixel footprints at the receiver ..."""
+    contact_texels: float = 32.0
+    """... and at most this many shadow-map texels of the receiver's cascade."""
 
     def __post_init__(self):
         if not 16 <= self.size <= MAX_IMAGE_SIZE:
@@ -90,6 +97,12 @@ class ShadowConfig:
             raise ConfigError(f"ShadowConfig.blocker_samples must be in 1..128, got {self.blocker_samples}")
         if not 1 <= self.filter_samples <= 256:
             raise ConfigError(f"ShadowConfig.filter_samples must be in 1..256, got {self.filter_samples}")
+        if not 0 <= self.contact_steps <= 64:
+            raise ConfigError(f"ShadowConfig.contact_steps must be in 0..64, got {self.contact_steps}")
+        if not self.contact_pixels > 0:
+            raise ConfigError(f"ShadowConfig.contact_pixels must be > 0, got {self.contact_pixels}")
+        if not self.contact_texels > 0:
+            raise ConfigError(f"ShadowConfig.contact_texels must be > 0, got {self.contact_texels}")
 
 
 @dataclass(frozen=True)

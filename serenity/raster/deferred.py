@@ -71,6 +71,12 @@ class DeferredPass(FullscreenPass):
             if sky is not None:
                 sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
             p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
+            if "u_view_proj" in p:
+                p["u_view_proj"].write(np.linalg.inv(light.inv_view_proj).T.astype(np.float32).tobytes())
+            if "u_contact_steps" in p:
+                p["u_contact_steps"].value = int(light.shadow.contact_steps)
+            self._set(p, "u_contact_pixels", light.shadow.contact_pixels)
+            self._set(p, "u_contact_texels", light.shadow.contact_texels)
             self._set(p, "u_sun_dir", light.sun_direction)
             self._set(p, "u_sun_irradiance", light.sun_irradiance)
             self._set(p, "u_sun_radiance", light.sun_radiance)
