@@ -1,0 +1,96 @@
+"""What the two sun-shadow fixes of the accuracy issue buy and cost, each switched on in turn.
+
+    python benchmarks/bench_shadow_fixes.py [--frames N] [--json FILE]
+
+The courtyard and the Cornell box at 320×180, default ``RenderConfig`` but for the two switches,
+against the same full references as ``bench_baseline.py`` (two cached halves, 256 / 1024 spp):
+
+- ``rt_sun_shadows``: "osm" (the paper's overlapped shadow maps light what reflections and
+  refractions show) vs "traced" (one shadow ray per traced hit in the CPU tracer);
+- ``ShadowConfig.contact_steps``: 0 (off) vs the default screen-space contact shadow.
+
+Per setting: relMSE (also 0.1 % trimmed), FLIP, the luminance ratio ours/reference of the glass,
+mirror and down-facing regions (``serenity.eval.regions``), the Cornell box's worst pixel of
+``bench_cornell_pixels.py`` (row 152, column 97: ours and the reference), and the median over frames
+2..N of the stages the switches touch ("cpu ray tracing" runs in the tracer process, beside the GL
+work) and of the frame's total. The renderers of one scene take their frames in turn, so the load
+of the machine falls on all settings alike.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import numpy as np
+
+from serenity.config import RenderConfig, ShadowConfig
+from serenity.eval.metrics import compare, rel_mse
+from serenity.eval.reference import render_reference
+from serenity.eval.regions import region_report
+from serenity.frame import Renderer
+from serenity.io.results import write_results
+from serenity.scene import load
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SCENES = {"courtyard": 256, "cornell": 1024}  # reference spp, as bench_baseline.py
+SETTINGS = {
+    "OSM, no contact shadow (before)": RenderConfig(rt_sun_shadows="osm", shadow=ShadowConfig(contact_steps=0)),
+    "traced rt shadows, no contact shadow": RenderConfig(shadow=ShadowConfig(contact_steps=0)),
+    "traced rt shadows + contact shadow (default)": RenderConfig(),
+}
+STAGES = ("direct lighting", "cpu ray tracing", "shadow maps (OSM)", "rt direct lighting", "composite")
+WORST = (152, 97)
+"""The Cornell box's worst pixel (row, column) at 320×180 (``benchmarks/results/cornell_worst_pixels.json``)."""
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--frames", type=int, default=6)
+    ap.add_argument("--json", default=os.path.join(HERE, "results", "shadow_fixes.json"))
+    args = ap.parse_args(argv)
+    w, h = 320, 180
+    out = {"benchmark": "shadow_fixes", "size": [w, h], "frames": args.frames,
+           "note": "timings on a shared 2-core machine: compare settings within one run", "scenes": {}}
+    for name, spp in SCENES.items():
+        scene = load(name)
+        ref = (render_reference(scene, w, h, spp=spp // 2, component="full", seed=0)
+               + render_reference(scene, w, h, spp=spp // 2, component="full", seed=1)) / 2
+        renderers = {label: Renderer(scene, w, h, config=cfg) for label, cfg in SETTINGS.items()}
+        timings = {label: [] for label in SETTINGS}
+        frames = {}
+        try:
+            for _ in range(args.frames):
+                for label, r in renderers.items():
+                    frames[label] = r.render()
+                    timings[label].append(frames[label].timings | {"total": frames[label].total_ms})
+        finally:
+            for r in renderers.values():
+                r.close()
+        rows = {}
+        for label, f in frames.items():
+            m = compare(f.hdr, ref, exposure=f.exposure)
+            reg = region_report(f.hdr, ref, f.aovs["normal"], f.aovs["depth"], f.aovs["material"],
+                                [mat.name for mat in scene.materials], exposure=f.exposure, fmap=m["flip_map"])
+            lum = {k: v["luminance_ratio"] for k, v in reg["materials"].items() if k in ("glass", "mirror")}
+            lum["down-facing"] = reg["regions"]["down-facing"]["luminance_ratio"]
+            later = timings[label][1:] or timings[label]
+            ms = {s: float(np.median([t.get(s, 0.0) for t in later])) for s in (*STAGES, "total")}
+            row = {"rel_mse": m["rel_mse"], "rel_mse_trimmed": rel_mse(f.hdr, ref, trim=1e-3), "flip": m["flip"],
+                   "luminance_ratio": lum, "ms": ms}
+            if name == "cornell":
+                row["worst_pixel"] = {"row_column": list(WORST), "ours": f.hdr[WORST].tolist(),
+                                      "reference": ref[WORST].tolist()}
+            rows[label] = row
+            print(f"{name:<10} {label:<46} relMSE {m['rel_mse']:.4f} FLIP {m['flip']:.4f} "
+                  + " ".join(f"{k} {v:.3f}" for k, v in lum.items() if v is not None)
+                  + f"  direct lighting {ms['direct lighting']:.2f} ms, cpu ray tracing {ms['cpu ray tracing']:.2f} ms,"
+                  f" OSM {ms['shadow maps (OSM)']:.2f} ms, total {ms['total']:.1f} ms", flush=True)
+        out["scenes"][name] = {"reference_spp": spp, "settings": rows}
+    write_results(args.json, out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
