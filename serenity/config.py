@@ -487,10 +487,11 @@ class KdBuildConfig:
 SUB_CONFIGS = {"shadow": ShadowConfig, "ssao": SSAOConfig, "sky": SkyConfig, "lpv": LPVConfig}
 
 PRESETS: dict[str, dict] = {
-    # the paper's settings (§6–§8): full-resolution passes, one sky layer per frame by ray casting,
-    # 3 LPV cascades of 32³, 4 cascades of 2048² with PCSS, SSAO at full resolution
+    # the paper's settings (§6–§9): full-resolution passes, one sky layer per frame by ray casting,
+    # 3 LPV cascades of 32³, 4 cascades of 2048² with PCSS and no contact shadow, SSAO at full
+    # resolution, the ray-traced views lit with the overlapped shadow maps
     "paper": {"indirect_scale": 1, "sky": {"method": "layers"}, "sky_layers_per_frame": 1,
-              "lpv": {"resolution": 32}},
+              "lpv": {"resolution": 32}, "shadow": {"contact_steps": 0}, "rt_sun_shadows": "osm"},
     # the defaults: indirect light and SSAO at half resolution, the sky volume by visibility
     # transfer (every probe current every frame), the 256² sky map
     "high": {},
