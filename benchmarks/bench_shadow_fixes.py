@@ -7,7 +7,12 @@ against the same full references as ``bench_baseline.py`` (two cached halves, 25
 
 - ``rt_sun_shadows``: "osm" (the paper's overlapped shadow maps light what reflections and
   refractions show) vs "traced" (one shadow ray per traced hit in the CPU tracer);
-- ``ShadowConfig.contact_steps``: 0 (off) vs the default screen-space contact shadow.
+- ``ShadowConfig.contact_steps``: 0 (off) vs the default screen-space contact shadow;
+
+and two diagnostics of the glass: refractions off (the glass's transmitted term shows its own
+rasterised surface: if the glass is right then, the refraction term is what was wrong) and 4096²
+overlapped maps with a hard, unbiased lookup (whether the maps' resolution and bias are the cause;
+acne elsewhere does not matter for this question).
 
 Per setting: relMSE (also 0.1 % trimmed), FLIP, the luminance ratio ours/reference of the glass,
 mirror and down-facing regions (``serenity.eval.regions``), the Cornell box's worst pixel of
@@ -35,9 +40,17 @@ from serenity.scene import load
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = {"courtyard": 256, "cornell": 1024}  # reference spp, as bench_baseline.py
+NO_CONTACT = ShadowConfig(contact_steps=0)
 SETTINGS = {
-    "OSM, no contact shadow (before)": RenderConfig(rt_sun_shadows="osm", shadow=ShadowConfig(contact_steps=0)),
-    "traced rt shadows, no contact shadow": RenderConfig(shadow=ShadowConfig(contact_steps=0)),
+    # diagnostics: which term of the glass was wrong (refraction off: the glass's transmitted term
+    # shows its own rasterised surface) and whether finer, unbiased overlapped maps get it right
+    "OSM, refractions off, no contact shadow": RenderConfig(rt_sun_shadows="osm", refractions=False,
+                                                            shadow=NO_CONTACT),
+    "OSM 4096², hard, no bias, no contact shadow": RenderConfig(
+        rt_sun_shadows="osm", osm_size=4096, shadow=ShadowConfig(contact_steps=0, filter="hard", bias=0.0,
+                                                                 normal_offset=0.0)),
+    "OSM, no contact shadow (before)": RenderConfig(rt_sun_shadows="osm", shadow=NO_CONTACT),
+    "traced rt shadows, no contact shadow": RenderConfig(shadow=NO_CONTACT),
     "traced rt shadows + contact shadow (default)": RenderConfig(),
 }
 STAGES = ("direct lighting", "cpu ray tracing", "shadow maps (OSM)", "rt direct lighting", "composite")
@@ -83,7 +96,7 @@ def main(argv=None) -> int:
                 row["worst_pixel"] = {"row_column": list(WORST), "ours": f.hdr[WORST].tolist(),
                                       "reference": ref[WORST].tolist()}
             rows[label] = row
-            print(f"{name:<10} {label:<46} relMSE {m['rel_mse']:.4f} FLIP {m['flip']:.4f} "
+            print(f"{name:<10} {label:<45} relMSE {m['rel_mse']:.4f} FLIP {m['flip']:.4f} "
                   + " ".join(f"{k} {v:.3f}" for k, v in lum.items() if v is not None)
                   + f"  direct lighting {ms['direct lighting']:.2f} ms, cpu ray tracing {ms['cpu ray tracing']:.2f} ms,"
                   f" OSM {ms['shadow maps (OSM)']:.2f} ms, total {ms['total']:.1f} ms", flush=True)

@@ -74,7 +74,10 @@ float contact_visibility(vec3 p, vec3 n, float view_depth) {
         if (abs(rn) < 1e-3) continue;
         float t = dot(g.xyz - u_camera_pos, gn) / rn;       // that pixel's plane along the ray to m
         float behind = dist - t;
-        if (t > 0.0 && behind > 0.05 * pixel && behind < len) return 0.0;
+        // the plane only near its pixel (a grazing plane extrapolated far past it is not the occluder)
+        float near_g = 2.0 * pixel * max(t, 0.0) / max(view_depth, 1e-6);
+        if (t > 0.0 && behind > 0.05 * pixel && behind < len
+            && length(u_camera_pos + r * t - g.xyz) < near_g) return 0.0;
     }
     return 1.0;
 }
