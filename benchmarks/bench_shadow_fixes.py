@@ -19,7 +19,8 @@ mirror and down-facing regions (``serenity.eval.regions``), the Cornell box's wo
 ``bench_cornell_pixels.py`` (row 152, column 97: ours and the reference), and the median over frames
 2..N of the stages the switches touch ("cpu ray tracing" runs in the tracer process, beside the GL
 work) and of the frame's total. The renderers of one scene take their frames in turn, so the load
-of the machine falls on all settings alike.
+of the machine falls on all settings alike. "tracer": the CPU tracer's time for one frame's rays
+with and without the shadow rays (one thread, interleaved), what the traced rt shadows cost it.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 
 import numpy as np
 
@@ -56,6 +58,30 @@ SETTINGS = {
 STAGES = ("direct lighting", "cpu ray tracing", "shadow maps (OSM)", "rt direct lighting", "composite")
 WORST = (152, 97)
 """The Cornell box's worst pixel (row, column) at 320×180 (``benchmarks/results/cornell_worst_pixels.json``)."""
+
+
+def tracer_cost(scene, w, h, repeats) -> dict | None:
+    """The CPU tracer's own time for one frame's rays (the default frame's ray-casting buffer), with
+    and without the sun's shadow rays, in this process on one thread, interleaved ``2 * repeats``
+    times; None when the scene has no ray-traced pixel."""
+    r = Renderer(scene, w, h, config=RenderConfig(overlap=False))
+    try:
+        r.render()
+        if r.tracer is None:
+            return None
+        rcb = r.raycast_pass.read()
+        batches = [b for b in r._ray_batches(rcb) if b is not None]
+        times = {False: [], True: []}
+        for _ in range(2 * repeats):
+            for with_sun in (False, True):
+                t0 = time.perf_counter()
+                for b in batches:
+                    r.tracer.trace(*b[:4], transmissions=b[4], sun_direction=b[5] if with_sun else None, threads=1)
+                times[with_sun].append((time.perf_counter() - t0) * 1e3)
+        return {"rays": int(sum(len(b[0]) for b in batches)), "threads": 1,
+                "ms_without_sun": float(np.median(times[False])), "ms_with_sun": float(np.median(times[True]))}
+    finally:
+        r.close()
 
 
 def main(argv=None) -> int:
@@ -101,6 +127,11 @@ def main(argv=None) -> int:
                   + f"  direct lighting {ms['direct lighting']:.2f} ms, cpu ray tracing {ms['cpu ray tracing']:.2f} ms,"
                   f" OSM {ms['shadow maps (OSM)']:.2f} ms, total {ms['total']:.1f} ms", flush=True)
         out["scenes"][name] = {"reference_spp": spp, "settings": rows}
+        tracer = tracer_cost(scene, w, h, args.frames)
+        if tracer:
+            out["scenes"][name]["tracer"] = tracer
+            print(f"{name:<10} tracer, {tracer['rays']} rays: {tracer['ms_without_sun']:.2f} ms without shadow rays, "
+                  f"{tracer['ms_with_sun']:.2f} ms with", flush=True)
     write_results(args.json, out)
     return 0
 
