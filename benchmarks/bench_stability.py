@@ -43,6 +43,7 @@ def cases(quick: bool):
         ("sky_terrain", lambda: S.terrain_sky_case(24 if quick else 64, 128 if quick else 256)),
         ("shadow_acne", lambda: S.shadow_acne_case(2.0, (160, 90))),
         ("peter_panning", lambda: S.peter_panning_case(10.0, (160, 90))),
+        ("contact_leak", lambda: S.contact_leak_case((320, 180))),
         ("cascade_seams", lambda: S.cascade_seam_case((320, 180))),
         ("penumbra", lambda: S.penumbra_case(10.0, (192, 192) if quick else (256, 256))),
         ("glass_slab", lambda: S.glass_slab_case(64)),

@@ -78,6 +78,13 @@ class ShadowConfig:
     the sun moving every frame, 2 tiles are drawn per frame instead of 4 and the far cascades' shadows
     lag the sun by up to 3 frames. The same for the overlapped shadow maps. A still frame is
     unchanged apart from the 10 % coarser tiles (``ShadowPass.render``)."""
+    contact_steps: int = 12
+    """Steps of the screen-space contact-shadow march towards the sun (main view; 0 = off): a
+    receiver touching a blocker closer than the map's texels (``glsl/deferred.glsl``)."""
+    contact_pixels: float = 12.0
+    """Length of the contact-shadow march, in pixel footprints at the receiver ..."""
+    contact_texels: float = 32.0
+    """... and at most this many shadow-map texels of the receiver's cascade."""
 
     def __post_init__(self):
         if not 16 <= self.size <= MAX_IMAGE_SIZE:
@@ -90,6 +97,12 @@ class ShadowConfig:
             raise ConfigError(f"ShadowConfig.blocker_samples must be in 1..128, got {self.blocker_samples}")
         if not 1 <= self.filter_samples <= 256:
             raise ConfigError(f"ShadowConfig.filter_samples must be in 1..256, got {self.filter_samples}")
+        if not 0 <= self.contact_steps <= 64:
+            raise ConfigError(f"ShadowConfig.contact_steps must be in 0..64, got {self.contact_steps}")
+        if not self.contact_pixels > 0:
+            raise ConfigError(f"ShadowConfig.contact_pixels must be > 0, got {self.contact_pixels}")
+        if not self.contact_texels > 0:
+            raise ConfigError(f"ShadowConfig.contact_texels must be > 0, got {self.contact_texels}")
 
 
 @dataclass(frozen=True)
@@ -362,6 +375,10 @@ class RenderConfig:
     traces inline first (the serial schedule, for comparison)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
+    rt_sun_shadows: str = "traced"
+    """Sun shadows of what reflections and refractions show: "traced" (one shadow ray per traced hit
+    in the CPU tracer, a hard shadow; no overlapped shadow maps are drawn) or "osm" (the paper's
+    overlapped shadow maps, ``osm_size``; their coarse texels light a wall a few cm behind a window)."""
     sky_layers_per_frame: int = 1
     """Probe layers re-integrated per frame while the sun moves (paper: one); the first frame
     builds the whole volume."""
@@ -390,6 +407,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.transmissions must be an int in 0..16, got {self.transmissions!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):
             raise ConfigError(f"RenderConfig.osm_size must be in 16..{MAX_IMAGE_SIZE}, got {self.osm_size}")
+        if self.rt_sun_shadows not in ("traced", "osm"):
+            raise ConfigError(f"RenderConfig.rt_sun_shadows must be traced or osm, got {self.rt_sun_shadows!r}")
         if not (isinstance(self.indirect_scale, int) and 1 <= self.indirect_scale <= 8):
             raise ConfigError(f"RenderConfig.indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
         if self.ambient not in ("none", "constant"):
@@ -468,10 +487,11 @@ class KdBuildConfig:
 SUB_CONFIGS = {"shadow": ShadowConfig, "ssao": SSAOConfig, "sky": SkyConfig, "lpv": LPVConfig}
 
 PRESETS: dict[str, dict] = {
-    # the paper's settings (§6–§8): full-resolution passes, one sky layer per frame by ray casting,
-    # 3 LPV cascades of 32³, 4 cascades of 2048² with PCSS, SSAO at full resolution
+    # the paper's settings (§6–§9): full-resolution passes, one sky layer per frame by ray casting,
+    # 3 LPV cascades of 32³, 4 cascades of 2048² with PCSS and no contact shadow, SSAO at full
+    # resolution, the ray-traced views lit with the overlapped shadow maps
     "paper": {"indirect_scale": 1, "sky": {"method": "layers"}, "sky_layers_per_frame": 1,
-              "lpv": {"resolution": 32}},
+              "lpv": {"resolution": 32}, "shadow": {"contact_steps": 0}, "rt_sun_shadows": "osm"},
     # the defaults: indirect light and SSAO at half resolution, the sky volume by visibility
     # transfer (every probe current every frame), the 256² sky map
     "high": {},

@@ -200,7 +200,8 @@ class Renderer:
             if self.traces:
                 self.raycast_pass = RayCastPass(self.ctx, self.scene_gl)
                 self.raycast_pass.resize(self.width, self.height)
-                self.osm_pass = ShadowPass(self.ctx, self.scene_gl, cfg.osm_size, 3)
+                self.osm_pass = (ShadowPass(self.ctx, self.scene_gl, cfg.osm_size, 3)
+                                 if cfg.rt_sun_shadows == "osm" else None)
                 self.rt_upload = RTGBufferUpload(self.ctx)
                 self.rt_upload.resize(self.width, self.height)
                 self.rt_deferred = DeferredPass(self.ctx)
@@ -436,11 +437,13 @@ class Renderer:
             traced = join()
         with self._stage("rt g-buffer upload"):
             view_rt = self.rt_upload.upload(rcb, *traced)
-        with self._stage("shadow maps (OSM)"):
-            stagger = cfg.shadow.stagger
-            osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, scene.bounds, 3,
-                                                      cfg.osm_size, pad=STAGGER_PAD if stagger else 0.0),
-                                       stagger=stagger)
+        osm = None  # rt_sun_shadows == "traced": the tracer's shadow rays (eye.w) instead
+        if self.osm_pass is not None:
+            with self._stage("shadow maps (OSM)"):
+                stagger = cfg.shadow.stagger
+                osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, scene.bounds, 3,
+                                                          cfg.osm_size, pad=STAGGER_PAD if stagger else 0.0),
+                                           stagger=stagger)
         with self._stage("rt direct lighting"):
             rt_lit = self.rt_deferred.render(view_rt, osm, light, None, rt_view=view_rt, sky=sky_gl)
         if sky_gl is not None:
@@ -540,19 +543,26 @@ class Renderer:
         return self.tracer
 
     def _ray_batches(self, rcb: RayCastingBuffer) -> list:
-        """(origins, directions, cone width, cone spread, transmissions) of the reflected and the
-        refracted rays, None where there are none."""
+        """(origins, directions, cone width, cone spread, transmissions, sun direction or None) of the
+        reflected and the refracted rays, None where there are none."""
+        sun = self._traced_sun()
         out = []
         for sel, dirs, transmissions in ((rcb.reflection_rays(), rcb.reflect_dirs, 0),
                                          (rcb.refraction_rays(), rcb.refract_dirs, self.config.transmissions)):
-            out.append((rcb.origins[sel], dirs[sel], rcb.cone_width[sel], rcb.cone_spread[sel], transmissions)
+            out.append((rcb.origins[sel], dirs[sel], rcb.cone_width[sel], rcb.cone_spread[sel], transmissions, sun)
                        if sel.any() else None)
         return out
+
+    def _traced_sun(self):
+        """The sun direction the tracer casts shadow rays to (``rt_sun_shadows == "traced"``), or None."""
+        if self.config.rt_sun_shadows != "traced":
+            return None
+        return np.asarray(self.scene.sun.direction, np.float64)
 
     def _trace(self, rcb: RayCastingBuffer) -> tuple[dict | None, dict | None]:
         """CPU ray tracing of the reflected and refracted rays, in this process."""
         t0 = time.perf_counter()
-        refl, refr = (None if b is None else self.tracer.trace(*b[:4], transmissions=b[4])
+        refl, refr = (None if b is None else self.tracer.trace(*b[:4], transmissions=b[4], sun_direction=b[5])
                       for b in self._ray_batches(rcb))
         self._record(RT_LANE, "cpu ray tracing", t0, time.perf_counter())
         return refl, refr

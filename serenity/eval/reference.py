@@ -23,14 +23,19 @@ What is exported, and how faithfully:
   loses energy below the horizon; highlights differ in shape, most at grazing angles, by up to a
   few tens of percent of the *specular* term. With k_s ≤ 0.05 on the built-in scenes' diffuse
   materials this is well under 1% of their radiance; it matters for water (k_s 0.3) and for the
-  highlights on mirrors and glass. ρ/(1-k_s) > 1 is clamped to 1 (never the case in the built-ins).
+  highlights on mirrors and glass. ρ/(1-k_s) > 1 (ρ + k_s > 1: the built-in glass, ρ 0.95 and
+  k_s 0.5, reflects 1.45 of what it receives) is exported as it is, through a raw bitmap; it was
+  clamped to 1 until the courtyard's windows showed the difference (their Phong surface at 0.53 of
+  ours in the reference).
 - **Mirrors** (``reflectivity`` R > 0): ``blendbsdf(weight=R, phong, conductor(F=1))`` — R·mirror +
   (1-R)·surface. Our composite uses Schlick's F(R, cos θ) instead of R, so the reference lacks the
   reflectance rise towards grazing angles (at most (1-R)(1-cos θ)⁵, < 1% below 50°).
 - **Glass** (``transparency`` T > 0): ``blendbsdf(weight=T, phong, dielectric(ior))`` — T·(Fresnel
-  reflection + refraction) + (1-T)·surface; our composite weighs the reflection by F rather than
-  T·F (0.04 vs 0.036 at normal incidence for ior 1.5, T 0.9). The opaque part is one-sided (a
-  dielectric cannot be wrapped in ``twosided``): light reaching it from inside the glass is absorbed.
+  reflection + refraction) + (1-T)·surface, the formula of our composite (``raster/glsl/composite.glsl``;
+  Mitsuba's exact Fresnel where we use Schlick's). The opaque part is one-sided (a dielectric cannot
+  be wrapped in ``twosided``): light reaching it from inside the glass is absorbed. Shadow rays do
+  not pass a dielectric, so glass casts a full sun shadow here as in our shadow maps and the
+  tracer's shadow rays (no caustics: the sun's disc is too small to be found through glass).
 - **Sun**: a sphere area emitter of radiance ``Sun.radiance`` at distance D = 10⁴ × the scene's
   radius, in direction ``Sun.direction``, with radius D·sin(θ_d/2), so that it subtends exactly the
   cone of ``angular_diameter_deg`` (0.53°) and delivers ``Sun.irradiance`` to a surface facing it.
@@ -137,12 +142,28 @@ def _rgb(v) -> dict:
     return {"type": "rgb", "value": [float(x) for x in np.asarray(v, np.float64).reshape(3)]}
 
 
+def diffuse_exceeds_one(material) -> bool:
+    """Whether the exported diffuse reflectance ρ/(1 − k_s) exceeds 1 somewhere (module doc, Phong)."""
+    ks = float(material.specular)
+    if ks <= 0.0 or ks >= 1.0:
+        return False
+    rho = material.albedo if material.albedo_texture is None else (
+        np.asarray(material.albedo_texture.mips[0], np.float32)[..., :3] * material.albedo.astype(np.float32))
+    return bool(np.max(rho) / (1.0 - ks) > 1.0)
+
+
 def _albedo_spec(mi, material, scale: float) -> dict:
-    """Diffuse reflectance: a constant or the material's texture (× albedo), times ``scale``, ≤ 1."""
+    """Diffuse reflectance: a constant or the material's texture (× albedo), times ``scale``. Above 1
+    (a Phong material with ρ + k_s > 1) it goes through a raw bitmap: Mitsuba's ``rgb`` reflectance
+    refuses values over 1, a raw bitmap passes them as they are."""
     if material.albedo_texture is None:
-        return _rgb(np.minimum(material.albedo * scale, 1.0))
+        value = np.asarray(material.albedo, np.float64) * scale
+        if value.max() <= 1.0:
+            return _rgb(value)
+        return {"type": "bitmap", "bitmap": mi.Bitmap(np.full((1, 1, 3), value, np.float32)), "raw": True,
+                "filter_type": "nearest", "wrap_mode": "repeat"}
     img = np.asarray(material.albedo_texture.mips[0], np.float32)[..., :3] * material.albedo.astype(np.float32)
-    img = np.clip(img * np.float32(scale), 0.0, 1.0)[::-1]  # GL: v = 0 is the bottom row
+    img = np.maximum(img * np.float32(scale), 0.0)[::-1]  # GL: v = 0 is the bottom row
     return {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(img)), "raw": True,
             "filter_type": "bilinear", "wrap_mode": "repeat"}
 
@@ -330,6 +351,8 @@ def scene_hash(scene, settings: dict, sky: np.ndarray | None = None) -> str:
     for m in scene.materials:
         put(m.albedo, m.specular, m.shininess, m.reflectivity, m.transparency, m.ior)
         put(None if m.albedo_texture is None else m.albedo_texture.mips[0])
+        if diffuse_exceeds_one(m):  # exported unclamped since then: only these scenes' keys change
+            put("diffuse > 1 unclamped")
     c = scene.camera
     put(c.position, c.target, c.up, c.fov_y_deg, c.near, c.far)
     put(scene.sun.direction, scene.sun.irradiance, scene.sun.angular_diameter_deg)

@@ -441,6 +441,44 @@ def peter_panning_case(elevation: float = 10.0, size=(160, 90)) -> Case:
                 images={"exact": b[2], "without": a[1], "with": b[1], "error": np.abs(b[1] - b[2])})
 
 
+def contact_leak(shadow, size=(320, 180), band: float = 0.15):
+    """The Cornell box's leak in the open: a one-sided 3 m wall (a single quad at x = 0, facing −x)
+    on the plane, the sun (70° up, azimuth 170°: 3.4° off the wall's plane) behind it, so the wall
+    shadows a 19 cm strip at its foot on the camera's side while nothing is drawn beyond it. The
+    shadow maps see the wall almost edge-on; a PCSS/PCF footprint at its foot reaches the texels past
+    its edge, which are open. Returns (fraction of ground pixels within ``band`` m of the wall, in
+    the exact umbra, that come out more than 5 % lit; visibility image; exact image; ms). A leak
+    touches only the pixels whose sample falls within a texel of the foot (the Cornell box's
+    worst pixel is one, 0.08 mm inside the wall), so the fraction is small but each is a bright
+    pixel on a black one.)"""
+    b = _Builder()
+    b.material("plane", albedo=(0.5, 0.5, 0.5))
+    b.material("block", albedo=(0.5, 0.5, 0.5))
+    b.rect("plane", (0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, -20.0))
+    b.rect("block", (0.0, 1.5, 0.0), (0.0, 0.0, 10.0), (0.0, 1.5, 0.0))
+    cam = Camera(position=(-3.0, 1.5, 5.0), target=(0.0, 0.0, 0.0), fov_y_deg=50.0, near=0.05, far=100.0)
+    sun = Sun(direction_from_angles(70.0, 170.0), irradiance=(1000.0,) * 3)
+    scene = b.scene("contact-test", cam, sun, Sky(radiance=(0.0, 0.0, 0.0), model="constant"))
+    vis, pos, ground, ms = render_sun_visibility(scene, *size, shadow)
+    near = ground & (pos[..., 0] < 0.0) & (pos[..., 0] > -band) & (np.abs(pos[..., 2]) < 5.0)
+    ex_img = np.full(vis.shape, np.nan)
+    ex = exact_ground_visibility(scene, pos[near], n=64)
+    ex_img[near] = ex
+    umbra = ex < 0.01
+    return float(np.mean(vis[near][umbra] > 0.05)), vis, ex_img, ms
+
+
+def contact_leak_case(size=(320, 180)) -> Case:
+    """Contact leak: a floor at the foot of a wall nearly parallel to the sun, lit through the
+    shadow map's texel edge (``contact_leak``): without vs with the screen-space contact shadow
+    (``ShadowConfig.contact_steps``)."""
+    a = contact_leak(ShadowConfig(contact_steps=0), size)
+    b = contact_leak(ShadowConfig(), size)
+    return Case("contact leak (wall 3.4 deg off the sun, open behind)", "shadows",
+                "fraction of contact umbra rendered lit", "screen-space contact shadow", a[0], b[0], a[3], b[3],
+                exact=0.0, images={"exact": b[2], "without": a[1], "with": b[1], "error": np.abs(b[1] - b[2])})
+
+
 def cascade_seams(shadow, size=(320, 180), elevation: float = 30.0):
     """A long 2 m wall along the view direction, sun from the east at ``elevation``°: its shadow's
     edge (x = −2/tan(elevation) − 0.1) runs through every cascade split. Returns (max over splits of
@@ -577,15 +615,16 @@ def glass_slab_case(count: int = 64, device=None) -> Case:
                         "error": b[0][None]})
 
 
-def mirror_shadow_case(size=(160, 90), device=None) -> Case:
+def mirror_shadow_case(size=(160, 90), device=None, rt_sun_shadows: str = "traced") -> Case:
     """Off-screen geometry seen in the ``mirror-box`` mirror (behind the camera, outside the main view's
     shadow cascades): is it shadowed? For the reflection rays, the exact sun-disc visibility at their
-    hits (the kd-tree) vs the overlapped shadow maps' answer as the RT direct-lighting pass uses it
-    (its direct term over the unshadowed one). Error: fraction of hits whose shadow state (exact
+    hits (the kd-tree) vs the answer the RT direct-lighting pass uses (its direct term over the
+    unshadowed one): the tracer's shadow ray by default, ``rt_sun_shadows="osm"`` the overlapped
+    shadow maps. Error: fraction of hits whose shadow state (exact
     visibility < 0.5) differs; "without" lights every hit as unshadowed."""
     scene = load("mirror-box")
     cfg = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ssao=SSAOConfig(enabled=False),
-                       overlap=False)
+                       overlap=False, rt_sun_shadows=rt_sun_shadows)
     r = Renderer(scene, *size, device=device, config=cfg)
     r.render()
     f, ms = _timed(r.render)
@@ -616,8 +655,9 @@ def mirror_shadow_case(size=(160, 90), device=None) -> Case:
     ex_img = np.full(h * w, np.nan)
     img[pix] = np.clip(ours, 0, 1.5)
     ex_img[pix] = vis
+    shadows = "overlapped shadow maps" if rt_sun_shadows == "osm" else "traced sun shadow rays"
     return Case("mirror: off-screen geometry in shadow", "ray tracing",
-                "fraction of reflected hits with the wrong shadow state", "overlapped shadow maps (vs unshadowed)",
+                "fraction of reflected hits with the wrong shadow state", f"{shadows} (vs unshadowed)",
                 err_without, err_with, 0.0, f.timings.get("shadow maps (OSM)", 0.0), exact=0.0,
                 images={"exact": ex_img.reshape(h, w), "without": np.where(np.isnan(img), np.nan, 1.0).reshape(h, w),
                         "with": img.reshape(h, w), "error": np.abs(img - ex_img).reshape(h, w)},

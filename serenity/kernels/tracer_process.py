@@ -11,9 +11,9 @@ Protocol (private): the child is ``python -m serenity.kernels.tracer_process IN 
 file descriptors; messages are length-prefixed pickles. First message in: (scene, device); the child
 builds its :class:`~serenity.kernels.raytrace.RayTracer` (the kd-tree comes from the disk cache when
 the parent built it before) and answers ("ready", build seconds). Then per frame: a list of ray
-batches ``(origins, directions, cone_width, cone_spread, transmissions)`` in, ("ok", results, t0,
-t1, cpu) out, where cpu is the child's CPU seconds (``time.process_time``) for the work, results
-are the tracer's dicts (None for an empty batch) and t0/t1 the child's
+batches ``(origins, directions, cone_width, cone_spread, transmissions, sun_direction)`` in, ("ok",
+results, t0, t1, cpu) out, where cpu is the child's CPU seconds (``time.process_time``) for the
+work, results are the tracer's dicts (None for an empty batch) and t0/t1 the child's
 ``time.perf_counter()`` around the work — the same monotonic clock as the parent's on Linux, so the
 frame's timeline places the child's work exactly. Errors come back as ("error", message). An empty
 message (None) stops the child.
@@ -143,7 +143,8 @@ def _serve_frames(fd_in: int, fd_out: int) -> None:
             return
         t0, c0 = time.perf_counter(), time.process_time()
         try:
-            results = [None if b is None else tracer.trace(*b[:4], transmissions=b[4]) for b in batches]
+            results = [None if b is None else tracer.trace(*b[:4], transmissions=b[4], sun_direction=b[5])
+                       for b in batches]
         except Exception as e:
             _write(fd_out, ("error", f"{type(e).__name__}: {e}"))
             continue

@@ -41,17 +41,22 @@ class DeferredPass(FullscreenPass):
     def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None) -> LitImage:
         """Light ``gbuffer``. ``rt_view`` (an object with ``eye`` and ``ray_dir`` textures) marks a
         ray-traced G-buffer: each pixel's viewer is its ray origin, misses show the sky along the
-        ray, untraced pixels are black, and SSAO is not applied."""
+        ray, untraced pixels are black, and SSAO is not applied. ``shadow`` None (rt views only):
+        the sun's visibility is the tracer's shadow ray, ``eye.w``."""
         ctx, p = self.ctx, self.program
         with ctx.debug_scope("deferred"):
             self.fbo.use()
             for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
                 t.use(location=i)
-            shadow.depth.use(location=4)
-            for name, loc in (("g_albedo", 0), ("g_normal", 1), ("g_position", 2), ("g_material", 3),
-                              ("u_shadow_map", 4)):
+            for name, loc in (("g_albedo", 0), ("g_normal", 1), ("g_position", 2), ("g_material", 3)):
                 p[name].value = loc
-            self._set_shadow_uniforms(p, shadow, light)
+            if shadow is None and rt_view is None:
+                raise ValueError("the main view needs shadow maps")
+            p["u_traced_sun"].value = shadow is None
+            if shadow is not None:
+                shadow.depth.use(location=4)
+                p["u_shadow_map"].value = 4
+                self._set_shadow_uniforms(p, shadow, light)
             p["u_use_ao"].value = ao is not None and rt_view is None
             p["u_rt_view"].value = rt_view is not None
             if rt_view is not None:
@@ -66,6 +71,12 @@ class DeferredPass(FullscreenPass):
             if sky is not None:
                 sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
             p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
+            if "u_view_proj" in p:
+                p["u_view_proj"].write(np.linalg.inv(light.inv_view_proj).T.astype(np.float32).tobytes())
+            if "u_contact_steps" in p:
+                p["u_contact_steps"].value = int(light.shadow.contact_steps)
+            self._set(p, "u_contact_pixels", light.shadow.contact_pixels)
+            self._set(p, "u_contact_texels", light.shadow.contact_texels)
             self._set(p, "u_sun_dir", light.sun_direction)
             self._set(p, "u_sun_irradiance", light.sun_irradiance)
             self._set(p, "u_sun_radiance", light.sun_radiance)

@@ -14,7 +14,8 @@ pixels. ``RTView.points`` lists, for each traced screen pixel, its reflection an
 Per-pixel layout (as ``glsl/gbuffer.glsl``): albedo.rgb; normal.xyz + specular k_s in w;
 position.xyz + coverage in w (1 = hit, 0 = miss: the deferred pass shows the sky along the ray);
 material = (shininess, reflectivity, transparency, ior); plus, for ray-traced views only, eye.xyz
-(the ray origin: the viewer of that pixel) and ray_dir.xyz (0 = pixel not traced).
+(the ray origin: the viewer of that pixel; w = the sun's visibility when the tracer cast shadow
+rays) and ray_dir.xyz (0 = pixel not traced).
 """
 
 from __future__ import annotations
@@ -92,8 +93,9 @@ class RTGBufferUpload:
             k = count + np.arange(len(pix))
             for n in GBUFFER_TARGETS:
                 flat[n][k] = res[n]
-            # the viewer and direction of the ray's last segment (after any transmissions)
-            flat["eye"][k, :3] = res["eye"][:, :3]
+            # the viewer and direction of the ray's last segment (after any transmissions); eye.w:
+            # the sun's visibility from the tracer's shadow ray (RenderConfig.rt_sun_shadows)
+            flat["eye"][k] = res["eye"]
             flat["ray_dir"][k, :3] = res["ray_dir"][:, :3]
             points[sel, 1 + channel] = k
             count += len(pix)

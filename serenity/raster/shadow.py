@@ -18,6 +18,13 @@ by the slope tan θ (clamped to [1, 4]) so grazing surfaces do not acne.
 
 Filtering (``ShadowConfig.filter``): "hard" (one tap), "pcf" (fixed-radius Vogel-disc PCF), "pcss"
 (Fernando 2005: blocker search → penumbra from the sun's angular diameter → variable PCF).
+
+Contact shadows (beyond the paper; ``ShadowConfig.contact_steps``, ``glsl/deferred.glsl``): where the
+map says lit, a short screen-space march towards the sun (``contact_pixels`` pixel footprints) tests
+each step against the plane of the surface the G-buffer shows there. A filter footprint at the foot
+of a wall the sun grazes reaches the map's texels past the wall's edge; the Cornell box's floor
+pixel 0.08 mm inside its red wall came out fully lit (94.8 against the reference's 0.86, 89 % of
+the frame's relMSE), and the bias detaches the courtyard's eave shadows from the walls.
 """
 
 from __future__ import annotations

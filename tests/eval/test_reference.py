@@ -162,6 +162,21 @@ def test_material_mapping():
     assert d["type"] == "blendbsdf" and d["weight"] == 0.8 and d["bsdf_1"]["int_ior"] == 1.33
 
 
+def test_phong_brighter_than_one_is_exported_as_rendered():
+    """The built-in glass's Phong surface (ρ 0.95, k_s 0.5: ρ + k_s > 1) exports unclamped: Mitsuba's
+    diffuse part evaluates to exactly our ρ/π·cos (it was clamped to 0.5/π), and only such
+    materials change the reference cache key."""
+    mi = R.mitsuba()
+    glass = Material("glass", albedo=(0.95, 0.95, 0.95), specular=0.5, shininess=500.0, transparency=0.9, ior=1.5)
+    assert R.diffuse_exceeds_one(glass) and not R.diffuse_exceeds_one(Material("p", albedo=(0.6,) * 3, specular=0.25))
+    blend = mi.load_dict(R.material_bsdf(mi, glass)["bsdf_0"])  # the Phong part of the glass blend
+    si = mi.SurfaceInteraction3f()
+    si.wi, si.n, si.sh_frame, si.uv = [0.6, 0.0, 0.8], [0, 0, 1], mi.Frame3f([0, 0, 1]), [0.3, 0.7]
+    wo = np.array([-0.3, 0.5, 0.8124]) / np.linalg.norm([-0.3, 0.5, 0.8124])  # far from the glossy lobe
+    value = np.asarray(blend.eval(mi.BSDFContext(), si, mi.Vector3f(*wo)))
+    assert value == pytest.approx([0.95 / math.pi * wo[2]] * 3, rel=1e-4)
+
+
 # ------------------------------------------------------------------------ agreement with our renderer
 
 

@@ -342,3 +342,22 @@ def test_total_internal_reflection_inside_the_glass(device):
     assert g["ray_dir"][0, 2] < 0.0
     assert g["position"][0, 2] == pytest.approx(-0.1, abs=1e-5)
     assert g["position"][0, 0] == pytest.approx(2 * 0.9, abs=1e-4)
+
+
+def test_sun_shadow_rays_see_the_glass(device):
+    """With a sun direction, ``eye.w`` is the sun's visibility at each hit: the wall behind the glass
+    slab is in its shadow (glass blocks the sun, as in the shadow maps and the reference), the wall
+    beside it is lit; without one, and on a miss, it is 0. A bad direction is a SerenityError."""
+    tracer = RayTracer(_glass_slab_and_wall(), device=device)
+    o = np.array([[0.0, 0.0, 1.5], [4.0, 0.0, 1.5], [0.0, 0.0, 1.5]], np.float32)
+    d = np.array([[0, 0, 1], [0, 0, 1], [0, 1, 0]], np.float32)  # wall behind, wall beside, miss
+    sun = np.array([0.0, 0.1, -1.0])
+    g = tracer.trace(o, d, sun_direction=sun)
+    assert g["position"][:2, 3].tolist() == [1.0, 1.0] and g["position"][2, 3] == 0.0
+    assert g["eye"][:, 3].tolist() == [0.0, 1.0, 0.0]
+    np.testing.assert_array_equal(g["eye"][:, :3], o)
+    assert tracer.trace(o, d)["eye"][:, 3].tolist() == [0.0, 0.0, 0.0]
+    # the sun passing beside the slab's top edge lights the wall behind it
+    assert tracer.trace(o[:1], d[:1], sun_direction=(0.0, 1.0, -1.0))["eye"][0, 3] == 1.0
+    with pytest.raises(SerenityError, match="sun_direction"):
+        tracer.trace(o, d, sun_direction=(0.0, 0.0, 0.0))

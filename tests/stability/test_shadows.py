@@ -1,5 +1,6 @@
 """Sun shadows where they fail: acne and peter-panning under a grazing sun, seams between
-cascades, and the penumbra's width against the exact sun-disc visibility (kd-tree traced)."""
+cascades, the penumbra's width against the exact sun-disc visibility (kd-tree traced), and the
+leak at the foot of a wall the shadow map sees edge-on."""
 
 from __future__ import annotations
 
@@ -57,3 +58,15 @@ def test_pcss_penumbra_vs_exact_disc_visibility(gl_ctx, elevation, bound):
     print(f"{elevation} deg: PCSS {err_pcss:.3f} (width x{ratio:.2f}), hard {err_hard:.3f}")
     assert err_pcss <= bound and err_pcss < err_hard
     assert 0.7 <= ratio <= 1.3
+
+
+@pytest.mark.gl
+def test_no_contact_leak_at_the_foot_of_a_wall_along_the_sun(gl_ctx):
+    """The Cornell box's worst pixel in the open (``contact_leak``): the floor at the foot of a
+    one-sided wall 3.4° off the sun's direction, open behind it. Measured at 320×180: without the
+    contact shadow 17 of 748 umbra pixels within 15 cm of the wall come out more than 5 % lit (2.3 %;
+    4 more than half); with it none. Bounds: > 1 % without (the case shows the leak), ≤ 0.2 % with."""
+    case = S.contact_leak_case((320, 180))
+    print(case.row())
+    assert case.error_without > 0.01
+    assert case.error_with <= 0.002

@@ -1,7 +1,9 @@
 // Composite of the ray-traced effect buffers over the lit main view (paper §9, Fig. 18-19), with
 // Schlick's Fresnel term. Per pixel (material from the main G-buffer, v = view direction):
 //   glass (transparency T > 0): F = schlick(((ior-1)/(ior+1))^2, cos) (1 under total internal
-//        reflection);  L = F * L_reflection + (1 - F) * (T * L_refraction + (1 - T) * L_surface)
+//        reflection);  L = T * (F * L_reflection + (1 - F) * L_refraction) + (1 - T) * L_surface
+//        — a fraction T of the pane is clear glass (Fresnel reflection + refraction), the rest its
+//        Phong surface: the reference's blendbsdf(T, phong, dielectric) (eval/reference.py)
 //   mirror / metal (reflectivity R > 0, T = 0): F = schlick(R, cos);
 //        L = F * L_reflection + (1 - F) * L_surface
 // A pixel whose reflection (or refraction) ray was not traced (RenderConfig.reflections /
@@ -60,8 +62,9 @@ void main() {
     if (transparency > 0.0) {
         float f0 = pow((mat.w - 1.0) / (mat.w + 1.0), 2.0);
         float F = v_rays.y < -1.5 ? 1.0 : schlick(f0, cos_t);
-        if (has_refl) { rgb += F * traced(v_rays.x); keep -= F; }
-        float wt = (1.0 - F) * transparency;
+        float wr = transparency * F;
+        if (has_refl) { rgb += wr * traced(v_rays.x); keep -= wr; }
+        float wt = transparency * (1.0 - F);
         if (has_refr) { rgb += wt * traced(v_rays.y); keep -= wt; }
     } else {
         float F = schlick(mat.y, cos_t);

@@ -1,7 +1,8 @@
 // Deferred lighting of a G-buffer (paper §3, §6, §9): Phong + sun shadows, the indirect terms, and
 // the sky behind uncovered pixels. Linear HDR radiance out. The same program lights the main view
 // (rasterised G-buffer, view-fitted cascades, SSAO) and the ray-traced views (ray-traced G-buffer,
-// overlapped shadow maps, no SSAO; the viewer of a pixel is its ray's origin).
+// the tracer's shadow rays or the overlapped shadow maps, no SSAO; the viewer of a pixel is its
+// ray's origin).
 //
 // Radiance of a lit pixel (W m^-2 sr^-1 per channel), E = sun irradiance facing the sun:
 //   L = (albedo/pi + k_s (n+2)/(2 pi) max(0, r.v)^n) * E * max(0, N.L) * visibility + indirect
@@ -28,8 +29,14 @@ uniform vec3 u_ambient_irradiance;  // constant ambient term (baseline hack; 0 =
 uniform bool u_use_ao;
 uniform sampler2D u_ao;             // SSAO, 1 = open (multiplies indirect light only)
 uniform bool u_rt_view;             // lighting a ray-traced G-buffer
-uniform sampler2D g_eye;            // rt view: xyz = ray origin (the viewer of this pixel)
+uniform sampler2D g_eye;            // rt view: xyz = ray origin (the viewer of this pixel);
+                                    // w = the sun's visibility from the tracer's shadow ray
+uniform bool u_traced_sun;          // rt view: use g_eye.w, not the (overlapped) shadow maps
 uniform sampler2D g_ray_dir;        // rt view: xyz = ray direction (0 = pixel not traced)
+uniform mat4 u_view_proj;           // main view: world -> clip (contact shadows)
+uniform int u_contact_steps;        // contact-shadow march steps (0 = off)
+uniform float u_contact_pixels;     // contact-shadow march length, pixel footprints at the receiver
+uniform float u_contact_texels;     // ... and at most this many shadow-map texels of its cascade
 layout(location = 0) out vec4 o_hdr;
 layout(location = 1) out vec4 o_direct;
 
@@ -37,6 +44,42 @@ vec3 sky(vec3 dir) {
     if (dot(dir, u_sun_dir) >= u_sun_cos_radius && u_sun_dir.y > 0.0) return u_sun_radiance;
     if (dir.y < 0.0) return vec3(0.0);
     return u_use_sky_map ? sky_map_radiance(u_sky_map, dir) : u_sky_radiance;
+}
+
+// Screen-space contact shadow (main view): march from p towards the sun over u_contact_pixels pixel
+// footprints, but no further than u_contact_texels texels of the shadow map (what its resolution and
+// bias cannot resolve; beyond that the map is right and a screen-space march only adds view-dependent
+// errors); a march point behind the surface the G-buffer shows there (that pixel's plane, so a plane
+// never shadows itself), by less than the march length, is blocked. It catches a receiver within a
+// few texels of a blocker it touches (a floor at the foot of a wall nearly parallel to the sun,
+// whose filter taps reach past the wall's edge in the map; a wall under an eave, lit by the bias).
+float contact_visibility(vec3 p, vec3 n, float view_depth) {
+    vec2 size = vec2(textureSize(g_position, 0));
+    float p11 = length(vec3(u_view_proj[0][1], u_view_proj[1][1], u_view_proj[2][1]));
+    float pixel = 2.0 * view_depth / (p11 * size.y);       // metres per pixel at the receiver
+    float len = min(u_contact_pixels * pixel, u_contact_texels * cascade_texel_at(view_depth));
+    for (int i = 1; i <= u_contact_steps; ++i) {
+        vec3 m = p + u_sun_dir * (len * float(i) / float(u_contact_steps));
+        vec4 c = u_view_proj * vec4(m, 1.0);
+        if (c.w <= 0.0) break;
+        vec2 uv = c.xy / c.w * 0.5 + 0.5;
+        if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) break;
+        vec4 g = texture(g_position, uv);
+        if (g.w == 0.0) continue;                            // sky
+        vec3 gn = normalize(texture(g_normal, uv).xyz);
+        vec3 r = m - u_camera_pos;
+        float dist = length(r);
+        r /= dist;
+        float rn = dot(r, gn);
+        if (abs(rn) < 1e-3) continue;
+        float t = dot(g.xyz - u_camera_pos, gn) / rn;       // that pixel's plane along the ray to m
+        float behind = dist - t;
+        // the plane only near its pixel (a grazing plane extrapolated far past it is not the occluder)
+        float near_g = 2.0 * pixel * max(t, 0.0) / max(view_depth, 1e-6);
+        if (t > 0.0 && behind > 0.05 * pixel && behind < len
+            && length(u_camera_pos + r * t - g.xyz) < near_g) return 0.0;
+    }
+    return 1.0;
 }
 
 void main() {
@@ -65,7 +108,8 @@ void main() {
     if (ndl > 0.0 && u_sun_dir.y > -0.02) {
         // cascades are chosen by view depth; overlapped maps (rt views) by distance to the camera
         float metric = u_rt_view ? length(p - u_camera_pos) : dot(p - u_camera_pos, u_camera_forward);
-        float vis = sun_visibility(p, n, ndl, metric);
+        float vis = (u_rt_view && u_traced_sun) ? texture(g_eye, v_uv).w : sun_visibility(p, n, ndl, metric);
+        if (!u_rt_view && u_contact_steps > 0 && vis > 0.0) vis *= contact_visibility(p, n, metric);
         vec3 r = reflect(-u_sun_dir, n);
         float spec = nrm.w * (mat.x + 2.0) / (2.0 * PI) * pow(max(dot(r, v), 0.0), mat.x);
         direct = (albedo / PI + vec3(spec)) * u_sun_irradiance * ndl * vis;

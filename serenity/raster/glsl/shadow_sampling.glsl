@@ -86,6 +86,14 @@ float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
     return lit / float(u_filter_samples);
 }
 
+// One texel (m) of the first cascade that holds view depth ``view_depth`` (before any blending).
+float cascade_texel_at(float view_depth) {
+    for (int c = 0; c < u_cascade_count; ++c) {
+        if (view_depth <= u_cascade_far[c]) return u_cascade_texel[c];
+    }
+    return u_cascade_texel[max(u_cascade_count - 1, 0)];
+}
+
 // view_depth: distance along the camera axis (m); n: shading normal; ndl = dot(n, sun) > 0.
 float sun_visibility(vec3 p, vec3 n, float ndl, float view_depth) {
     float size = float(textureSize(u_shadow_map, 0).x) / u_atlas_tiles;
