@@ -155,6 +155,7 @@ def lighting_inputs(scene, config: RenderConfig, view_proj: np.ndarray) -> Light
         sky_radiance=sky.radiance,
         ambient_irradiance=math.pi * sky.radiance if config.ambient == "constant" else np.zeros(3),
         camera_position=cam.position,
+        view_proj=view_proj,
         inv_view_proj=np.linalg.inv(view_proj),
         camera_forward=cam.forward,
         sun_tan_half=sun.tan_angular_radius,

@@ -468,24 +468,31 @@ def sort_keys(
 
 
 @wp.kernel(enable_backward=False)
-def gather_rays(
+def gather_vec3(
     # inputs
     order: wp.array(dtype=wp.int32),
-    origins: wp.array(dtype=wp.vec3),
-    directions: wp.array(dtype=wp.vec3),
-    tmax: wp.array(dtype=float),
+    src: wp.array(dtype=wp.vec3),
     # outputs
-    sorted_origins: wp.array(dtype=wp.vec3),
-    sorted_directions: wp.array(dtype=wp.vec3),
-    sorted_tmax: wp.array(dtype=float),
+    dst: wp.array(dtype=wp.vec3),
     offset: int,
 ):
-    """The rays in their traced order (``sorted_*[i]`` = ray ``order[i]``)."""
+    """``dst[i] = src[order[i]]``: a per-ray array in the traced order."""
     i = wp.tid() + offset
-    j = order[i]
-    sorted_origins[i] = origins[j]
-    sorted_directions[i] = directions[j]
-    sorted_tmax[i] = tmax[j]
+    dst[i] = src[order[i]]
+
+
+@wp.kernel(enable_backward=False)
+def gather_float(
+    # inputs
+    order: wp.array(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    # outputs
+    dst: wp.array(dtype=float),
+    offset: int,
+):
+    """``dst[i] = src[order[i]]``: a per-ray array in the traced order."""
+    i = wp.tid() + offset
+    dst[i] = src[order[i]]
 
 
 @wp.kernel(enable_backward=False)
@@ -582,6 +589,18 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
         return wp.empty(0, dtype=wp.int32, device=device)
     order = np.argsort(k, kind="stable").astype(np.int32)
     return wp.array(order, dtype=wp.int32, device=device, copy=not device.startswith("cpu"))
+
+
+def gather_in_order(order: wp.array, arrays: list, device: str, threads: int | None = None) -> list:
+    """Per-ray arrays (vec3 or float) in the traced order of :func:`ray_order`: ``out[i] = a[order[i]]``
+    (a separate pass: a random read per ray inside the traversal costs more)."""
+    out = []
+    for a in arrays:
+        b = wp.empty(a.shape[0], dtype=a.dtype, device=device)
+        launch(gather_vec3 if a.dtype == wp.vec3 else gather_float, a.shape[0], [order, a, b], device=device,
+               threads=threads)
+        out.append(b)
+    return out
 
 
 class KdTree:
@@ -692,10 +711,7 @@ class KdTree:
         n = len(o)
         order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads)
         if order.shape[0]:
-            rays = [wp.empty(n, dtype=wp.vec3, device=dev), wp.empty(n, dtype=wp.vec3, device=dev),
-                    wp.empty(n, dtype=float, device=dev)]
-            launch(gather_rays, n, [order, origins, directions, tmax, *rays], device=dev, threads=threads)
-            origins, directions, tmax = rays
+            origins, directions, tmax = gather_in_order(order, [origins, directions, tmax], dev, threads)
         return [data, origins, directions, tmin, tmax, order]
 
     def intersect(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
@@ -732,6 +748,6 @@ class KdTree:
 
 
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "PROGRESS_MIN_TRIANGLES", "SORT_MIN_RAYS", "Hits",
-           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_rays",
-           "intersect_rays", "intersect_triangle", "intersect_triangle_fixed", "occlude_rays", "ray_order",
-           "ray_sort_key", "setup_ray", "sort_keys", "start_ray", "trace_kd"]
+           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_float",
+           "gather_in_order", "gather_vec3", "intersect_rays", "intersect_triangle", "intersect_triangle_fixed",
+           "occlude_rays", "ray_order", "ray_sort_key", "setup_ray", "sort_keys", "start_ray", "trace_kd"]

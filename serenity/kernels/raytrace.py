@@ -64,7 +64,7 @@ from serenity.config import KdBuildConfig
 from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
 from serenity.gbuffer_layout import RT_GBUFFER_KEYS
-from serenity.kernels.kdtree import CHUNKS_PER_THREAD, KdTree, KdTreeData, finite, ray_order, trace_kd
+from serenity.kernels.kdtree import CHUNKS_PER_THREAD, KdTree, KdTreeData, finite, gather_in_order, ray_order, trace_kd
 from serenity.kernels.launch import launch
 
 wp.set_module_options({"enable_backward": False})
@@ -191,30 +191,6 @@ def bend(d: wp.vec3, n_out: wp.vec3, ior: float) -> wp.vec3:
     if k < 0.0:
         return wp.normalize(d + 2.0 * c * nn)
     return wp.normalize(eta * d + (eta * c - wp.sqrt(k)) * nn)
-
-
-@wp.kernel(enable_backward=False)
-def gather_cone_rays(
-    # inputs
-    order: wp.array(dtype=wp.int32),
-    origins: wp.array(dtype=wp.vec3),
-    directions: wp.array(dtype=wp.vec3),
-    cone_width: wp.array(dtype=float),
-    cone_spread: wp.array(dtype=float),
-    # outputs
-    sorted_origins: wp.array(dtype=wp.vec3),
-    sorted_directions: wp.array(dtype=wp.vec3),
-    sorted_width: wp.array(dtype=float),
-    sorted_spread: wp.array(dtype=float),
-    offset: int,
-):
-    """The rays and their cones in their traced order (``sorted_*[i]`` = ray ``order[i]``)."""
-    i = wp.tid() + offset
-    j = order[i]
-    sorted_origins[i] = origins[j]
-    sorted_directions[i] = directions[j]
-    sorted_width[i] = cone_width[j]
-    sorted_spread[i] = cone_spread[j]
 
 
 @wp.kernel(enable_backward=False)
@@ -431,9 +407,7 @@ class RayTracer:
             tree = self.data.tree
             order = ray_order(tree.box_lo, tree.box_hi, rays[0], rays[1], n, sort, dev, threads)
             if order.shape[0]:
-                gathered = [wp.empty(n, dtype=a.dtype, device=dev) for a in rays]
-                launch(gather_cone_rays, n, [order, *rays, *gathered], device=dev, threads=threads)
-                rays = gathered
+                rays = gather_in_order(order, rays, dev, threads)
             args = [self.data, *rays, float(self.ray_epsilon if tmin is None else tmin), float(tmax),
                     int(max(0, transmissions)), order, wp.vec3(*(float(x) for x in sun)),
                     int(sun_direction is not None), *outs]

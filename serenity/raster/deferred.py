@@ -22,6 +22,7 @@ class LightingInputs:
     sky_radiance: np.ndarray       # (3,) constant sky placeholder
     ambient_irradiance: np.ndarray  # (3,) constant ambient (baseline); zeros = off
     camera_position: np.ndarray
+    view_proj: np.ndarray          # (4,4) world → clip of the main view
     inv_view_proj: np.ndarray
     camera_forward: np.ndarray
     sun_tan_half: float            # tan of the sun's angular radius
@@ -72,7 +73,7 @@ class DeferredPass(FullscreenPass):
                 sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
             p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
             if "u_view_proj" in p:
-                p["u_view_proj"].write(np.linalg.inv(light.inv_view_proj).T.astype(np.float32).tobytes())
+                p["u_view_proj"].write(light.view_proj.T.astype(np.float32).tobytes())
             if "u_contact_steps" in p:
                 p["u_contact_steps"].value = int(light.shadow.contact_steps)
             self._set(p, "u_contact_pixels", light.shadow.contact_pixels)

@@ -200,7 +200,6 @@ class ShadowPass:
         self.depth.repeat_x = self.depth.repeat_y = False
         self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF/PCSS)
         self.fbo = ctx.framebuffer(depth_attachment=self.depth)
-        self._drawn: list[bytes | None] = [None] * cascades
         self._kept: list[Cascade | None] = [None] * cascades   # the cascade each tile was drawn for
         self._age = [0] * cascades                               # frames since each tile was drawn
         #: tiles drawn by the last ``render`` (the others were still valid)
@@ -208,7 +207,6 @@ class ShadowPass:
 
     def invalidate(self) -> None:
         """Redraw every tile next time (after the scene's geometry changed in place)."""
-        self._drawn = [None] * self.count
         self._kept = [None] * self.count
 
     def render(self, cascades: list[Cascade], stagger: bool = False) -> ShadowMaps:
@@ -229,9 +227,8 @@ class ShadowPass:
         draw = []
         stale = []
         for i, c in enumerate(cascades):
-            key = np.asarray(c.view_proj, np.float32).tobytes()
             kept = self._kept[i]
-            if key == self._drawn[i]:
+            if kept is not None and np.array_equal(np.float32(kept.view_proj), np.float32(c.view_proj)):
                 continue
             if stagger and i > 0 and kept is not None and kept.covers(c):
                 stale.append(i)
@@ -251,7 +248,6 @@ class ShadowPass:
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
                 if self.caster_index_count:  # the casters: the bottom plane shadows nothing
                     self.vao.render(moderngl.TRIANGLES, vertices=self.caster_index_count)
-                self._drawn[i] = np.asarray(c.view_proj, np.float32).tobytes()
                 self._kept[i] = c
                 self.redrawn += 1
             self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)
@@ -260,6 +256,6 @@ class ShadowPass:
         for i, c in enumerate(cascades):
             self._age[i] = 0 if i in draw else self._age[i] + 1
             k = self._kept[i]
-            used.append(c if k is c or k is None else
+            used.append(c if k is c else  # a kept tile: as drawn, with this frame's split depth
                         Cascade(k.view_proj, c.far, k.texel_world, k.depth_range, sphere=c.sphere, tile=k.tile))
         return ShadowMaps(self.depth, used, self.size)
