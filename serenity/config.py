@@ -225,10 +225,11 @@ class LPVConfig:
     glossy: bool = True
     """Add the LPV's glossy light (k_s · L along the reflected direction). False: the lighting passes
     skip the glossy march. With ``diffuse`` also False the LPV lighting passes are not drawn."""
-    resolution: int | tuple[int, ...] = 16
+    resolution: int | tuple[int, ...] = 12
     """Cells per axis of each cascade's cubic grid; an int for all cascades or one per cascade.
-    16³, not the paper's 32³: at 32³ cells are finer than the propagation can cross in a frame's
-    budget, and the measured error is lower at 16³ (README, LPV section)."""
+    12³, not the paper's 32³: at 32³ cells are finer than the propagation can cross in a frame's
+    budget; over 7 views of the courtyard and the Cornell box (``benchmarks/bench_lpv_views.py``)
+    12³ has a lower mean FLIP and relMSE than 16³ in both scenes, for about half the update."""
     cascades: int = 3
     """Nested grids around the camera (1..3), finest first."""
     iterations: int | tuple[int, ...] = 8
@@ -354,7 +355,7 @@ class RenderConfig:
     """The sky lighting irradiance volume (paper §7); ``enabled=False`` turns the sky term off."""
     lpv: LPVConfig = field(default_factory=LPVConfig)
     """Light propagation volumes (paper §8); ``enabled=False`` turns the LPV off. Default: 3 cascades
-    of 16³, 8 iterations, the coarsest extended to cross the scene and at most 6 cells across it, far
+    of 12³, 8 iterations, the coarsest extended to cross the scene and at most 6 cells across it, far
     light handed over to the finer cascades, clamped face flux, lookup occlusion."""
     sync_stages: bool = True
     """Wait for the GL queue after each stage so per-stage wall times are exact (costs overlap)."""

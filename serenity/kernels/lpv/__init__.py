@@ -124,8 +124,9 @@ light from sources within N of its (small) cells. Two measures, both on by defau
     Measured (Cornell box, indirect only, 160×90, ``benchmarks/bench_lpv.py``; courtyard full
     image vs the full reference): see the README's LPV section — together they took the
     courtyard's FLIP from 0.235 to 0.124 and the Cornell box's trimmed relMSE from 18 to 1.0.
-    Default resolution 16³ (not the paper's 32³): at 32³ cells are finer than the propagation
-    can cross in a frame's budget, and the sweep's error is lower at 16³ in both scenes.
+    Default resolution 12³ (not the paper's 32³): at 32³ cells are finer than the propagation
+    can cross in a frame's budget; over several views of both scenes (``bench_lpv_views.py``) 12³
+    has a lower error than 16³ in both, for about half the update.
 Known error (measured, ``tests/kernels/test_lpv.py::test_self_illumination_of_a_lit_plane`` and
 ``benchmarks/bench_lpv_room.py``): L1 lobes are wide and propagation is diffusive, so light a lit
 plane's VPLs send sideways reaches the plane itself: a plane of exitance M receives 0.5–0.6·M from
