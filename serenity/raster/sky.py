@@ -73,7 +73,7 @@ class SkyTexturesGL:
                 raise ValueError(f"volume texture {t} must be (Z, Y, X, {want}), got {a.shape}")
             tex = self.volume[t]
             if (tex.depth, tex.height, tex.width) == a.shape[:3]:
-                tex.write(a.tobytes())
+                tex.write(a)  # contiguous float32: written from its buffer, no bytes copy
             else:
                 tex.release()
                 self.volume[t] = upload_texture3d(self.ctx, a)
