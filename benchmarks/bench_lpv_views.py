@@ -85,7 +85,8 @@ def run(resolutions, frames: int, progress: bool = True) -> dict:
                 scene = view_scene(name, view)
                 bar.set_description(f"{name} view {vi}: reference")
                 ref = render_reference(scene, *SIZE, spp=REF_SPP, progress=False)[..., :3]
-                row = {"view": vi, "camera": None if view is None else [list(view[0]), list(view[1])], "by_resolution": {}}
+                camera = None if view is None else [list(view[0]), list(view[1])]
+                row = {"view": vi, "camera": camera, "by_resolution": {}}
                 for res in resolutions:
                     bar.set_description(f"{name} view {vi}: {res}^3")
                     r = Renderer(copy.deepcopy(scene), *SIZE, config=config(res))
@@ -122,7 +123,7 @@ def chart(results: dict, path: str) -> None:
               ("rel_mse_trimmed_mean", "mean relMSE (0.1 % trimmed)", "log"),
               ("update_ms", "LPV update per frame (ms, first view)", "linear"))
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
-    for ax, (key, label, scale) in zip(axes, panels):
+    for ax, (key, label, scale) in zip(axes, panels, strict=True):
         for name, res in results.items():
             pts = sorted((int(k), v[key]) for k, v in res["summary"].items())
             ax.plot([k for k, _ in pts], [v for _, v in pts], "o-", label=name)
