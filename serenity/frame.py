@@ -70,12 +70,14 @@ STAGES = (
     "shadow maps (CSM)", "low-res guide", "ssao",                      # the main view
     "sky volume build", "sky volume update", "sky upload",             # paper §7
     "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload",  # paper §8
-    "direct lighting", "sky lighting", "lpv lighting", "indirect upsample",
+    "direct lighting", "sky lighting", "lpv lighting",
     "wait for ray tracing", "rt g-buffer upload", "shadow maps (OSM)",  # sync 2, paper §9
     "rt direct lighting", "rt sky lighting", "rt lpv lighting", "composite",
     "anti-aliasing", "tone map", "readback",
 )
-"""Every stage a frame can time, in pipeline order (``Frame.timings`` keys are a subsequence)."""
+"""Every stage a frame can time, in pipeline order (``Frame.timings`` keys are a subsequence; with
+``indirect_scale`` > 1 "sky lighting" and "lpv lighting" run at low resolution before "direct
+lighting", which then includes their upsampling: one full-resolution pass)."""
 LPV_UPDATE_STAGES = ("rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload")
 """The parts of the paper's "Light Propagation Volumes Update" (Table 1)."""
 SKY_UPDATE_STAGES = ("sky volume update", "sky upload")
@@ -403,29 +405,33 @@ class Renderer:
                 self._update_lpv(gbuf, light.sun_irradiance)
 
     def _light_main_view(self, gbuf, shadow, light: LightingInputs, ao, guide):
-        """Phong + CSM/PCSS, then the sky volume's and the LPV's light (at 1/indirect_scale
-        resolution, upsampled) added on."""
+        """Phong + CSM/PCSS and the sky volume's and the LPV's light: at full resolution added onto
+        the lit image; at 1/indirect_scale drawn first and upsampled by the deferred pass."""
         sky_gl = self.sky_gl if self.sky_volume is not None else None
-        cam = self.scene.camera
-        with self._stage("direct lighting"):
-            lit = self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl)
         lo = self.lowres
-        target = lit.hdr if lo is None else lo
-        if lo is not None:
-            lo.clear()
+        if lo is None:  # full resolution: the indirect passes add onto the lit image
+            with self._stage("direct lighting"):
+                lit = self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl)
+            self._indirect_passes(lit.hdr, gbuf, ao, sky_gl, full_res=True)
+            return lit
+        # reduced resolution: the indirect passes first, into the low-res targets; the deferred pass
+        # then upsamples them as it lights each pixel (no second full-resolution pass)
+        lo.clear()
+        self._indirect_passes(lo, gbuf, ao, sky_gl, full_res=False)
+        with self._stage("direct lighting"):  # the upsampling included
+            return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide))
+
+    def _indirect_passes(self, target, gbuf, ao, sky_gl, full_res: bool) -> None:
+        """The sky volume's and the LPV's light of the main view, added onto ``target``."""
+        cam = self.scene.camera
         if sky_gl is not None:
             with self._stage("sky lighting"):
-                (self.sky_pass if lo is None else self.sky_pass_lo).render(target, gbuf, sky_gl.bind, cam.position,
-                                                                           ao)
+                (self.sky_pass if full_res else self.sky_pass_lo).render(target, gbuf, sky_gl.bind, cam.position, ao)
         terms = self._lpv_terms()
         if terms:
             with self._stage("lpv lighting"):
-                (self.lpv_pass if lo is None else self.lpv_pass_lo).render(target, gbuf, self.lpv_gl.bind,
-                                                                           cam.position, ao, **terms)
-        if lo is not None:
-            with self._stage("indirect upsample"):
-                lo.upsample(lit.hdr, gbuf, cam.position, cam.forward, guide)
-        return lit
+                (self.lpv_pass if full_res else self.lpv_pass_lo).render(target, gbuf, self.lpv_gl.bind,
+                                                                         cam.position, ao, **terms)
 
     def _ray_traced_views(self, rcb, join, gbuf, lit, light: LightingInputs):
         """Join the tracer (sync 2), light the ray-traced G-buffers with the overlapped shadow maps

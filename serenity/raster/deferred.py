@@ -10,6 +10,9 @@ import numpy as np
 
 from serenity.raster.context import FullscreenPass, draw_fullscreen
 
+UPSAMPLE_UNIT = 16
+"""First of the 3 texture units of the upsampled indirect light (units 0..15: G-buffer, shadows, sky)."""
+
 
 @dataclass
 class LightingInputs:
@@ -39,11 +42,14 @@ class DeferredPass(FullscreenPass):
     SHADER = "deferred.glsl"
     TARGETS = {"hdr": (4, "f4"), "direct": (4, "f4")}
 
-    def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None) -> LitImage:
+    def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None,
+               upsample=None) -> LitImage:
         """Light ``gbuffer``. ``rt_view`` (an object with ``eye`` and ``ray_dir`` textures) marks a
         ray-traced G-buffer: each pixel's viewer is its ray origin, misses show the sky along the
         ray, untraced pixels are black, and SSAO is not applied. ``shadow`` None (rt views only):
-        the sun's visibility is the tracer's shadow ray, ``eye.w``."""
+        the sun's visibility is the tracer's shadow ray, ``eye.w``. ``upsample`` (main view only):
+        (the frame's :class:`~serenity.raster.indirect.LowResIndirect`, already drawn, and the
+        low-res guide texture): its light is upsampled and added in this pass (``glsl/upsample.glsl``)."""
         ctx, p = self.ctx, self.program
         with ctx.debug_scope("deferred"):
             self.fbo.use()
@@ -68,6 +74,14 @@ class DeferredPass(FullscreenPass):
             if ao is not None and rt_view is None:
                 ao.use(location=5)
                 p["u_ao"].value = 5
+            p["u_upsample"].value = upsample is not None and rt_view is None
+            if upsample is not None and rt_view is None:
+                lo, guide = upsample
+                for loc, (name, tex) in enumerate((("u_irr", lo.irr), ("u_gloss", lo.gloss), ("u_guide", guide)),
+                                                  start=UPSAMPLE_UNIT):
+                    tex.use(location=loc)
+                    p[name].value = loc
+                p["u_scale"].value = lo.scale
             p["u_use_sky_map"].value = sky is not None
             if sky is not None:
                 sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)

@@ -8,10 +8,11 @@ The volumes' textures and uniforms are bound by their owners (``SkyTexturesGL.bi
 
 Reduced resolution (``RenderConfig.indirect_scale`` > 1, main view): the passes built with
 ``lowres=True`` write the light *per unit albedo* at 1/scale of the view per axis into
-:class:`LowResIndirect`'s two targets (diffuse E/π·AO and glossy·AO), and
-:meth:`LowResIndirect.upsample` adds ``albedo·E + glossy`` onto the full-resolution image with a
-joint bilateral filter (``glsl/upsample.glsl``). Indirect light is smooth, so at scale 2 a quarter
-of the pixels carry it; texture detail comes back from the full-resolution albedo.
+:class:`LowResIndirect`'s two targets (diffuse E/π·AO and glossy·AO), drawn before the deferred
+pass, which adds ``albedo·E + glossy`` as it lights each full-resolution pixel, with a joint
+bilateral filter (``glsl/upsample.glsl``; ``DeferredPass.render(upsample=...)``). Indirect light
+is smooth, so at scale 2 a quarter of the pixels carry it; texture detail comes back from the
+full-resolution albedo.
 """
 
 from __future__ import annotations
@@ -68,16 +69,13 @@ class IndirectPass:
 
 class LowResIndirect:
     """The main view's indirect light at 1/``scale`` resolution (see the module docstring): two
-    RGBA16F targets that the ``lowres`` :class:`IndirectPass` programs add to, and the joint
-    bilateral upsampling onto the full-resolution lit image."""
+    RGBA16F targets that the ``lowres`` :class:`IndirectPass` programs add to; the deferred pass
+    upsamples them (joint bilateral, ``glsl/upsample.glsl``) as it lights the full-resolution view."""
 
     def __init__(self, ctx, scale: int):
         self.ctx = ctx
         self.scale = max(1, int(scale))
-        self.program = load_program(ctx, "upsample.glsl")
-        self.vao = fullscreen_vao(ctx, self.program)
         self.size = None
-        self._targets = BlendedTargets(ctx)
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
@@ -93,18 +91,3 @@ class LowResIndirect:
 
     def clear(self) -> None:
         self.fbo.clear(0.0, 0.0, 0.0, 0.0)
-
-    def upsample(self, target, gbuffer, camera_pos, camera_forward, guide) -> None:
-        """Add albedo·E + glossy, upsampled, onto ``target`` (the full-resolution lit HDR texture);
-        ``guide``: the frame's :class:`~serenity.raster.lowres.LowResGuide` texture (same scale)."""
-        ctx, p = self.ctx, self.program
-        with ctx.debug_scope("indirect:upsample"), self._targets.adding_to(target):
-            for loc, (name, tex) in enumerate((("g_albedo", gbuffer.albedo), ("g_normal", gbuffer.normal),
-                                               ("g_position", gbuffer.position), ("u_irr", self.irr),
-                                               ("u_gloss", self.gloss), ("u_guide", guide))):
-                tex.use(location=loc)
-                p[name].value = loc
-            p["u_scale"].value = self.scale
-            p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
-            p["u_camera_forward"].value = tuple(float(x) for x in camera_forward)
-            self.vao.render(vertices=3)

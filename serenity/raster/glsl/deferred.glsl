@@ -1,5 +1,6 @@
-// Deferred lighting of a G-buffer (paper §3, §6, §9): Phong + sun shadows, the indirect terms, and
-// the sky behind uncovered pixels. Linear HDR radiance out. The same program lights the main view
+// Deferred lighting of a G-buffer (paper §3, §6, §9): Phong + sun shadows, the indirect terms (with
+// indirect_scale > 1, the low-res sky and LPV light upsampled: upsample.glsl), and the sky behind
+// uncovered pixels. Linear HDR radiance out. The same program lights the main view
 // (rasterised G-buffer, view-fitted cascades, SSAO) and the ray-traced views (ray-traced G-buffer,
 // the tracer's shadow rays or the overlapped shadow maps, no SSAO; the viewer of a pixel is its
 // ray's origin).
@@ -12,6 +13,8 @@
 #if defined FRAGMENT_SHADER
 #include "shadow_sampling.glsl"
 #include "sky.glsl"
+#include "upsample.glsl"
+uniform bool u_upsample;            // main view: add the low-res indirect light, upsampled
 uniform bool u_use_sky_map;         // sky dome from the paraboloid sky map (else the constant sky)
 uniform sampler2D g_albedo;
 uniform sampler2D g_normal;
@@ -116,6 +119,9 @@ void main() {
     }
     vec3 indirect = albedo / PI * u_ambient_irradiance;
     if (u_use_ao && !u_rt_view) indirect *= texture(u_ao, v_uv).r;
+    if (u_upsample && !u_rt_view)
+        indirect += upsampled_indirect(ivec2(gl_FragCoord.xy), dot(p - u_camera_pos, u_camera_forward), nrm.xyz,
+                                       albedo);
     o_hdr = vec4(direct + indirect, 1.0);
     o_direct = vec4(direct, 1.0);
 }

@@ -1,30 +1,21 @@
-// Joint bilateral upsampling of the low-resolution indirect light (indirect.glsl with LOWRES) onto
-// the full-resolution lit image, added with additive blending:
+// Joint bilateral upsampling of the low-resolution indirect light (indirect.glsl with LOWRES), done
+// inside the deferred pass (deferred.glsl with u_upsample; one full-resolution pass instead of a
+// second one that re-read the G-buffer and blended onto the lit image):
 //   L = albedo * E_lo + G_lo,   E_lo, G_lo = sum_i w_i X_i / sum_i w_i over the 2x2 low-res texels
 //   around the pixel, w_i = bilinear_i * exp(-|z_i - z| / (0.05 z)) * max(0, n_i . n)^8
 // where z, n are the pixel's view depth and normal and z_i, n_i those of texel i's representative
-// G-buffer pixel (lowres.glsl), read from the low-res guide (lowres_guide.glsl). Across a silhouette or a crease the texels of the other surface get
-// ~no weight; when every weight vanishes (a pixel unlike all four) the most similar texel is used.
-#include "fullscreen.glsl"
-
-#if defined FRAGMENT_SHADER
+// G-buffer pixel (lowres.glsl), read from the low-res guide (lowres_guide.glsl). Across a silhouette
+// or a crease the texels of the other surface get ~no weight; when every weight vanishes (a pixel
+// unlike all four) the most similar texel is used.
+#ifndef SERENITY_UPSAMPLE_GLSL
+#define SERENITY_UPSAMPLE_GLSL
 #include "lowres.glsl"
-uniform sampler2D g_albedo;
-uniform sampler2D g_normal;
-uniform sampler2D g_position;
 uniform sampler2D u_irr;     // E/pi * AO (W m^-2 sr^-1 per unit albedo)
 uniform sampler2D u_gloss;   // k_s * glossy * AO (W m^-2 sr^-1)
 uniform sampler2D u_guide;   // per low-res texel: xyz = normal, w = view depth (-1: background)
-uniform vec3 u_camera_pos;
-uniform vec3 u_camera_forward;
-out vec4 o_hdr;
 
-void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
-    vec4 pos = texelFetch(g_position, px, 0);
-    if (pos.w == 0.0) { o_hdr = vec4(0.0); return; }
-    vec3 n = texelFetch(g_normal, px, 0).xyz;
-    float z = dot(pos.xyz - u_camera_pos, u_camera_forward);
+// albedo * E + G at full-resolution pixel px (view depth z, G-buffer normal n)
+vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
     ivec2 low_max = textureSize(u_irr, 0) - 1;
     // low-res coordinate whose integers are the texels' representatives
     vec2 t = (vec2(px) - float(u_scale / 2)) / float(u_scale);
@@ -47,6 +38,6 @@ void main() {
         if (sim > best) { best = sim; best_irr = xi; best_gloss = xg; }
     }
     if (wsum > 1e-6) { irr /= wsum; gloss /= wsum; } else { irr = best_irr; gloss = best_gloss; }
-    o_hdr = vec4(texelFetch(g_albedo, px, 0).rgb * irr + gloss, 0.0);
+    return albedo * irr + gloss;
 }
 #endif
