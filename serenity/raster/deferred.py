@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from serenity.raster.context import FullscreenPass, draw_fullscreen
+from serenity.raster.context import FullscreenPass, draw_fullscreen, fullscreen_vao, load_program
 
 UPSAMPLE_UNIT = 16
 """First of the 3 texture units of the upsampled indirect light (units 0..15: G-buffer, shadows, sky)."""
@@ -39,8 +39,28 @@ class LitImage:
 
 
 class DeferredPass(FullscreenPass):
+    """The deferred lighting pass. Its program is compiled per variant (``glsl/deferred.glsl``: main
+    view or ray-traced view, traced or mapped sun, contact shadow, upsampling), each on first use,
+    because llvmpipe pays for every path a shader has, taken or not."""
+
     SHADER = "deferred.glsl"
     TARGETS = {"hdr": (4, "f4"), "direct": (4, "f4")}
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.size = None
+        self._variants: dict[tuple, tuple] = {}
+        self.program = self.vao = None  # the variant drawn last
+
+    def _variant(self, rt_view: bool, traced_sun: bool, contact: bool, upsample: bool):
+        key = (rt_view, traced_sun, contact, upsample)
+        if key not in self._variants:
+            program = load_program(self.ctx, self.SHADER, defines={
+                "RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_SHADOW": int(contact),
+                "UPSAMPLE": int(upsample)})
+            self._variants[key] = (program, fullscreen_vao(self.ctx, program))
+        self.program, self.vao = self._variants[key]
+        return self.program
 
     def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None,
                upsample=None) -> LitImage:
@@ -50,46 +70,47 @@ class DeferredPass(FullscreenPass):
         the sun's visibility is the tracer's shadow ray, ``eye.w``. ``upsample`` (main view only):
         (the frame's :class:`~serenity.raster.indirect.LowResIndirect`, already drawn, and the
         low-res guide texture): its light is upsampled and added in this pass (``glsl/upsample.glsl``)."""
-        ctx, p = self.ctx, self.program
+        if shadow is None and rt_view is None:
+            raise ValueError("the main view needs shadow maps")
+        main = rt_view is None
+        contact = main and light.shadow.contact_steps > 0
+        ctx = self.ctx
+        p = self._variant(not main, shadow is None, contact, main and upsample is not None)
+        put = self._put
         with ctx.debug_scope("deferred"):
             self.fbo.use()
             for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
                 t.use(location=i)
             for name, loc in (("g_albedo", 0), ("g_normal", 1), ("g_position", 2), ("g_material", 3)):
-                p[name].value = loc
-            if shadow is None and rt_view is None:
-                raise ValueError("the main view needs shadow maps")
-            p["u_traced_sun"].value = shadow is None
+                put(p, name, loc)
             if shadow is not None:
                 shadow.depth.use(location=4)
-                p["u_shadow_map"].value = 4
+                put(p, "u_shadow_map", 4)
                 self._set_shadow_uniforms(p, shadow, light)
-            p["u_use_ao"].value = ao is not None and rt_view is None
-            p["u_rt_view"].value = rt_view is not None
-            if rt_view is not None:
+            put(p, "u_use_ao", ao is not None and main)
+            if not main:
                 rt_view.eye.use(location=6)
                 rt_view.ray_dir.use(location=7)
-                p["g_eye"].value = 6
-                p["g_ray_dir"].value = 7
-            if ao is not None and rt_view is None:
+                put(p, "g_eye", 6)
+                put(p, "g_ray_dir", 7)
+            elif ao is not None:
                 ao.use(location=5)
-                p["u_ao"].value = 5
-            p["u_upsample"].value = upsample is not None and rt_view is None
-            if upsample is not None and rt_view is None:
+                put(p, "u_ao", 5)
+            if main and upsample is not None:
                 lo, guide = upsample
                 for loc, (name, tex) in enumerate((("u_irr", lo.irr), ("u_gloss", lo.gloss), ("u_guide", guide)),
                                                   start=UPSAMPLE_UNIT):
                     tex.use(location=loc)
-                    p[name].value = loc
-                p["u_scale"].value = lo.scale
-            p["u_use_sky_map"].value = sky is not None
+                    put(p, name, loc)
+                put(p, "u_scale", lo.scale)
+            put(p, "u_use_sky_map", sky is not None)
             if sky is not None:
                 sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
-            p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
-            if "u_view_proj" in p:
+            if "u_inv_view_proj" in p:
+                p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
+            if contact:
                 p["u_view_proj"].write(light.view_proj.T.astype(np.float32).tobytes())
-            if "u_contact_steps" in p:
-                p["u_contact_steps"].value = int(light.shadow.contact_steps)
+                put(p, "u_contact_steps", int(light.shadow.contact_steps))
             self._set(p, "u_contact_pixels", light.shadow.contact_pixels)
             self._set(p, "u_contact_texels", light.shadow.contact_texels)
             self._set(p, "u_sun_dir", light.sun_direction)
@@ -99,7 +120,7 @@ class DeferredPass(FullscreenPass):
             self._set(p, "u_camera_pos", light.camera_position)
             self._set(p, "u_sky_radiance", light.sky_radiance)
             self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
-            draw_fullscreen(ctx, self.vao, None if rt_view is None else rt_view.rects)
+            draw_fullscreen(ctx, self.vao, None if main else rt_view.rects)
         return LitImage(self.hdr, self.direct)
 
     def _set_shadow_uniforms(self, p, shadow, light: LightingInputs) -> None:
@@ -109,6 +130,8 @@ class DeferredPass(FullscreenPass):
         mats = np.zeros((4, 4, 4), np.float32)
         for i, c in enumerate(cs):
             mats[i] = c.view_proj.T
+        if "u_cascade_vp" not in p:  # a variant that samples no shadow map
+            return
         p["u_cascade_vp"].write(mats.tobytes())
 
         def vec4(vals):
@@ -127,6 +150,12 @@ class DeferredPass(FullscreenPass):
                         ("u_pcss_max_blocker", cfg.pcss_max_blocker), ("u_cascade_blend", cfg.cascade_blend)):
             self._set(p, name, v)
         self._set(p, "u_camera_forward", light.camera_forward)
+
+    @staticmethod
+    def _put(p, name, value):
+        """Set uniform ``name`` if this variant has it (a variant leaves out what it never reads)."""
+        if name in p:
+            p[name].value = value
 
     @staticmethod
     def _set(p, name, value):

@@ -10,11 +10,31 @@
 // (energy-normalised Phong: its lobe integrates to k_s over the hemisphere at normal incidence).
 #include "fullscreen.glsl"
 
+// Compiled per use (DeferredPass picks the variant): llvmpipe runs every path of a fragment shader
+// for every pixel, whatever its branches decide, so a path a view never takes is left out of its
+// program instead of being skipped by a uniform.
+//   RT_VIEW 1: a ray-traced G-buffer (else the main view);  TRACED_SUN 1 (rt views): the sun's
+//   visibility is the tracer's shadow ray, g_eye.w (else the shadow maps);  CONTACT_SHADOW 1 (main
+//   view): the screen-space contact shadow;  UPSAMPLE 1 (main view): add the low-res indirect light.
+#ifndef RT_VIEW
+#define RT_VIEW 0
+#endif
+#ifndef TRACED_SUN
+#define TRACED_SUN 0
+#endif
+#ifndef CONTACT_SHADOW
+#define CONTACT_SHADOW 0
+#endif
+#ifndef UPSAMPLE
+#define UPSAMPLE 0
+#endif
+
 #if defined FRAGMENT_SHADER
 #include "shadow_sampling.glsl"
 #include "sky.glsl"
+#if UPSAMPLE
 #include "upsample.glsl"
-uniform bool u_upsample;            // main view: add the low-res indirect light, upsampled
+#endif
 uniform bool u_use_sky_map;         // sky dome from the paraboloid sky map (else the constant sky)
 uniform sampler2D g_albedo;
 uniform sampler2D g_normal;
@@ -31,13 +51,11 @@ uniform vec3 u_sky_radiance;        // constant sky (placeholder until the sky m
 uniform vec3 u_ambient_irradiance;  // constant ambient term (baseline hack; 0 = off)
 uniform bool u_use_ao;
 uniform sampler2D u_ao;             // SSAO, 1 = open (multiplies indirect light only)
-uniform bool u_rt_view;             // lighting a ray-traced G-buffer
 uniform sampler2D g_eye;            // rt view: xyz = ray origin (the viewer of this pixel);
                                     // w = the sun's visibility from the tracer's shadow ray
-uniform bool u_traced_sun;          // rt view: use g_eye.w, not the (overlapped) shadow maps
 uniform sampler2D g_ray_dir;        // rt view: xyz = ray direction (0 = pixel not traced)
 uniform mat4 u_view_proj;           // main view: world -> clip (contact shadows)
-uniform int u_contact_steps;        // contact-shadow march steps (0 = off)
+uniform int u_contact_steps;        // contact-shadow march steps
 uniform float u_contact_pixels;     // contact-shadow march length, pixel footprints at the receiver
 uniform float u_contact_texels;     // ... and at most this many shadow-map texels of its cascade
 layout(location = 0) out vec4 o_hdr;
@@ -49,6 +67,7 @@ vec3 sky(vec3 dir) {
     return u_use_sky_map ? sky_map_radiance(u_sky_map, dir) : u_sky_radiance;
 }
 
+#if CONTACT_SHADOW
 // Screen-space contact shadow (main view): march from p towards the sun over u_contact_pixels pixel
 // footprints, but no further than u_contact_texels texels of the shadow map (what its resolution and
 // bias cannot resolve; beyond that the map is right and a screen-space march only adds view-dependent
@@ -84,22 +103,26 @@ float contact_visibility(vec3 p, vec3 n, float view_depth) {
     }
     return 1.0;
 }
+#endif
 
 void main() {
     vec4 pos = texture(g_position, v_uv);
+#if RT_VIEW
+    vec3 rd = texture(g_ray_dir, v_uv).xyz;
+    if (dot(rd, rd) == 0.0) { o_hdr = vec4(0.0); o_direct = vec4(0.0); return; }  // not traced
+    vec4 eye_w = texture(g_eye, v_uv);
+    vec3 eye = eye_w.xyz;
+    if (pos.w == 0.0) { o_hdr = vec4(sky(normalize(rd)), 1.0); o_direct = vec4(0.0); return; }
+#else
     vec3 eye = u_camera_pos;
-    if (u_rt_view) {
-        vec3 rd = texture(g_ray_dir, v_uv).xyz;
-        if (dot(rd, rd) == 0.0) { o_hdr = vec4(0.0); o_direct = vec4(0.0); return; }  // not traced
-        eye = texture(g_eye, v_uv).xyz;
-        if (pos.w == 0.0) { o_hdr = vec4(sky(normalize(rd)), 1.0); o_direct = vec4(0.0); return; }
-    } else if (pos.w == 0.0) {
+    if (pos.w == 0.0) {
         vec4 far_p = u_inv_view_proj * vec4(v_uv * 2.0 - 1.0, 1.0, 1.0);
         vec3 dir = normalize(far_p.xyz / far_p.w - u_camera_pos);
         o_hdr = vec4(sky(dir), 1.0);
         o_direct = vec4(0.0);
         return;
     }
+#endif
     vec3 albedo = texture(g_albedo, v_uv).rgb;
     vec4 nrm = texture(g_normal, v_uv);
     vec4 mat = texture(g_material, v_uv);
@@ -110,18 +133,28 @@ void main() {
     vec3 direct = vec3(0.0);
     if (ndl > 0.0 && u_sun_dir.y > -0.02) {
         // cascades are chosen by view depth; overlapped maps (rt views) by distance to the camera
-        float metric = u_rt_view ? length(p - u_camera_pos) : dot(p - u_camera_pos, u_camera_forward);
-        float vis = (u_rt_view && u_traced_sun) ? texture(g_eye, v_uv).w : sun_visibility(p, n, ndl, metric);
-        if (!u_rt_view && u_contact_steps > 0 && vis > 0.0) vis *= contact_visibility(p, n, metric);
+#if RT_VIEW && TRACED_SUN
+        float vis = eye_w.w;
+#elif RT_VIEW
+        float vis = sun_visibility(p, n, ndl, length(p - u_camera_pos));
+#else
+        float metric = dot(p - u_camera_pos, u_camera_forward);
+        float vis = sun_visibility(p, n, ndl, metric);
+#if CONTACT_SHADOW
+        if (vis > 0.0) vis *= contact_visibility(p, n, metric);
+#endif
+#endif
         vec3 r = reflect(-u_sun_dir, n);
         float spec = nrm.w * (mat.x + 2.0) / (2.0 * PI) * pow(max(dot(r, v), 0.0), mat.x);
         direct = (albedo / PI + vec3(spec)) * u_sun_irradiance * ndl * vis;
     }
     vec3 indirect = albedo / PI * u_ambient_irradiance;
-    if (u_use_ao && !u_rt_view) indirect *= texture(u_ao, v_uv).r;
-    if (u_upsample && !u_rt_view)
-        indirect += upsampled_indirect(ivec2(gl_FragCoord.xy), dot(p - u_camera_pos, u_camera_forward), nrm.xyz,
-                                       albedo);
+#if !RT_VIEW
+    if (u_use_ao) indirect *= texture(u_ao, v_uv).r;
+#if UPSAMPLE
+    indirect += upsampled_indirect(ivec2(gl_FragCoord.xy), dot(p - u_camera_pos, u_camera_forward), nrm.xyz, albedo);
+#endif
+#endif
     o_hdr = vec4(direct + indirect, 1.0);
     o_direct = vec4(direct, 1.0);
 }

@@ -1,5 +1,5 @@
 // Joint bilateral upsampling of the low-resolution indirect light (indirect.glsl with LOWRES), done
-// inside the deferred pass (deferred.glsl with u_upsample; one full-resolution pass instead of a
+// inside the deferred pass (deferred.glsl with UPSAMPLE; one full-resolution pass instead of a
 // second one that re-read the G-buffer and blended onto the lit image):
 //   L = albedo * E_lo + G_lo,   E_lo, G_lo = sum_i w_i X_i / sum_i w_i over the 2x2 low-res texels
 //   around the pixel, w_i = bilinear_i * exp(-|z_i - z| / (0.05 z)) * max(0, n_i . n)^8
