@@ -32,10 +32,19 @@ class GBufferPass:
         self.scene_gl = scene_gl
         self.texture_taps = int(texture_taps)
         """Trilinear taps per textured fragment along the footprint's major axis (1 = plain GL)."""
-        self.program = load_program(ctx, "gbuffer.glsl")
+        # one program for untextured materials and one for textured ones (``glsl/gbuffer.glsl``,
+        # TEXTURE_TAPS): llvmpipe would otherwise sample for every fragment, textured or not
+        self.program = load_program(ctx, "gbuffer.glsl", defines={"TEXTURE_TAPS": 0})
         self.vao = scene_gl.vao(self.program)
+        self._textured = None  # (program, vao), built when a textured material is first drawn
         self.size = None
         self.gbuffer = None
+
+    def _textured_program(self):
+        if self._textured is None:
+            p = load_program(self.ctx, "gbuffer.glsl", defines={"TEXTURE_TAPS": max(1, self.texture_taps)})
+            self._textured = (p, self.scene_gl.vao(p))
+        return self._textured
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
@@ -71,24 +80,26 @@ class GBufferPass:
             self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
-            p = self.program
-            p["u_view_proj"].write(view_proj.T.astype(np.float32).tobytes())
-            if "u_camera_pos" in p:
-                p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
+            vp = view_proj.T.astype(np.float32).tobytes()
+            cam = tuple(float(x) for x in camera_pos)
+            bound = set()
             for r in self.scene_gl.ranges:
                 m = self.scene_gl.materials[r.material]
-                p["u_albedo"].value = tuple(float(x) for x in m.albedo)
                 tex = self.scene_gl.textures.get(r.material)
-                p["u_has_texture"].value = tex is not None
-                if "u_texture_taps" in p:
-                    p["u_texture_taps"].value = self.texture_taps
+                p, vao = (self.program, self.vao) if tex is None else self._textured_program()
+                if id(p) not in bound:  # per-frame uniforms, once per program
+                    p["u_view_proj"].write(vp)
+                    if "u_camera_pos" in p:
+                        p["u_camera_pos"].value = cam
+                    bound.add(id(p))
                 if tex is not None:
                     tex.use(location=0)
                     p["u_albedo_tex"].value = 0
+                p["u_albedo"].value = tuple(float(x) for x in m.albedo)
                 p["u_material_index"].value = float(r.material)
                 p["u_specular"].value = float(m.specular)
                 p["u_material"].value = (float(m.shininess), float(m.reflectivity), float(m.transparency),
                                          float(m.ior))
-                self.vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
+                vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
             ctx.disable(moderngl.DEPTH_TEST)
         return self.gbuffer
