@@ -29,7 +29,7 @@ sys.path.insert(0, ROOT)
 from serenity.config import RenderConfig  # noqa: E402
 from serenity.eval import metrics  # noqa: E402
 from serenity.eval.reference import render_reference  # noqa: E402
-from serenity.frame import Renderer  # noqa: E402
+from serenity.frame import LPV_UPDATE_STAGES, Renderer  # noqa: E402
 from serenity.io.results import write_results  # noqa: E402
 from serenity.scene import load  # noqa: E402
 from serenity.scene.model import Camera  # noqa: E402
@@ -43,7 +43,6 @@ VIEWS = {
                   ((0.0, 8.0, 14.0), (0.0, 0.0, -4.0))),
     "cornell": (None, ((0.45, 0.15, -0.6), (0.2, 0.3, 0.4)), ((0.1, 0.45, -0.5), (0.4, 0.1, 0.5))),
 }
-UPDATE_STAGES = ("rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload")
 
 
 def view_scene(name: str, view):
@@ -67,7 +66,7 @@ def update_ms(scene, resolution: int, frames: int) -> float:
         for _ in range(frames):
             r.invalidate_lpv()
             f = r.render(read_back=False)
-            out.append(sum(f.timings.get(s, 0.0) for s in UPDATE_STAGES))
+            out.append(sum(f.timings.get(s, 0.0) for s in LPV_UPDATE_STAGES))
         return float(np.median(out))
     finally:
         r.close()
@@ -164,7 +163,7 @@ def main() -> None:
                   f"update {v['update_ms']:6.1f} ms")
     write_results(args.json, {"benchmark": "lpv_views", "size": list(SIZE), "reference_spp": REF_SPP,
                               "preset": "medium", "resolutions": resolutions, "frames": args.frames,
-                              "update_stages": list(UPDATE_STAGES), "scenes": results,
+                              "update_stages": list(LPV_UPDATE_STAGES), "scenes": results,
                               "seconds": time.perf_counter() - t0})
     chart(results, args.chart)
 

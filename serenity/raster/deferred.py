@@ -76,41 +76,40 @@ class DeferredPass(FullscreenPass):
         contact = main and light.shadow.contact_steps > 0
         ctx = self.ctx
         p = self._variant(not main, shadow is None, contact, main and upsample is not None)
-        put = self._put
         with ctx.debug_scope("deferred"):
             self.fbo.use()
             for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
                 t.use(location=i)
             for name, loc in (("g_albedo", 0), ("g_normal", 1), ("g_position", 2), ("g_material", 3)):
-                put(p, name, loc)
+                self._set(p, name, loc)
             if shadow is not None:
                 shadow.depth.use(location=4)
-                put(p, "u_shadow_map", 4)
+                self._set(p, "u_shadow_map", 4)
                 self._set_shadow_uniforms(p, shadow, light)
-            put(p, "u_use_ao", ao is not None and main)
+            self._set(p, "u_use_ao", ao is not None and main)
             if not main:
                 rt_view.eye.use(location=6)
                 rt_view.ray_dir.use(location=7)
-                put(p, "g_eye", 6)
-                put(p, "g_ray_dir", 7)
+                self._set(p, "g_eye", 6)
+                self._set(p, "g_ray_dir", 7)
             elif ao is not None:
                 ao.use(location=5)
-                put(p, "u_ao", 5)
+                self._set(p, "u_ao", 5)
             if main and upsample is not None:
                 lo, guide = upsample
                 for loc, (name, tex) in enumerate((("u_irr", lo.irr), ("u_gloss", lo.gloss), ("u_guide", guide)),
                                                   start=UPSAMPLE_UNIT):
                     tex.use(location=loc)
-                    put(p, name, loc)
-                put(p, "u_scale", lo.scale)
-            put(p, "u_use_sky_map", sky is not None)
+                    self._set(p, name, loc)
+                self._set(p, "u_scale", lo.scale)
+            self._set(p, "u_use_sky_map", sky is not None)
             if sky is not None:
                 sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
             if "u_inv_view_proj" in p:
                 p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
             if contact:
                 p["u_view_proj"].write(light.view_proj.T.astype(np.float32).tobytes())
-                put(p, "u_contact_steps", int(light.shadow.contact_steps))
+                self._set(p, "u_contact_steps", int(light.shadow.contact_steps))
             self._set(p, "u_contact_pixels", light.shadow.contact_pixels)
             self._set(p, "u_contact_texels", light.shadow.contact_texels)
             self._set(p, "u_sun_dir", light.sun_direction)
@@ -152,16 +151,15 @@ class DeferredPass(FullscreenPass):
         self._set(p, "u_camera_forward", light.camera_forward)
 
     @staticmethod
-    def _put(p, name, value):
-        """Set uniform ``name`` if this variant has it (a variant leaves out what it never reads)."""
-        if name in p:
-            p[name].value = value
-
-    @staticmethod
     def _set(p, name, value):
+        """Set uniform ``name`` if this variant has it (a variant leaves out what it never reads):
+        bools and ints as they are (switches, texture units), other scalars as float, arrays as a
+        tuple of floats."""
         if name not in p:
             return
-        if np.ndim(value) == 0:
+        if isinstance(value, (bool, int)):
+            p[name].value = value
+        elif np.ndim(value) == 0:
             p[name].value = float(value)
         else:
             p[name].value = tuple(float(x) for x in np.asarray(value).reshape(-1))

@@ -36,15 +36,13 @@ class GBufferPass:
         # TEXTURE_TAPS): llvmpipe would otherwise sample for every fragment, textured or not
         self.program = load_program(ctx, "gbuffer.glsl", defines={"TEXTURE_TAPS": 0})
         self.vao = scene_gl.vao(self.program)
-        self._textured = None  # (program, vao), built when a textured material is first drawn
+        self.program_textured = self.vao_textured = None  # only for a scene with textures
+        if scene_gl.textures:
+            self.program_textured = load_program(ctx, "gbuffer.glsl",
+                                                 defines={"TEXTURE_TAPS": max(1, self.texture_taps)})
+            self.vao_textured = scene_gl.vao(self.program_textured)
         self.size = None
         self.gbuffer = None
-
-    def _textured_program(self):
-        if self._textured is None:
-            p = load_program(self.ctx, "gbuffer.glsl", defines={"TEXTURE_TAPS": max(1, self.texture_taps)})
-            self._textured = (p, self.scene_gl.vao(p))
-        return self._textured
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
@@ -81,17 +79,15 @@ class GBufferPass:
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
             vp = view_proj.T.astype(np.float32).tobytes()
-            cam = tuple(float(x) for x in camera_pos)
-            bound = set()
+            for p in (self.program, self.program_textured):
+                if p is not None:
+                    p["u_view_proj"].write(vp)
+                    if "u_camera_pos" in p:
+                        p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
             for r in self.scene_gl.ranges:
                 m = self.scene_gl.materials[r.material]
                 tex = self.scene_gl.textures.get(r.material)
-                p, vao = (self.program, self.vao) if tex is None else self._textured_program()
-                if id(p) not in bound:  # per-frame uniforms, once per program
-                    p["u_view_proj"].write(vp)
-                    if "u_camera_pos" in p:
-                        p["u_camera_pos"].value = cam
-                    bound.add(id(p))
+                p, vao = (self.program, self.vao) if tex is None else (self.program_textured, self.vao_textured)
                 if tex is not None:
                     tex.use(location=0)
                     p["u_albedo_tex"].value = 0
