@@ -64,10 +64,19 @@ from serenity.config import KdBuildConfig
 from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
 from serenity.gbuffer_layout import RT_GBUFFER_KEYS
-from serenity.kernels.kdtree import CHUNKS_PER_THREAD, KdTree, KdTreeData, finite, gather_in_order, ray_order, trace_kd
+from serenity.kernels.kdtree import (
+    CHUNKS_PER_THREAD,
+    TRACE_MODULE_OPTIONS,
+    KdTree,
+    KdTreeData,
+    finite,
+    gather_in_order,
+    ray_order,
+    trace_kd,
+)
 from serenity.kernels.launch import launch
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options(TRACE_MODULE_OPTIONS)  # no FMA contraction: watertight on CUDA too (kdtree.py)
 
 # ----------------------------------------------------------------------------------------------
 # constants

@@ -10,10 +10,19 @@ import trimesh
 
 from serenity.device import init_warp
 from serenity.errors import SerenityError
-from serenity.kernels.kdtree import SORT_MIN_RAYS, KdBuildConfig, KdTree, intersect_triangle, ray_order, setup_ray
+from serenity.kernels.kdtree import (
+    SORT_MIN_RAYS,
+    TRACE_MODULE_OPTIONS,
+    KdBuildConfig,
+    KdTree,
+    intersect_triangle,
+    ray_order,
+    setup_ray,
+)
 from serenity.scene.procedural import lumpy_mesh
 
 wp = init_warp()
+wp.set_module_options(TRACE_MODULE_OPTIONS)  # the brute force below uses the kd-tree's arithmetic exactly
 
 
 @pytest.fixture(autouse=True)
@@ -61,9 +70,9 @@ def brute_force(vertices, faces, origins, directions, tmax=math.inf):
     """Closest hits by testing every triangle (the kd-tree's own triangle test)."""
     tv = wp.array(np.ascontiguousarray(vertices[faces].reshape(-1, 3), np.float32), dtype=wp.vec3, device="cpu")
     n = len(origins)
-    outs = [wp.zeros(n, dtype=float), wp.zeros(n, dtype=wp.int32), wp.zeros(n, dtype=float), wp.zeros(n, dtype=float)]
-    wp.launch(_brute_force, n, [tv, len(faces), wp.array(origins, dtype=wp.vec3), wp.array(directions, dtype=wp.vec3),
-                                float(tmax), *outs], device="cpu")
+    outs = [wp.zeros(n, dtype=t, device="cpu") for t in (float, wp.int32, float, float)]
+    rays = [wp.array(a, dtype=wp.vec3, device="cpu") for a in (origins, directions)]
+    wp.launch(_brute_force, n, [tv, len(faces), *rays, float(tmax), *outs], device="cpu")
     return [a.numpy() for a in outs]
 
 
