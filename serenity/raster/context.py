@@ -63,6 +63,21 @@ def is_software(ctx) -> bool:
     return any(k in name for k in ("llvmpipe", "softpipe", "software"))
 
 
+#: Trilinear filtering of the sky and LPV volumes done in the shader (8 ``texelFetch`` and float
+#: weights, ``#define EXACT_FILTER``) instead of by the texture unit. GPUs weight the 8 texels with
+#: 8-bit fixed-point fractions: the sky volume's SH coefficients of neighbouring probes can differ
+#: ~30x and cancel in the irradiance sum, so on an NVIDIA H200 the filtered irradiance was off by up
+#: to 37 % (relative to the point's own value) at dim points between bright probes, and the LPV
+#: lookups by 0.24 %. llvmpipe filters in float. ``None``: on hardware GL only; tests set ``True`` to
+#: run the exact path on llvmpipe too.
+EXACT_FILTER: bool | None = None
+
+
+def exact_filter(ctx) -> bool:
+    """Whether shaders built now filter the volumes by hand (``EXACT_FILTER``)."""
+    return (not is_software(ctx)) if EXACT_FILTER is None else bool(EXACT_FILTER)
+
+
 def anisotropy(ctx) -> float:
     """Anisotropic filtering level for scene textures: 8 on a GPU; 1 on a CPU rasteriser, where
     llvmpipe's anisotropic path made the courtyard's 320×180 G-buffer take ~650 ms instead of 3 ms
@@ -100,7 +115,8 @@ def shader_source(name: str, _seen: frozenset = frozenset()) -> str:
 def load_program(ctx, name: str, defines: dict | None = None, stages=("VERTEX_SHADER", "FRAGMENT_SHADER")):
     """Compile ``glsl/<name>`` for the given stages with ``#define``s prepended."""
     body = shader_source(name)
-    head = [GLSL_VERSION] + [f"#define {k} {v}" for k, v in (defines or {}).items()]
+    defines = {**({"EXACT_FILTER": 1} if exact_filter(ctx) else {}), **(defines or {})}
+    head = [GLSL_VERSION] + [f"#define {k} {v}" for k, v in defines.items()]
     srcs = {}
     for stage in stages:
         key = {"VERTEX_SHADER": "vertex_shader", "FRAGMENT_SHADER": "fragment_shader",

@@ -8,6 +8,7 @@ import pytest
 
 from serenity.config import LPVConfig
 from serenity.kernels import lpv as L
+from serenity.raster import context
 from serenity.raster.lpv_gl import LPVProbeGL
 
 
@@ -30,6 +31,17 @@ def _volume(leak_guard: bool, cascades: int = 3, occlusion: bool = True, planes:
                                                                   (True, 3, False, True), (False, 3, True, True),
                                                                   (True, 1, True, True)])
 def test_glsl_lookups_match_warp(gl_ctx, leak_guard, cascades, occlusion, planes):
+    _check_lookups(gl_ctx, leak_guard, cascades, occlusion, planes)
+
+
+@pytest.mark.parametrize("leak_guard", [True, False])
+def test_glsl_exact_filter_matches_warp(gl_ctx, monkeypatch, leak_guard):
+    # the shader's own trilinear filter (hardware GL's default, raster/context.EXACT_FILTER), run here too
+    monkeypatch.setattr(context, "EXACT_FILTER", True)
+    _check_lookups(gl_ctx, leak_guard, 3, True, True)
+
+
+def _check_lookups(gl_ctx, leak_guard, cascades, occlusion, planes):
     v, bounds, rng = _volume(leak_guard, cascades, occlusion, planes)
     assert len(v.grids) == cascades
     m = 3000

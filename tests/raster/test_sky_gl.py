@@ -6,6 +6,7 @@ import pytest
 from serenity.config import SkyConfig
 from serenity.kernels import atmosphere as A
 from serenity.kernels.skyvolume import SkyVolume
+from serenity.raster import context
 from serenity.raster.context import load_program
 from serenity.raster.sky import SkyTexturesGL
 from serenity.scene.procedural import build_scene
@@ -18,8 +19,11 @@ def volume():
     return vol
 
 
-@pytest.fixture()
-def sky_gl(gl_ctx, volume):
+@pytest.fixture(params=[None, True], ids=["auto", "exact-filter"])
+def sky_gl(request, monkeypatch, gl_ctx, volume):
+    # auto: the texture unit's filter on llvmpipe, the shader's own on a GPU; True: the shader's own here
+    # too (raster/context.EXACT_FILTER)
+    monkeypatch.setattr(context, "EXACT_FILTER", request.param)
     g = SkyTexturesGL(gl_ctx)
     g.upload_sky_map(volume.sky.sky_map)
     g.upload_volume(volume.textures(), volume.grid_origin, volume.cell_size, volume.resolution,

@@ -60,9 +60,26 @@ float lpv_cascade_weight(vec3 u, int res, bool last) {
 // pass even with no cascade active, and 3x the texture fetches (every branch's fetches ran).
 
 // R, G, B SH trilinear at grid coordinate u (cells) of a cascade of res cells.
+// (EXACT_FILTER: by hand with float weights, as the texture unit's clamp-to-edge trilinear filter
+// would with exact weights; raster/context.py says why.)
 void lpv_fetch(sampler3D tr, sampler3D tg, sampler3D tb, int res, vec3 u, out vec4 sr, out vec4 sg, out vec4 sb) {
+#ifdef EXACT_FILTER
+    vec3 us = u - 0.5;
+    vec3 f = floor(us);
+    vec3 w = us - f;
+    ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1));
+    ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1));
+    sr = vec4(0.0); sg = vec4(0.0); sb = vec4(0.0);
+    for (int k = 0; k < 8; ++k) {
+        bool bx = (k & 1) != 0, by = (k & 2) != 0, bz = (k & 4) != 0;
+        ivec3 ii = ivec3(bx ? i1.x : i0.x, by ? i1.y : i0.y, bz ? i1.z : i0.z);
+        float wk = (bx ? w.x : 1.0 - w.x) * (by ? w.y : 1.0 - w.y) * (bz ? w.z : 1.0 - w.z);
+        sr += wk * texelFetch(tr, ii, 0); sg += wk * texelFetch(tg, ii, 0); sb += wk * texelFetch(tb, ii, 0);
+    }
+#else
     vec3 t = u / float(res);
     sr = textureLod(tr, t, 0.0); sg = textureLod(tg, t, 0.0); sb = textureLod(tb, t, 0.0);
+#endif
 }
 
 // Where the blockers of cell i's +x, +y, +z faces lie, in cells from the face (0: on it): the openness

@@ -43,16 +43,34 @@ void sky_sh9(vec3 d, out float y[9]) {
     y[8] = 0.546274215296040 * (d.x * d.x - d.y * d.y);
 }
 
+#ifdef EXACT_FILTER
+// Trilinear between the probes around grid point g (clamped to the grid) with float weights: the
+// texture unit's 8-bit weights are too coarse for SH coefficients that cancel (raster/context.py).
+vec4 sky_trilinear(sampler3D t, vec3 g, vec3 res) {
+    ivec3 i0 = ivec3(floor(g));
+    ivec3 i1 = min(i0 + 1, ivec3(res) - 1);
+    vec3 w = g - vec3(i0);
+    vec4 c00 = mix(texelFetch(t, i0, 0), texelFetch(t, ivec3(i1.x, i0.y, i0.z), 0), w.x);
+    vec4 c10 = mix(texelFetch(t, ivec3(i0.x, i1.y, i0.z), 0), texelFetch(t, ivec3(i1.x, i1.y, i0.z), 0), w.x);
+    vec4 c01 = mix(texelFetch(t, ivec3(i0.x, i0.y, i1.z), 0), texelFetch(t, ivec3(i1.x, i0.y, i1.z), 0), w.x);
+    vec4 c11 = mix(texelFetch(t, ivec3(i0.x, i1.y, i1.z), 0), texelFetch(t, i1, 0), w.x);
+    return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+}
+#define SKY_TAP(t) sky_trilinear(t, g, res)
+#else
+#define SKY_TAP(t) texture(t, tc)
+#endif
+
 vec3 sky_volume_irradiance(sampler3D tex[7], vec3 p, vec3 n, vec3 origin, vec3 cell, vec3 res,
                            float normal_offset) {
     vec3 g = clamp((p + normal_offset * n - origin) / cell, vec3(0.0), res - 1.0);
     vec3 tc = (g + 0.5) / res;
     float f[28];
     for (int t = 0; t < 6; ++t) {
-        vec4 v = texture(tex[t], tc);
+        vec4 v = SKY_TAP(tex[t]);
         f[4 * t + 0] = v.x; f[4 * t + 1] = v.y; f[4 * t + 2] = v.z; f[4 * t + 3] = v.w;
     }
-    vec3 last = texture(tex[6], tc).rgb;
+    vec3 last = SKY_TAP(tex[6]).rgb;
     f[24] = last.x; f[25] = last.y; f[26] = last.z; f[27] = 0.0;
     float y[9];
     sky_sh9(n, y);
