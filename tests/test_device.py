@@ -1,5 +1,5 @@
-"""Device choice: the CPU unless CUDA is asked for, a CUDA choice says once that it is unverified, and a
-missing device is a SerenityError."""
+"""Device choice: CUDA where there is a GPU, else the CPU, SERENITY_DEVICE over both, and a missing device
+is a SerenityError."""
 
 import pytest
 
@@ -7,9 +7,12 @@ from serenity import device as D
 from serenity.errors import SerenityError
 
 
-def test_default_is_the_cpu(monkeypatch):
+def test_default_is_cuda_where_there_is_a_gpu_else_the_cpu(monkeypatch):
     monkeypatch.delenv("SERENITY_DEVICE", raising=False)
+    monkeypatch.setattr(D, "available_devices", lambda: ["cpu"])
     assert D.resolve_device(None) == "cpu"
+    monkeypatch.setattr(D, "available_devices", lambda: ["cpu", "cuda:0"])
+    assert D.resolve_device(None) == "cuda:0"
     monkeypatch.setenv("SERENITY_DEVICE", "cpu")
     assert D.resolve_device(None) == "cpu"
 
@@ -21,11 +24,9 @@ def test_missing_device_is_a_serenity_error():
         D.resolve_device("tpu")
 
 
-def test_cuda_says_once_that_it_is_unverified(monkeypatch, capsys):
+def test_cuda_aliases(capsys):
     if "cuda:0" not in D.available_devices():
         pytest.skip("no CUDA device")
-    monkeypatch.setattr(D, "_cuda_noted", False)
     assert D.resolve_device("cuda") == "cuda:0"
     assert D.resolve_device("cuda:0") == "cuda:0"
-    err = capsys.readouterr().err
-    assert err.count("unverified") == 1 and len(err.strip().splitlines()) == 1
+    assert capsys.readouterr().err == ""

@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import os
 
-from serenity.commands.common import DEFAULT_OUT_DIR, DEFAULT_SCENE, DEFAULT_SIZE, add_quality_argument, parse_size
+from serenity.commands.common import (
+    DEFAULT_OUT_DIR,
+    DEFAULT_SCENE,
+    DEFAULT_SIZE,
+    DEVICE_HELP,
+    add_quality_argument,
+    parse_size,
+)
 from serenity.errors import SerenityError
 
 
@@ -15,7 +22,7 @@ def register(subparsers) -> None:
     b.add_argument("scene", nargs="?", default=DEFAULT_SCENE)
     b.add_argument("--frames", type=int, default=30, help="frames per schedule (default %(default)s)")
     b.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}", help="WxH (default %(default)s)")
-    b.add_argument("--device", help="cpu (default) | cuda:0 (unverified)")
+    b.add_argument("--device", help=DEVICE_HELP)
     add_quality_argument(b)
     b.add_argument("--json", default=os.path.join(DEFAULT_OUT_DIR, "bench.json"), help="JSON output path")
     b.add_argument("--chart", default=os.path.join(DEFAULT_OUT_DIR, "timeline.png"), help="timeline PNG path")

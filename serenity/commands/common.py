@@ -11,6 +11,8 @@ from serenity.errors import SerenityError
 
 DEFAULT_SCENE = "courtyard"
 DEFAULT_SIZE = (640, 360)
+#: --device help, shared by render, view and bench
+DEVICE_HELP = "Warp device (default: cuda:0 where there is a GPU, else cpu; SERENITY_DEVICE overrides)"
 DEFAULT_OUT_DIR = "serenity_out"
 
 

@@ -9,6 +9,7 @@ from serenity.commands.common import (
     DEFAULT_OUT_DIR,
     DEFAULT_SCENE,
     DEFAULT_SIZE,
+    DEVICE_HELP,
     add_quality_argument,
     add_time_arguments,
     apply_time,
@@ -27,7 +28,7 @@ def register(subparsers) -> None:
     r.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}", help="WxH (default %(default)s)")
     add_time_arguments(r)
     add_quality_argument(r)
-    r.add_argument("--device", help="cpu (default) | cuda:0 (compiles, not yet run on a GPU: unverified)")
+    r.add_argument("--device", help=DEVICE_HELP)
     r.add_argument("--exposure", type=float, default=DEFAULT_EXPOSURE,
                    help="exposure before Reinhard (default %(default)s)")
     r.add_argument("--ambient", choices=("none", "constant"), default="none",

@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import os
 
-from serenity.commands.common import DEFAULT_OUT_DIR, DEFAULT_SCENE, DEFAULT_SIZE, add_quality_argument, parse_size
+from serenity.commands.common import (
+    DEFAULT_OUT_DIR,
+    DEFAULT_SCENE,
+    DEFAULT_SIZE,
+    DEVICE_HELP,
+    add_quality_argument,
+    parse_size,
+)
 from serenity.config import DEFAULT_EXPOSURE
 from serenity.errors import SerenityError
 from serenity.view import TAA_SAMPLES
@@ -18,7 +25,7 @@ def register(subparsers) -> None:
     v.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}",
                    help="render size WxH (default %(default)s); the window opens at this size")
     add_quality_argument(v)
-    v.add_argument("--device", help="cpu (default) | cuda:0 (compiles, not yet run on a GPU: unverified)")
+    v.add_argument("--device", help=DEVICE_HELP)
     v.add_argument("--exposure", type=float, default=DEFAULT_EXPOSURE,
                    help="exposure before Reinhard (default %(default)s)")
     v.add_argument("--script", help="TOML file of timed input steps (see serenity/view/script.py)")
