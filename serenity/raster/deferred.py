@@ -12,6 +12,8 @@ from serenity.raster.context import FullscreenPass, draw_fullscreen, fullscreen_
 
 UPSAMPLE_UNIT = 16
 """First of the 3 texture units of the upsampled indirect light (units 0..15: G-buffer, shadows, sky)."""
+SHADOW_FILTERS = {"hard": 0, "pcf": 1, "pcss": 2}
+"""ShadowConfig.filter → glsl/shadow_sampling.glsl's SHADOW_FILTER."""
 
 
 @dataclass
@@ -52,12 +54,17 @@ class DeferredPass(FullscreenPass):
         self._variants: dict[tuple, tuple] = {}
         self.program = self.vao = None  # the variant drawn last
 
-    def _variant(self, rt_view: bool, traced_sun: bool, contact: bool, upsample: bool):
-        key = (rt_view, traced_sun, contact, upsample)
+    def _variant(self, rt_view: bool, traced_sun: bool, contact: bool, upsample: bool, shadow_cfg=None):
+        # the shadow filter and its tap counts are compiled in too (glsl/shadow_sampling.glsl)
+        filt = None if shadow_cfg is None else (SHADOW_FILTERS[shadow_cfg.filter], int(shadow_cfg.blocker_samples),
+                                                int(shadow_cfg.filter_samples))
+        key = (rt_view, traced_sun, contact, upsample, filt)
         if key not in self._variants:
-            program = load_program(self.ctx, self.SHADER, defines={
-                "RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_SHADOW": int(contact),
-                "UPSAMPLE": int(upsample)})
+            defines = {"RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_SHADOW": int(contact),
+                       "UPSAMPLE": int(upsample)}
+            if filt is not None:
+                defines.update(SHADOW_FILTER=filt[0], BLOCKER_SAMPLES=filt[1], FILTER_SAMPLES=filt[2])
+            program = load_program(self.ctx, self.SHADER, defines=defines)
             self._variants[key] = (program, fullscreen_vao(self.ctx, program))
         self.program, self.vao = self._variants[key]
         return self.program
@@ -75,7 +82,8 @@ class DeferredPass(FullscreenPass):
         main = rt_view is None
         contact = main and light.shadow.contact_steps > 0
         ctx = self.ctx
-        p = self._variant(not main, shadow is None, contact, main and upsample is not None)
+        p = self._variant(not main, shadow is None, contact, main and upsample is not None,
+                          None if shadow is None else light.shadow)
         with ctx.debug_scope("deferred"):
             self.fbo.use()
             for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
@@ -141,9 +149,6 @@ class DeferredPass(FullscreenPass):
         p["u_cascade_far"].value = vec4([c.far for c in cs])
         p["u_cascade_texel"].value = vec4([c.texel_world for c in cs])
         p["u_cascade_depth_range"].value = vec4([c.depth_range for c in cs])
-        p["u_shadow_filter"].value = {"hard": 0, "pcf": 1, "pcss": 2}[cfg.filter]
-        p["u_blocker_samples"].value = int(cfg.blocker_samples)
-        p["u_filter_samples"].value = int(cfg.filter_samples)
         for name, v in (("u_shadow_bias", cfg.bias), ("u_normal_offset", cfg.normal_offset),
                         ("u_pcf_radius", cfg.pcf_radius), ("u_sun_tan_half", light.sun_tan_half),
                         ("u_pcss_max_blocker", cfg.pcss_max_blocker), ("u_cascade_blend", cfg.cascade_blend)):

@@ -17,12 +17,22 @@ uniform vec4 u_cascade_texel;         // one texel, metres
 uniform vec4 u_cascade_depth_range;   // light depth extent, metres
 uniform float u_shadow_bias;          // texels
 uniform float u_normal_offset;        // texels
-uniform int u_shadow_filter;
 uniform float u_pcf_radius;           // texels (PCF mode)
 uniform float u_sun_tan_half;         // tan of the sun's angular radius
 uniform float u_pcss_max_blocker;     // metres: farthest blocker the search looks for
-uniform int u_blocker_samples;
-uniform int u_filter_samples;
+
+// The filter and its tap counts are compiled in (DeferredPass builds one program per setting): the
+// loops unroll and the modes not chosen are left out, which a CPU rasteriser would otherwise run
+// for every pixel (it runs every side of a branch).
+#ifndef SHADOW_FILTER
+#define SHADOW_FILTER SHADOW_PCSS
+#endif
+#ifndef BLOCKER_SAMPLES
+#define BLOCKER_SAMPLES 16
+#endif
+#ifndef FILTER_SAMPLES
+#define FILTER_SAMPLES 32
+#endif
 uniform float u_cascade_blend;        // fraction of a cascade's depth blended into the next
 
 float interleaved_gradient_noise(vec2 pixel) {
@@ -57,15 +67,17 @@ float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
     vec2 texel = vec2(1.0 / size);
     float phi = 6.2831853 * interleaved_gradient_noise(gl_FragCoord.xy);
     float radius = 0.0;  // filter radius, texels
-    if (u_shadow_filter == SHADOW_PCF) radius = u_pcf_radius;
-    if (u_shadow_filter == SHADOW_PCSS) {
+#if SHADOW_FILTER == SHADOW_PCF
+    radius = u_pcf_radius;
+#elif SHADOW_FILTER == SHADOW_PCSS
+    {
         float recv_m = s.z * range;
         float search = clamp(u_pcss_max_blocker * 2.0 * u_sun_tan_half / texel_w, 1.0, 16.0);
         float sum = 0.0;
         int found = 0;
         float bias0 = (u_shadow_bias + search * 0.5) * texel_w / range;
-        for (int i = 0; i < u_blocker_samples; ++i) {
-            float d = atlas_depth(c, s.xy + vogel_disc(i, u_blocker_samples, phi) * search * texel, texel);
+        for (int i = 0; i < BLOCKER_SAMPLES; ++i) {
+            float d = atlas_depth(c, s.xy + vogel_disc(i, BLOCKER_SAMPLES, phi) * search * texel, texel);
             if (d < s.z - bias0) { sum += d; found++; }
         }
         if (found == 0) return 1.0;
@@ -73,17 +85,19 @@ float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
         float penumbra_m = max(recv_m - blocker_m, 0.0) * 2.0 * u_sun_tan_half;  // full width
         radius = clamp(0.5 * penumbra_m / texel_w, 0.5, 24.0);
     }
+#endif
     // the farther a filter tap is, the more a sloped receiver rises above the lookup depth
     float bias = (u_shadow_bias + radius * slope) * texel_w / range;
-    if (u_shadow_filter == SHADOW_HARD) {
-        return s.z - bias <= atlas_depth(c, s.xy, texel) ? 1.0 : 0.0;
-    }
+#if SHADOW_FILTER == SHADOW_HARD
+    return s.z - bias <= atlas_depth(c, s.xy, texel) ? 1.0 : 0.0;
+#else
     float lit = 0.0;
-    for (int i = 0; i < u_filter_samples; ++i) {
-        vec2 o = vogel_disc(i, u_filter_samples, phi) * radius * texel;
+    for (int i = 0; i < FILTER_SAMPLES; ++i) {
+        vec2 o = vogel_disc(i, FILTER_SAMPLES, phi) * radius * texel;
         lit += (s.z - bias <= atlas_depth(c, s.xy + o, texel)) ? 1.0 : 0.0;
     }
-    return lit / float(u_filter_samples);
+    return lit / float(FILTER_SAMPLES);
+#endif
 }
 
 // One texel (m) of the first cascade that holds view depth ``view_depth`` (before any blending).
@@ -95,25 +109,28 @@ float cascade_texel_at(float view_depth) {
 }
 
 // view_depth: distance along the camera axis (m); n: shading normal; ndl = dot(n, sun) > 0.
+// The cascade is chosen first and filtered once, outside any loop: a CPU rasteriser runs a loop body
+// for a block of pixels until every pixel in it has left, so a filter inside the cascade loop ran
+// once per cascade up to the pixel's own (4x the taps in the farthest cascade).
 float sun_visibility(vec3 p, vec3 n, float ndl, float view_depth) {
+    if (u_cascade_count <= 0) return 1.0;
     float size = float(textureSize(u_shadow_map, 0).x) / u_atlas_tiles;
-    for (int c = 0; c < u_cascade_count; ++c) {
-        float far_c = u_cascade_far[c];
-        if (view_depth <= far_c || c == u_cascade_count - 1) {
-            // in the blend band before the split, the next cascade is chosen with probability w
-            // (dithered by the pixel's noise): the expected value is the linear cross-fade, at the
-            // cost of one cascade lookup (a CPU rasteriser runs both sides of a branch for a whole
-            // block of pixels, so a real cross-fade cost a second PCSS for every block it touched)
-            float near_c = c == 0 ? 0.0 : u_cascade_far[c - 1];
-            float band = u_cascade_blend * (far_c - near_c);
-            int use = c;
-            if (c + 1 < u_cascade_count && view_depth > far_c - band) {
-                float w = (view_depth - (far_c - band)) / max(band, 1e-6);
-                if (interleaved_gradient_noise(gl_FragCoord.yx + 7.0) < w) use = c + 1;
-            }
-            return cascade_visibility(use, p, n, ndl, size);
-        }
+    int c = u_cascade_count - 1;  // the first cascade that holds view_depth, else the last
+    for (int k = u_cascade_count - 2; k >= 0; --k) {
+        if (view_depth <= u_cascade_far[k]) c = k;
     }
-    return 1.0;
+    // in the blend band before the split, the next cascade is chosen with probability w (dithered
+    // by the pixel's noise): the expected value is the linear cross-fade, at the cost of one
+    // cascade lookup (a CPU rasteriser runs both sides of a branch for a whole block of pixels, so
+    // a real cross-fade cost a second PCSS for every block it touched)
+    float far_c = u_cascade_far[c];
+    float near_c = c == 0 ? 0.0 : u_cascade_far[c - 1];
+    float band = u_cascade_blend * (far_c - near_c);
+    int use = c;
+    if (c + 1 < u_cascade_count && view_depth > far_c - band) {
+        float w = (view_depth - (far_c - band)) / max(band, 1e-6);
+        if (interleaved_gradient_noise(gl_FragCoord.yx + 7.0) < w) use = c + 1;
+    }
+    return cascade_visibility(use, p, n, ndl, size);
 }
 #endif
