@@ -42,8 +42,8 @@ class LitImage:
 
 class DeferredPass(FullscreenPass):
     """The deferred lighting pass. Its program is compiled per variant (``glsl/deferred.glsl``: main
-    view or ray-traced view, traced or mapped sun, contact shadow, upsampling), each on first use,
-    because llvmpipe pays for every path a shader has, taken or not."""
+    view or ray-traced view, traced or mapped sun, contact-shadow steps, upsampling, shadow filter and
+    taps), each on first use, because llvmpipe pays for every path a shader has, taken or not."""
 
     SHADER = "deferred.glsl"
     TARGETS = {"hdr": (4, "f4"), "direct": (4, "f4")}
@@ -54,13 +54,13 @@ class DeferredPass(FullscreenPass):
         self._variants: dict[tuple, tuple] = {}
         self.program = self.vao = None  # the variant drawn last
 
-    def _variant(self, rt_view: bool, traced_sun: bool, contact: bool, upsample: bool, shadow_cfg=None):
+    def _variant(self, rt_view: bool, traced_sun: bool, contact_steps: int, upsample: bool, shadow_cfg=None):
         # the shadow filter and its tap counts are compiled in too (glsl/shadow_sampling.glsl)
         filt = None if shadow_cfg is None else (SHADOW_FILTERS[shadow_cfg.filter], int(shadow_cfg.blocker_samples),
                                                 int(shadow_cfg.filter_samples))
-        key = (rt_view, traced_sun, contact, upsample, filt)
+        key = (rt_view, traced_sun, contact_steps, upsample, filt)
         if key not in self._variants:
-            defines = {"RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_SHADOW": int(contact),
+            defines = {"RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_STEPS": int(contact_steps),
                        "UPSAMPLE": int(upsample)}
             if filt is not None:
                 defines.update(SHADOW_FILTER=filt[0], BLOCKER_SAMPLES=filt[1], FILTER_SAMPLES=filt[2])
@@ -80,7 +80,7 @@ class DeferredPass(FullscreenPass):
         if shadow is None and rt_view is None:
             raise ValueError("the main view needs shadow maps")
         main = rt_view is None
-        contact = main and light.shadow.contact_steps > 0
+        contact = int(light.shadow.contact_steps) if main else 0  # march steps, 0 = no contact shadow
         ctx = self.ctx
         p = self._variant(not main, shadow is None, contact, main and upsample is not None,
                           None if shadow is None else light.shadow)
@@ -117,7 +117,6 @@ class DeferredPass(FullscreenPass):
                 p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
             if contact:
                 p["u_view_proj"].write(light.view_proj.T.astype(np.float32).tobytes())
-                self._set(p, "u_contact_steps", int(light.shadow.contact_steps))
             self._set(p, "u_contact_pixels", light.shadow.contact_pixels)
             self._set(p, "u_contact_texels", light.shadow.contact_texels)
             self._set(p, "u_sun_dir", light.sun_direction)

@@ -14,16 +14,17 @@
 // for every pixel, whatever its branches decide, so a path a view never takes is left out of its
 // program instead of being skipped by a uniform.
 //   RT_VIEW 1: a ray-traced G-buffer (else the main view);  TRACED_SUN 1 (rt views): the sun's
-//   visibility is the tracer's shadow ray, g_eye.w (else the shadow maps);  CONTACT_SHADOW 1 (main
-//   view): the screen-space contact shadow;  UPSAMPLE 1 (main view): add the low-res indirect light.
+//   visibility is the tracer's shadow ray, g_eye.w (else the shadow maps);  CONTACT_STEPS N > 0 (main
+//   view): the screen-space contact shadow, N march steps;  UPSAMPLE 1 (main view): add the low-res
+//   indirect light. (The shadow filter and its taps are compiled in too: shadow_sampling.glsl.)
 #ifndef RT_VIEW
 #define RT_VIEW 0
 #endif
 #ifndef TRACED_SUN
 #define TRACED_SUN 0
 #endif
-#ifndef CONTACT_SHADOW
-#define CONTACT_SHADOW 0
+#ifndef CONTACT_STEPS
+#define CONTACT_STEPS 0
 #endif
 #ifndef UPSAMPLE
 #define UPSAMPLE 0
@@ -55,7 +56,6 @@ uniform sampler2D g_eye;            // rt view: xyz = ray origin (the viewer of 
                                     // w = the sun's visibility from the tracer's shadow ray
 uniform sampler2D g_ray_dir;        // rt view: xyz = ray direction (0 = pixel not traced)
 uniform mat4 u_view_proj;           // main view: world -> clip (contact shadows)
-uniform int u_contact_steps;        // contact-shadow march steps
 uniform float u_contact_pixels;     // contact-shadow march length, pixel footprints at the receiver
 uniform float u_contact_texels;     // ... and at most this many shadow-map texels of its cascade
 layout(location = 0) out vec4 o_hdr;
@@ -67,7 +67,7 @@ vec3 sky(vec3 dir) {
     return u_use_sky_map ? sky_map_radiance(u_sky_map, dir) : u_sky_radiance;
 }
 
-#if CONTACT_SHADOW
+#if CONTACT_STEPS > 0
 // Screen-space contact shadow (main view): march from p towards the sun over u_contact_pixels pixel
 // footprints, but no further than u_contact_texels texels of the shadow map (what its resolution and
 // bias cannot resolve; beyond that the map is right and a screen-space march only adds view-dependent
@@ -80,8 +80,8 @@ float contact_visibility(vec3 p, vec3 n, float view_depth) {
     float p11 = length(vec3(u_view_proj[0][1], u_view_proj[1][1], u_view_proj[2][1]));
     float pixel = 2.0 * view_depth / (p11 * size.y);       // metres per pixel at the receiver
     float len = min(u_contact_pixels * pixel, u_contact_texels * cascade_texel_at(view_depth));
-    for (int i = 1; i <= u_contact_steps; ++i) {
-        vec3 m = p + u_sun_dir * (len * float(i) / float(u_contact_steps));
+    for (int i = 1; i <= CONTACT_STEPS; ++i) {
+        vec3 m = p + u_sun_dir * (len * float(i) / float(CONTACT_STEPS));
         vec4 c = u_view_proj * vec4(m, 1.0);
         if (c.w <= 0.0) break;
         vec2 uv = c.xy / c.w * 0.5 + 0.5;
@@ -140,7 +140,7 @@ void main() {
 #else
         float metric = dot(p - u_camera_pos, u_camera_forward);
         float vis = sun_visibility(p, n, ndl, metric);
-#if CONTACT_SHADOW
+#if CONTACT_STEPS > 0
         if (vis > 0.0) vis *= contact_visibility(p, n, metric);
 #endif
 #endif
