@@ -28,6 +28,21 @@ def _collatz_steps(start: wp.array(dtype=wp.int32), steps: wp.array(dtype=wp.int
     steps[i] = k
 
 
+@wp.kernel
+def _chunk_start(out: wp.array(dtype=wp.int32), offset: int):
+    out[wp.tid() + offset] = offset
+
+
+def test_launch_gives_each_thread_at_least_min_items():
+    out = wp.zeros(10_000, dtype=wp.int32, device="cpu")
+    launch(_chunk_start, 10_000, [out], device="cpu", threads=4, min_items=2_500)
+    assert sorted(set(out.numpy().tolist())) == [0, 2_500, 5_000, 7_500]
+    launch(_chunk_start, 10_000, [out], device="cpu", threads=4, min_items=4_000)  # 2 chunks of 5000
+    assert sorted(set(out.numpy().tolist())) == [0, 5_000]
+    launch(_chunk_start, 10_000, [out], device="cpu", threads=4, min_items=16_384)  # one, on this thread
+    assert set(out.numpy().tolist()) == {0}
+
+
 def test_chunk_ranges_cover_exactly():
     for dim in (1, 7, 255, 256, 1000, 100_003):
         for threads in (1, 2, 3, 16):
