@@ -48,11 +48,11 @@ _pool_size = 0
 MIN_ITEMS_PER_THREAD = 256
 #: with ``chunks_per_thread`` > 1, chunks are not made smaller than this (each is one ``wp.launch``)
 MIN_ITEMS_PER_CHUNK = 4096
-#: ``min_items`` for kernels over a volume's cells, ~0.1 µs of work per cell: a chunk handed to a
-#: worker costs ~0.2 ms of Python under the GIL, so a 3 x 12³ LPV propagation step (5184 cells,
-#: ~0.6 ms) took 8.3 ms for 8 steps on 2 threads against 5.1 ms on 1, and 19.4 ms on 16 (the
-#: 2-core machine; 32³: 100.8 ms on 1 thread, 85.7 on 2)
-MIN_CELLS_PER_THREAD = 16384
+#: ``min_items`` for kernels with ~0.1 µs of work per item (a volume's cells, VPLs scattered into
+#: it): a chunk handed to a worker costs ~0.2 ms of Python under the GIL, so a 3 x 12³ LPV
+#: propagation step (5184 cells, ~0.6 ms) took 8.3 ms for 8 steps on 2 threads against 5.1 ms on
+#: 1, and 19.4 ms on 16 (the 2-core machine; 32³: 100.8 ms on 1 thread, 85.7 on 2)
+MIN_CHEAP_ITEMS_PER_THREAD = 16384
 
 
 def _executor(n: int) -> ThreadPoolExecutor:
@@ -87,7 +87,7 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     ``SERENITY_THREADS`` overrides) and this call returns when every chunk is done; with
     ``chunks_per_thread`` > 1 into that many contiguous chunks per thread, taken in order by
     whichever worker is free (module docstring). A thread gets at least ``min_items`` items (fewer
-    threads when ``dim`` is small: ``MIN_CELLS_PER_THREAD`` for cheap per-item kernels). On CUDA it
+    threads when ``dim`` is small: ``MIN_CHEAP_ITEMS_PER_THREAD`` for cheap per-item kernels). On CUDA it
     is a single asynchronous launch, as ``wp.launch`` is.
     """
     wp = init_warp()
@@ -189,7 +189,7 @@ class ScatterGrid:
         """Launch ``kernel`` over ``dim`` items, adding into this grid (its slots on the CPU)."""
         if dim <= 0:
             return
-        chunks = chunk_ranges(dim, min(self.n_slots, self.threads or cpu_threads()))
+        chunks = chunk_ranges(dim, min(self.n_slots, self.threads or cpu_threads()), MIN_CHEAP_ITEMS_PER_THREAD)
         if self._slots is None or len(chunks) == 1:
             launch(kernel, dim, [*inputs, self._no_slots, 0, self.array], device=self.device, threads=1)
             return
@@ -201,7 +201,7 @@ class ScatterGrid:
         """Sum the private slots into ``array`` (nothing to do on CUDA or after one-chunk launches)."""
         if self._used:
             launch(gather_slots, self.size, [self._slots, self._used, self.size, self.array], device=self.device,
-                   threads=self.threads, min_items=MIN_CELLS_PER_THREAD)
+                   threads=self.threads, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
             self._used = 0
 
     def zero(self) -> None:

@@ -83,7 +83,7 @@ def test_launch_from_a_start_index_covers_exactly_that_range(device):
 def test_scatter_grid_sums_every_item_once(device, threads):
     """Many items adding into few cells: the CPU's private slots (or CUDA's atomics) lose nothing, and
     a second scatter before the gather adds to the first."""
-    n, cells = 40_000, 7
+    n, cells = 140_000, 7  # >= 8 x launch.MIN_CHEAP_ITEMS_PER_THREAD: 8 slots on 8 threads
     values = np.arange(n, dtype=np.int32) % cells
     grid = ScatterGrid(cells, device, threads=threads)
     vals = wp.array(values, dtype=wp.int32, device=device)

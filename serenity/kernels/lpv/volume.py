@@ -18,7 +18,7 @@ import warp as wp
 
 from serenity.config import LPVConfig
 from serenity.device import init_warp, resolve_device
-from serenity.kernels.launch import MIN_CELLS_PER_THREAD, ScatterGrid, Staging, host_array, launch
+from serenity.kernels.launch import MIN_CHEAP_ITEMS_PER_THREAD, ScatterGrid, Staging, host_array, launch
 from serenity.kernels.lpv.basis import MAX_CASCADES, SH_FLUX
 from serenity.kernels.lpv.cascades import CascadeGrid, fit_cascades
 from serenity.kernels.lpv.kernels import (
@@ -214,7 +214,7 @@ class LightPropagationVolume:
         inj = self._inj.array
         # skip cascades that received nothing: not propagated, not looked up
         launch(measure_cells, self._n_cells, [inj, self._level_table, nl, self._total], device=dev,
-               threads=self.threads, min_items=MIN_CELLS_PER_THREAD)
+               threads=self.threads, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
         injected = self._level_sums(self._total)
         fitted = {g.level for g in self.fitted}
         on = np.array([1 if (lv in fitted and injected[lv] > 0.0 and iters[lv] > 0) else 0 for lv in range(nl)],
@@ -225,7 +225,7 @@ class LightPropagationVolume:
             launch(eval_face_transmittance, self._n_cells,
                    [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open, self._plane,
                     self._n_gv if self._moments else 0, int(self._coverage) + 2 * int(self._planes)],
-                   device=dev, threads=self.threads, min_items=MIN_CELLS_PER_THREAD)
+                   device=dev, threads=self.threads, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
             self._gv_dirty = False
         # hand-over: a cascade's iterations past the finer one's reach (in its own cells) go to "far"
         far_from = np.full(nl, 1 << 30, np.int32)
@@ -257,7 +257,7 @@ class LightPropagationVolume:
             launch(self._propagate, dim,
                    [src, self._accum, self._trans_pos, self._trans_neg, self._level_table, nl, self._level_on,
                     self._far_from, k + 1, dst, self._accum, self._far, self._change, self._total], device=dev,
-                   threads=self.threads, start=lo, min_items=MIN_CELLS_PER_THREAD)
+                   threads=self.threads, start=lo, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
             for lv in np.flatnonzero(on):
                 done[lv] += 1
                 last[int(lv)] = dst
@@ -269,7 +269,7 @@ class LightPropagationVolume:
             for c in range(len(self.grids) - 1):
                 launch(hand_over_far, self._levels[self.grids[c].level].res ** 3,
                        [self._far, self._cas_table, len(self.grids), c, self._accum], device=dev,
-                       threads=self.threads, min_items=MIN_CELLS_PER_THREAD)
+                       threads=self.threads, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
         self._last_level = last
         self.iterations_run = [int(done[g.level]) for g in self.fitted]
         self._has_result = True
