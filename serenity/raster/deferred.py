@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import FullscreenPass, draw_fullscreen, fullscreen_vao, load_program
@@ -53,21 +54,38 @@ class DeferredPass(FullscreenPass):
         self.size = None
         self._variants: dict[tuple, tuple] = {}
         self.program = self.vao = None  # the variant drawn last
+        self._split = None  # (G-buffer depth texture, framebuffer of our targets + that depth)
 
-    def _variant(self, rt_view: bool, traced_sun: bool, contact_steps: int, upsample: bool, shadow_cfg=None):
+    def resize(self, width: int, height: int) -> None:
+        if self.size != (width, height) and self._split is not None:
+            self._split[1].release()
+            self._split = None
+        super().resize(width, height)
+
+    def _variant(self, rt_view: bool, traced_sun: bool, contact_steps: int, upsample: bool, shadow_cfg=None,
+                 split: int = 0):
+        """(program, vao) of one variant; ``split`` 1 = surfaces only, 2 = sky only (glsl/deferred.glsl)."""
         # the shadow filter and its tap counts are compiled in too (glsl/shadow_sampling.glsl)
         filt = None if shadow_cfg is None else (SHADOW_FILTERS[shadow_cfg.filter], int(shadow_cfg.blocker_samples),
                                                 int(shadow_cfg.filter_samples))
-        key = (rt_view, traced_sun, contact_steps, upsample, filt)
+        key = (rt_view, traced_sun, contact_steps, upsample, filt, split)
         if key not in self._variants:
             defines = {"RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_STEPS": int(contact_steps),
-                       "UPSAMPLE": int(upsample)}
+                       "UPSAMPLE": int(upsample), "SPLIT": int(split)}
             if filt is not None:
                 defines.update(SHADOW_FILTER=filt[0], BLOCKER_SAMPLES=filt[1], FILTER_SAMPLES=filt[2])
             program = load_program(self.ctx, self.SHADER, defines=defines)
             self._variants[key] = (program, fullscreen_vao(self.ctx, program))
-        self.program, self.vao = self._variants[key]
-        return self.program
+        return self._variants[key]
+
+    def _split_fbo(self, depth):
+        """Our targets with the G-buffer's depth attached (read, not written), for the split draw."""
+        if self._split is None or self._split[0] is not depth:
+            if self._split is not None:
+                self._split[1].release()
+            self._split = (depth, self.ctx.framebuffer(color_attachments=[self.hdr, self.direct],
+                                                        depth_attachment=depth))
+        return self._split[1]
 
     def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None,
                upsample=None) -> LitImage:
@@ -76,58 +94,88 @@ class DeferredPass(FullscreenPass):
         ray, untraced pixels are black, and SSAO is not applied. ``shadow`` None (rt views only):
         the sun's visibility is the tracer's shadow ray, ``eye.w``. ``upsample`` (main view only):
         (the frame's :class:`~serenity.raster.indirect.LowResIndirect`, already drawn, and the
-        low-res guide texture): its light is upsampled and added in this pass (``glsl/upsample.glsl``)."""
+        low-res guide texture): its light is upsampled and added in this pass (``glsl/upsample.glsl``).
+        The main view is drawn in two halves over the G-buffer's depth: the sky's pixels, then the
+        surfaces' (``SPLIT`` in the shader: llvmpipe shades neither half's pixels with the other's code)."""
         if shadow is None and rt_view is None:
             raise ValueError("the main view needs shadow maps")
         main = rt_view is None
         contact = int(light.shadow.contact_steps) if main else 0  # march steps, 0 = no contact shadow
+        shadow_cfg = None if shadow is None else light.shadow
+        if main:
+            draws = [self._variant(False, False, 0, False, None, split=2),
+                     self._variant(False, False, contact, upsample is not None, shadow_cfg, split=1)]
+        else:
+            draws = [self._variant(True, shadow is None, 0, False, shadow_cfg)]
+        self.program, self.vao = draws[-1]
         ctx = self.ctx
-        p = self._variant(not main, shadow is None, contact, main and upsample is not None,
-                          None if shadow is None else light.shadow)
         with ctx.debug_scope("deferred"):
-            self.fbo.use()
             for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
                 t.use(location=i)
-            for name, loc in (("g_albedo", 0), ("g_normal", 1), ("g_position", 2), ("g_material", 3)):
-                self._set(p, name, loc)
             if shadow is not None:
                 shadow.depth.use(location=4)
-                self._set(p, "u_shadow_map", 4)
-                self._set_shadow_uniforms(p, shadow, light)
-            self._set(p, "u_use_ao", ao is not None and main)
             if not main:
                 rt_view.eye.use(location=6)
                 rt_view.ray_dir.use(location=7)
-                self._set(p, "g_eye", 6)
-                self._set(p, "g_ray_dir", 7)
             elif ao is not None:
                 ao.use(location=5)
-                self._set(p, "u_ao", 5)
             if main and upsample is not None:
                 lo, guide = upsample
-                for loc, (name, tex) in enumerate((("u_irr", lo.irr), ("u_gloss", lo.gloss), ("u_guide", guide)),
-                                                  start=UPSAMPLE_UNIT):
+                for loc, tex in enumerate((lo.irr, lo.gloss, guide), start=UPSAMPLE_UNIT):
                     tex.use(location=loc)
-                    self._set(p, name, loc)
-                self._set(p, "u_scale", lo.scale)
-            self._set(p, "u_use_sky_map", sky is not None)
-            if sky is not None:
-                sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
-            if "u_inv_view_proj" in p:
-                p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
-            if contact:
-                p["u_view_proj"].write(light.view_proj.T.astype(np.float32).tobytes())
-            self._set(p, "u_contact_pixels", light.shadow.contact_pixels)
-            self._set(p, "u_contact_texels", light.shadow.contact_texels)
-            self._set(p, "u_sun_dir", light.sun_direction)
-            self._set(p, "u_sun_irradiance", light.sun_irradiance)
-            self._set(p, "u_sun_radiance", light.sun_radiance)
-            self._set(p, "u_sun_cos_radius", light.sun_cos_radius)
-            self._set(p, "u_camera_pos", light.camera_position)
-            self._set(p, "u_sky_radiance", light.sky_radiance)
-            self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
-            draw_fullscreen(ctx, self.vao, None if main else rt_view.rects)
+            for p, _ in draws:
+                self._set_uniforms(p, shadow, light, ao, main, upsample, sky, contact)
+            if not main:
+                self.fbo.use()
+                draw_fullscreen(ctx, self.vao, rt_view.rects)
+                return LitImage(self.hdr, self.direct)
+            fbo = self._split_fbo(gbuffer.depth)
+            fbo.use()
+            fbo.depth_mask = False
+            ctx.enable(moderngl.DEPTH_TEST)
+            try:
+                for (_, vao), test in zip(draws, ("<=", ">"), strict=True):  # sky: depth 1; surfaces: < 1
+                    ctx.depth_func = test
+                    vao.render(vertices=3)
+            finally:
+                ctx.disable(moderngl.DEPTH_TEST)
+                ctx.depth_func = "<"
+                fbo.depth_mask = True
         return LitImage(self.hdr, self.direct)
+
+    def _set_uniforms(self, p, shadow, light: LightingInputs, ao, main: bool, upsample, sky, contact: int) -> None:
+        """Every uniform program ``p`` has (texture units as bound by ``render``)."""
+        for name, loc in (("g_albedo", 0), ("g_normal", 1), ("g_position", 2), ("g_material", 3)):
+            self._set(p, name, loc)
+        if shadow is not None:
+            self._set(p, "u_shadow_map", 4)
+            self._set_shadow_uniforms(p, shadow, light)
+        self._set(p, "u_use_ao", ao is not None and main)
+        if not main:
+            self._set(p, "g_eye", 6)
+            self._set(p, "g_ray_dir", 7)
+        elif ao is not None:
+            self._set(p, "u_ao", 5)
+        if main and upsample is not None:
+            for loc, name in enumerate(("u_irr", "u_gloss", "u_guide"), start=UPSAMPLE_UNIT):
+                self._set(p, name, loc)
+            self._set(p, "u_scale", upsample[0].scale)
+        self._set(p, "u_use_sky_map", sky is not None)
+        if sky is not None:
+            sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
+        if "u_inv_view_proj" in p:
+            p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
+        if contact and "u_view_proj" in p:
+            p["u_view_proj"].write(light.view_proj.T.astype(np.float32).tobytes())
+        self._set(p, "u_contact_pixels", light.shadow.contact_pixels)
+        self._set(p, "u_contact_texels", light.shadow.contact_texels)
+        self._set(p, "u_sun_dir", light.sun_direction)
+        self._set(p, "u_sun_irradiance", light.sun_irradiance)
+        self._set(p, "u_sun_radiance", light.sun_radiance)
+        self._set(p, "u_sun_cos_radius", light.sun_cos_radius)
+        self._set(p, "u_camera_pos", light.camera_position)
+        self._set(p, "u_sky_radiance", light.sky_radiance)
+        self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
 
     def _set_shadow_uniforms(self, p, shadow, light: LightingInputs) -> None:
         cfg = light.shadow

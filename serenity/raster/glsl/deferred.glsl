@@ -8,6 +8,9 @@
 // Radiance of a lit pixel (W m^-2 sr^-1 per channel), E = sun irradiance facing the sun:
 //   L = (albedo/pi + k_s (n+2)/(2 pi) max(0, r.v)^n) * E * max(0, N.L) * visibility + indirect
 // (energy-normalised Phong: its lobe integrates to k_s over the hemisphere at normal incidence).
+#if defined(SPLIT) && SPLIT > 0
+#define FULLSCREEN_AT_FAR 1
+#endif
 #include "fullscreen.glsl"
 
 // Compiled per use (DeferredPass picks the variant): llvmpipe runs every path of a fragment shader
@@ -17,6 +20,10 @@
 //   visibility is the tracer's shadow ray, g_eye.w (else the shadow maps);  CONTACT_STEPS N > 0 (main
 //   view): the screen-space contact shadow, N march steps;  UPSAMPLE 1 (main view): add the low-res
 //   indirect light. (The shadow filter and its taps are compiled in too: shadow_sampling.glsl.)
+//   SPLIT (main view): 0 = one program for every pixel; 1 = the G-buffer's surfaces only; 2 = the
+//   sky only. DeferredPass draws 2 then 1 at the far plane over the G-buffer's depth (depth test <=,
+//   then >), and llvmpipe rejects a pixel by depth before shading it: neither half runs the other's
+//   code (the sky's for every surface pixel, the lighting for every sky pixel).
 #ifndef RT_VIEW
 #define RT_VIEW 0
 #endif
@@ -28,6 +35,9 @@
 #endif
 #ifndef UPSAMPLE
 #define UPSAMPLE 0
+#endif
+#ifndef SPLIT
+#define SPLIT 0
 #endif
 
 #if defined FRAGMENT_SHADER
@@ -115,13 +125,19 @@ void main() {
     if (pos.w == 0.0) { o_hdr = vec4(sky(normalize(rd)), 1.0); o_direct = vec4(0.0); return; }
 #else
     vec3 eye = u_camera_pos;
+#if SPLIT == 0
     if (pos.w == 0.0) {
+#endif
+#if SPLIT != 1
         vec4 far_p = u_inv_view_proj * vec4(v_uv * 2.0 - 1.0, 1.0, 1.0);
         vec3 dir = normalize(far_p.xyz / far_p.w - u_camera_pos);
         o_hdr = vec4(sky(dir), 1.0);
         o_direct = vec4(0.0);
         return;
+#endif
+#if SPLIT == 0
     }
+#endif
 #endif
     vec3 albedo = texture(g_albedo, v_uv).rgb;
     vec4 nrm = texture(g_normal, v_uv);

@@ -4,7 +4,13 @@
 
 #if defined VERTEX_SHADER
 out vec2 v_uv;
-void main() { v_uv = fullscreen_uv(gl_VertexID); gl_Position = fullscreen_position(gl_VertexID); }
+void main() {
+    v_uv = fullscreen_uv(gl_VertexID);
+    gl_Position = fullscreen_position(gl_VertexID);
+#ifdef FULLSCREEN_AT_FAR
+    gl_Position.z = 1.0;  // at the far plane, to be depth-tested against a G-buffer (deferred.glsl SPLIT)
+#endif
+}
 #elif defined FRAGMENT_SHADER
 in vec2 v_uv;
 #endif
