@@ -417,6 +417,7 @@ class Renderer:
         # reduced resolution: the indirect passes first, into the low-res targets; the deferred pass
         # then upsamples them as it lights each pixel (no second full-resolution pass)
         lo.clear()
+        lo.use_depth(self.lowres_guide.depth)  # the texels' classes: the passes shade only theirs
         self._indirect_passes(lo, gbuf, ao, sky_gl, full_res=False)
         with self._stage("direct lighting"):  # the upsampling included
             return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide))

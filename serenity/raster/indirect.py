@@ -17,11 +17,19 @@ full-resolution albedo.
 
 from __future__ import annotations
 
+import moderngl
+
 from serenity.raster.context import BlendedTargets, draw_fullscreen, fullscreen_vao, load_program, low_res_size
 
 TECHNIQUES = {"sky": 1, "lpv": 2}
 #: texture units 0..5 are the G-buffer, eye and AO; the volume's own textures start here
 FIRST_VOLUME_UNIT = 6
+#: Low-res draws: (LPV terms, NDC depth the fullscreen triangle is drawn at) against the guide's
+#: class depth with test ">" (glsl/lowres.glsl): the sky's light and the LPV's diffuse term at the
+#: far plane (every surface class), the LPV's glossy term at 0.375 in window depth (the glossy class,
+#: 0.25, alone). llvmpipe shades no pixel the test rejects: background texels cost nothing, and the
+#: glossy march runs where k_s calls for it (2 % of the courtyard's texels) instead of everywhere.
+LOWRES_DRAWS = {"sky": ((3, 1.0),), "lpv": ((1, 1.0), (2, -0.25))}
 
 
 class IndirectPass:
@@ -31,40 +39,66 @@ class IndirectPass:
         self.ctx = ctx
         self.technique = technique
         self.lowres = lowres
-        self.program = load_program(ctx, "indirect.glsl",
-                                    defines={"TECHNIQUE": TECHNIQUES[technique], "LOWRES": int(lowres)})
-        self.vao = fullscreen_vao(ctx, self.program)
+        self._draws = []  # (program, vao, LPV terms it adds)
+        for terms, z in (LOWRES_DRAWS[technique] if lowres else ((3, None),)):
+            defines = {"TECHNIQUE": TECHNIQUES[technique], "LOWRES": int(lowres), "LPV_TERMS": terms}
+            if z is not None:
+                defines["FULLSCREEN_Z"] = z
+            program = load_program(ctx, "indirect.glsl", defines=defines)
+            self._draws.append((program, fullscreen_vao(ctx, program), terms))
+        self.program, self.vao = self._draws[0][:2]
         self._targets = BlendedTargets(ctx)
 
     def render(self, target, gbuffer, bind, camera_pos, ao=None, rt_view=None, diffuse: bool = True,
                glossy: bool = True) -> None:
         """Add this technique's light onto ``target``: the lit HDR texture of the same size, or for a
-        ``lowres`` pass the :class:`LowResIndirect` whose targets it adds to. ``diffuse`` / ``glossy``:
-        which of the LPV's two terms to add (the sky's light is diffuse only and ignores them)."""
-        ctx, p = self.ctx, self.program
+        ``lowres`` pass the :class:`LowResIndirect` whose targets (and the guide's class depth) it
+        draws into. ``diffuse`` / ``glossy``: which of the LPV's two terms to add (the sky's light is
+        diffuse only and ignores them)."""
+        ctx = self.ctx
+        wanted = (1 if diffuse else 0) | (2 if glossy else 0) if self.technique == "lpv" else 3
+        draws = [d for d in self._draws if d[2] & wanted]
         adding = (self._targets.adding_to_framebuffer(target.fbo) if self.lowres
                   else self._targets.adding_to(target))
         with ctx.debug_scope(f"indirect:{self.technique}"), adding:
-            if self.lowres:
-                p["u_scale"].value = target.scale
-            for loc, (name, tex) in enumerate((("g_albedo", gbuffer.albedo), ("g_normal", gbuffer.normal),
-                                               ("g_position", gbuffer.position), ("g_material", gbuffer.material))):
+            for loc, tex in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
                 tex.use(location=loc)
-                if name in p:
-                    p[name].value = loc
-            if rt_view is not None and "g_eye" in p:
+            if rt_view is not None:
                 rt_view.eye.use(location=4)
-                p["g_eye"].value = 4
-            if ao is not None and rt_view is None and "u_ao" in p:
+            if ao is not None and rt_view is None:
                 ao.use(location=5)
-                p["u_ao"].value = 5
-            for name, value in (("u_use_ao", ao is not None and rt_view is None), ("u_rt_view", rt_view is not None),
-                                ("u_camera_pos", tuple(float(x) for x in camera_pos)),
-                                ("u_diffuse", bool(diffuse)), ("u_glossy", bool(glossy))):
-                if name in p:
-                    p[name].value = value
-            bind(p, FIRST_VOLUME_UNIT)
-            draw_fullscreen(ctx, self.vao, None if rt_view is None else rt_view.rects)
+            for p, _, _ in draws:
+                self._set_uniforms(p, target, bind, camera_pos, ao, rt_view, diffuse, glossy)
+            if not self.lowres:
+                draw_fullscreen(ctx, self.vao, None if rt_view is None else rt_view.rects)
+                return
+            target.fbo.depth_mask = False
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.depth_func = ">"
+            try:
+                for _, vao, _ in draws:
+                    vao.render(vertices=3)
+            finally:
+                ctx.disable(moderngl.DEPTH_TEST)
+                ctx.depth_func = "<"
+                target.fbo.depth_mask = True
+
+    def _set_uniforms(self, p, target, bind, camera_pos, ao, rt_view, diffuse: bool, glossy: bool) -> None:
+        if self.lowres:
+            p["u_scale"].value = target.scale
+        for loc, name in enumerate(("g_albedo", "g_normal", "g_position", "g_material")):
+            if name in p:
+                p[name].value = loc
+        if rt_view is not None and "g_eye" in p:
+            p["g_eye"].value = 4
+        if ao is not None and rt_view is None and "u_ao" in p:
+            p["u_ao"].value = 5
+        for name, value in (("u_use_ao", ao is not None and rt_view is None), ("u_rt_view", rt_view is not None),
+                            ("u_camera_pos", tuple(float(x) for x in camera_pos)),
+                            ("u_diffuse", bool(diffuse)), ("u_glossy", bool(glossy))):
+            if name in p:
+                p[name].value = value
+        bind(p, FIRST_VOLUME_UNIT)
 
 
 class LowResIndirect:
@@ -76,18 +110,30 @@ class LowResIndirect:
         self.ctx = ctx
         self.scale = max(1, int(scale))
         self.size = None
+        self.depth = None  # the guide's class depth attached to fbo (LowResGuide)
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
             return
         if self.size is not None:
-            for o in (self.fbo, self.irr, self.gloss):
+            for o in {self.fbo, self._colour_fbo, self.irr, self.gloss}:
                 o.release()
         low = low_res_size(width, height, self.scale)
         self.irr = self.ctx.texture(low, 4, dtype="f2")
         self.gloss = self.ctx.texture(low, 4, dtype="f2")
-        self.fbo = self.ctx.framebuffer(color_attachments=[self.irr, self.gloss])
+        self._colour_fbo = self.ctx.framebuffer(color_attachments=[self.irr, self.gloss])  # clears keep the depth
+        self.fbo = self._colour_fbo
+        self.depth = None
         self.size = (width, height)
 
+    def use_depth(self, depth) -> None:
+        """Attach the low-res guide's class depth (same size) for the passes' depth tests."""
+        if depth is not self.depth:
+            if self.fbo is not self._colour_fbo:
+                self.fbo.release()
+            self.fbo = self.ctx.framebuffer(color_attachments=[self.irr, self.gloss], depth_attachment=depth)
+            self.depth = depth
+
     def clear(self) -> None:
-        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        """Zero the two targets (not the attached depth)."""
+        self._colour_fbo.clear(0.0, 0.0, 0.0, 0.0)

@@ -8,6 +8,7 @@ gathered on the GL side, so the LPV's sky VPLs read back 1/n² of the G-buffer."
 
 from __future__ import annotations
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import FullscreenPass, low_res_size
@@ -15,15 +16,29 @@ from serenity.raster.interop import read_texture
 
 
 class LowResGuide(FullscreenPass):
+    """The guide texture, and a depth texture of the same size holding each texel's class (background,
+    surface, glossy surface: ``glsl/lowres.glsl``), which the low-res passes depth-test against."""
+
     SHADER = "lowres_guide.glsl"
     TARGETS = {"guide": (4, "f4")}
 
     def __init__(self, ctx, scale: int):
         super().__init__(ctx)
         self.scale = max(1, int(scale))
+        self.depth = None
 
     def target_size(self, width: int, height: int) -> tuple[int, int]:
         return low_res_size(width, height, self.scale)
+
+    def resize(self, width: int, height: int) -> None:
+        if self.size == (width, height):
+            return
+        super().resize(width, height)
+        if self.depth is not None:
+            self.depth.release()
+        self.fbo.release()
+        self.depth = self.ctx.depth_texture(self.target_size(width, height))
+        self.fbo = self.ctx.framebuffer(color_attachments=[self.guide], depth_attachment=self.depth)
 
     def render(self, gbuffer, camera_pos, camera_forward):
         """The (W/scale, H/scale) RGBA32F guide texture of ``gbuffer``."""
@@ -37,7 +52,14 @@ class LowResGuide(FullscreenPass):
             p["u_scale"].value = self.scale
             p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
             p["u_camera_forward"].value = tuple(float(x) for x in camera_forward)
-            self.vao.render(vertices=3)
+            ctx = self.ctx
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.depth_func = "1"  # always: every texel writes its class
+            try:
+                self.vao.render(vertices=3)
+            finally:
+                ctx.disable(moderngl.DEPTH_TEST)
+                ctx.depth_func = "<"
         return self.guide
 
 

@@ -57,3 +57,22 @@ def test_guide_is_the_representatives_normal_and_depth(gl_ctx, frame, scale):
     assert np.all(got[~covered, 3] == -1.0)
     assert np.allclose(got[covered, 3], z[covered], rtol=1e-5, atol=1e-5)
     assert np.array_equal(got[covered, :3], n[covered, :3])
+
+
+def test_guide_depth_holds_each_texels_class(gl_ctx, frame):
+    # glsl/lowres.glsl: background 1, k_s >= 0.1 (the glossy LPV term's pixels) 0.25, other surfaces 0.5
+    gbuf, cam = frame.outputs["gbuffer"], frame.scene.camera
+    guide = LowResGuide(frame.ctx, 2)
+    guide.resize(frame.width, frame.height)
+    g = read_texture(guide.render(gbuf, cam.position, cam.forward), 4)
+    h, w = g.shape[:2]
+    depth = np.frombuffer(guide.depth.read(), dtype=np.float32).reshape(h, w)[::-1]  # image rows, top first
+    nrm = read_texture(gbuf.normal, 4)
+    rows = frame.height - 1 - np.minimum(np.arange(h)[::-1] * 2 + 1, frame.height - 1)
+    cols = np.minimum(np.arange(w) * 2 + 1, frame.width - 1)
+    ks = nrm[rows][:, cols, 3]
+    background = g[..., 3] < 0
+    glossy = ~background & (ks >= 0.1)
+    assert background.any() and glossy.any() and (~background & ~glossy).any()
+    assert np.all(depth[background] == 1.0)
+    assert np.allclose(depth[glossy], 0.25, atol=1e-6) and np.allclose(depth[~background & ~glossy], 0.5, atol=1e-6)

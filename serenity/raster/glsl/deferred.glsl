@@ -9,7 +9,7 @@
 //   L = (albedo/pi + k_s (n+2)/(2 pi) max(0, r.v)^n) * E * max(0, N.L) * visibility + indirect
 // (energy-normalised Phong: its lobe integrates to k_s over the hemisphere at normal incidence).
 #if defined(SPLIT) && SPLIT > 0
-#define FULLSCREEN_AT_FAR 1
+#define FULLSCREEN_Z 1.0
 #endif
 #include "fullscreen.glsl"
 

@@ -7,8 +7,8 @@ out vec2 v_uv;
 void main() {
     v_uv = fullscreen_uv(gl_VertexID);
     gl_Position = fullscreen_position(gl_VertexID);
-#ifdef FULLSCREEN_AT_FAR
-    gl_Position.z = 1.0;  // at the far plane, to be depth-tested against a G-buffer (deferred.glsl SPLIT)
+#ifdef FULLSCREEN_Z
+    gl_Position.z = FULLSCREEN_Z;  // NDC depth to test against a depth buffer: deferred.glsl SPLIT, lowres.glsl
 #endif
 }
 #elif defined FRAGMENT_SHADER

@@ -9,6 +9,13 @@
 // out 1 = k_s * L_glossy * AO, summed over the techniques, then upsample.glsl multiplies by the
 // full-resolution albedo while it upsamples (textures stay sharp, the smooth light is computed on
 // fewer pixels).
+// LPV_TERMS (TECHNIQUE 2): 3 = diffuse and glossy (full resolution), 1 = diffuse only, 2 = glossy
+// only: at low resolution the two are drawn apart, the glossy one over the glossy class alone
+// (lowres.glsl), since only a few pixels need its march.
+#ifndef LPV_TERMS
+#define LPV_TERMS 3
+#endif
+#include "lowres.glsl"
 #include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
@@ -17,9 +24,6 @@
 #else
 #include "lpv.glsl"
 #endif
-// glossy LPV light only where the specular lobe is strong enough to show it (the march costs
-// glossy_steps x 3 cascades x 3 fetches per pixel; k_s = 0.05 plaster gains < 1 % from it)
-const float GLOSSY_MIN_SPECULAR = 0.1;
 uniform sampler2D g_albedo;
 uniform sampler2D g_normal;
 uniform sampler2D g_position;
@@ -32,7 +36,6 @@ uniform vec3 u_camera_pos;
 uniform bool u_diffuse;         // TECHNIQUE 2: add the LPV's diffuse term
 uniform bool u_glossy;          // TECHNIQUE 2: add the LPV's glossy term
 #if LOWRES
-#include "lowres.glsl"
 layout(location = 0) out vec4 o_irr;
 layout(location = 1) out vec4 o_gloss;
 #define GBUF(t) texelFetch(t, px, 0)
@@ -66,8 +69,12 @@ void main() {
     diffuse = albedo / PI * sky_irradiance(p, n);
 #else
     float shininess = GBUF(g_material).x;
+#if LPV_TERMS & 1
     if (u_diffuse) diffuse = albedo / PI * lpv_irradiance(p, n);
+#endif
+#if LPV_TERMS & 2
     if (u_glossy && nrm.w >= GLOSSY_MIN_SPECULAR) glossy = nrm.w * lpv_glossy(p, reflect(-v, n), shininess);
+#endif
 #endif
 #if LOWRES
     o_irr = vec4(diffuse * ao, 0.0);

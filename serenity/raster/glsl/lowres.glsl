@@ -7,6 +7,16 @@
 #define SERENITY_LOWRES_GLSL
 uniform int u_scale;
 
+// The glossy LPV light is looked up only where the specular lobe is strong enough to show it (the
+// march costs glossy_steps x 3 cascades x 3 fetches per pixel; k_s = 0.05 plaster gains < 1 %).
+const float GLOSSY_MIN_SPECULAR = 0.1;
+// The low-res guide pass writes each texel's class as its depth (lowres_guide.glsl), and the low-res
+// passes draw at a depth that passes only the classes they shade (depth test >, IndirectPass):
+// llvmpipe shades no pixel the depth test rejects, where a per-pixel branch saves nothing.
+const float LOWRES_DEPTH_GLOSSY = 0.25;      // a surface whose k_s >= GLOSSY_MIN_SPECULAR
+const float LOWRES_DEPTH_SURFACE = 0.5;      // any other surface
+const float LOWRES_DEPTH_BACKGROUND = 1.0;   // no surface (the clear value)
+
 ivec2 representative_pixel(ivec2 low, ivec2 full_size) {
     return min(low * u_scale + ivec2(u_scale / 2), full_size - 1);
 }

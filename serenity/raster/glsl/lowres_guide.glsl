@@ -3,7 +3,7 @@
 // joint bilateral upsampling (upsample.glsl) weigh their taps by. Computed once per frame, so a tap
 // reads one texel instead of the G-buffer's position and normal and a dot product.
 //   xyz = the G-buffer normal as stored (not renormalised), w = view depth (m) along the camera
-//   axis; w = -1 where the representative is background.
+//   axis; w = -1 where the representative is background. Depth: the texel's class (lowres.glsl).
 #include "fullscreen.glsl"
 
 #if defined FRAGMENT_SHADER
@@ -16,7 +16,13 @@ out vec4 o_guide;
 void main() {
     ivec2 rq = representative_pixel(ivec2(gl_FragCoord.xy), textureSize(g_position, 0));
     vec4 p = texelFetch(g_position, rq, 0);
-    if (p.w == 0.0) { o_guide = vec4(0.0, 0.0, 0.0, -1.0); return; }
-    o_guide = vec4(texelFetch(g_normal, rq, 0).xyz, dot(p.xyz - u_camera_pos, u_camera_forward));
+    if (p.w == 0.0) {
+        o_guide = vec4(0.0, 0.0, 0.0, -1.0);
+        gl_FragDepth = LOWRES_DEPTH_BACKGROUND;
+        return;
+    }
+    vec4 nrm = texelFetch(g_normal, rq, 0);
+    o_guide = vec4(nrm.xyz, dot(p.xyz - u_camera_pos, u_camera_forward));
+    gl_FragDepth = nrm.w >= GLOSSY_MIN_SPECULAR ? LOWRES_DEPTH_GLOSSY : LOWRES_DEPTH_SURFACE;
 }
 #endif
