@@ -3,7 +3,9 @@
 ``LowResGuide`` (``glsl/lowres_guide.glsl``): per low-res texel, the normal and view depth of its
 representative G-buffer pixel (``glsl/lowres.glsl``), drawn once per frame for the SSAO blur and the
 indirect light's joint bilateral upsampling, whose taps each read one guide texel instead of two
-G-buffer texels. ``GBufferSamples`` (``glsl/gbuffer_samples.glsl``): every n-th G-buffer pixel
+G-buffer texels; and each texel's class (background, surface, glossy surface) as its depth, which
+the low-res indirect passes depth-test against to shade only the texels they need.
+``GBufferSamples`` (``glsl/gbuffer_samples.glsl``): every n-th G-buffer pixel
 gathered on the GL side, so the LPV's sky VPLs read back 1/n² of the G-buffer."""
 
 from __future__ import annotations
