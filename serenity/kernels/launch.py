@@ -194,7 +194,8 @@ class ScatterGrid:
             launch(kernel, dim, [*inputs, self._no_slots, 0, self.array], device=self.device, threads=1)
             return
         starts = wp.array(np.array([s for s, _ in chunks], np.int32), dtype=int, device=self.device)
-        launch(kernel, dim, [*inputs, starts, self.size, self._slots], device=self.device, threads=len(chunks))
+        launch(kernel, dim, [*inputs, starts, self.size, self._slots], device=self.device, threads=len(chunks),
+               min_items=MIN_CHEAP_ITEMS_PER_THREAD)  # the same chunks as above: slot_starts match
         self._used = max(self._used, len(chunks))
 
     def gather(self) -> None:

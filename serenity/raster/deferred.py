@@ -53,7 +53,6 @@ class DeferredPass(FullscreenPass):
         self.ctx = ctx
         self.size = None
         self._variants: dict[tuple, tuple] = {}
-        self.program = self.vao = None  # the variant drawn last
         self._split = None  # (G-buffer depth texture, framebuffer of our targets + that depth)
 
     def resize(self, width: int, height: int) -> None:
@@ -107,7 +106,6 @@ class DeferredPass(FullscreenPass):
                      self._variant(False, False, contact, upsample is not None, shadow_cfg, split=1)]
         else:
             draws = [self._variant(True, shadow is None, 0, False, shadow_cfg)]
-        self.program, self.vao = draws[-1]
         ctx = self.ctx
         with ctx.debug_scope("deferred"):
             for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
@@ -127,7 +125,7 @@ class DeferredPass(FullscreenPass):
                 self._set_uniforms(p, shadow, light, ao, main, upsample, sky, contact)
             if not main:
                 self.fbo.use()
-                draw_fullscreen(ctx, self.vao, rt_view.rects)
+                draw_fullscreen(ctx, draws[0][1], rt_view.rects)
                 return LitImage(self.hdr, self.direct)
             fbo = self._split_fbo(gbuffer.depth)
             fbo.use()
@@ -178,14 +176,14 @@ class DeferredPass(FullscreenPass):
         self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
 
     def _set_shadow_uniforms(self, p, shadow, light: LightingInputs) -> None:
+        if "u_cascade_vp" not in p:  # a variant that samples no shadow map (the sky's half)
+            return
         cfg = light.shadow
         cs = shadow.cascades
         n = len(cs)
         mats = np.zeros((4, 4, 4), np.float32)
         for i, c in enumerate(cs):
             mats[i] = c.view_proj.T
-        if "u_cascade_vp" not in p:  # a variant that samples no shadow map
-            return
         p["u_cascade_vp"].write(mats.tobytes())
 
         def vec4(vals):

@@ -46,7 +46,6 @@ class IndirectPass:
                 defines["FULLSCREEN_Z"] = z
             program = load_program(ctx, "indirect.glsl", defines=defines)
             self._draws.append((program, fullscreen_vao(ctx, program), terms))
-        self.program, self.vao = self._draws[0][:2]
         self._targets = BlendedTargets(ctx)
 
     def render(self, target, gbuffer, bind, camera_pos, ao=None, rt_view=None, diffuse: bool = True,
@@ -69,8 +68,9 @@ class IndirectPass:
                 ao.use(location=5)
             for p, _, _ in draws:
                 self._set_uniforms(p, target, bind, camera_pos, ao, rt_view, diffuse, glossy)
-            if not self.lowres:
-                draw_fullscreen(ctx, self.vao, None if rt_view is None else rt_view.rects)
+            if not self.lowres:  # one program, all pixels (the ray-traced views: their rectangles)
+                for _, vao, _ in draws:
+                    draw_fullscreen(ctx, vao, None if rt_view is None else rt_view.rects)
                 return
             target.fbo.depth_mask = False
             ctx.enable(moderngl.DEPTH_TEST)

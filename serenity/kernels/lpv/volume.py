@@ -122,6 +122,12 @@ class LightPropagationVolume:
 
     # -- helpers ---------------------------------------------------------------------------------
 
+    def _launch_cells(self, kernel, dim: int, inputs: list, start: int = 0) -> None:
+        """Launch a kernel over cells: ~0.1 µs of work each, so at least
+        ``MIN_CHEAP_ITEMS_PER_THREAD`` of them per worker thread (``kernels/launch.py``)."""
+        launch(kernel, dim, inputs, device=self.device, threads=self.threads, start=start,
+               min_items=MIN_CHEAP_ITEMS_PER_THREAD)
+
     def _timed(self, name: str, t0: float):
         if self.sync_timings:
             wp.synchronize_device(self.device)
@@ -208,13 +214,11 @@ class LightPropagationVolume:
             g = self.fitted[-1]
             iters[g.level] = max(iters[g.level], min(g.resolution, math.ceil(self._scene_size / g.cell_size)))
         thresh = cfg.early_stop if early_stop is None else float(early_stop)
-        dev = self.device
         self._inj.gather()
         self._gv.gather()
         inj = self._inj.array
         # skip cascades that received nothing: not propagated, not looked up
-        launch(measure_cells, self._n_cells, [inj, self._level_table, nl, self._total], device=dev,
-               threads=self.threads, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
+        self._launch_cells(measure_cells, self._n_cells, [inj, self._level_table, nl, self._total])
         injected = self._level_sums(self._total)
         fitted = {g.level for g in self.fitted}
         on = np.array([1 if (lv in fitted and injected[lv] > 0.0 and iters[lv] > 0) else 0 for lv in range(nl)],
@@ -222,10 +226,10 @@ class LightPropagationVolume:
         self.grids = [g for g in self.fitted if injected[g.level] > 0.0]
         self._tables(self.grids, self._cas_table)
         if cfg.geometry_volume and self._gv_dirty:
-            launch(eval_face_transmittance, self._n_cells,
-                   [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open, self._plane,
-                    self._n_gv if self._moments else 0, int(self._coverage) + 2 * int(self._planes)],
-                   device=dev, threads=self.threads, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
+            self._launch_cells(eval_face_transmittance, self._n_cells,
+                               [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open,
+                                self._plane, self._n_gv if self._moments else 0,
+                                int(self._coverage) + 2 * int(self._planes)])
             self._gv_dirty = False
         # hand-over: a cascade's iterations past the finer one's reach (in its own cells) go to "far"
         far_from = np.full(nl, 1 << 30, np.int32)
@@ -254,10 +258,10 @@ class LightPropagationVolume:
             active = [self._levels[lv] for lv in np.flatnonzero(on)]
             lo = min(v.cell_base for v in active)
             dim = max(v.cell_base + v.res**3 for v in active) - lo
-            launch(self._propagate, dim,
-                   [src, self._accum, self._trans_pos, self._trans_neg, self._level_table, nl, self._level_on,
-                    self._far_from, k + 1, dst, self._accum, self._far, self._change, self._total], device=dev,
-                   threads=self.threads, start=lo, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
+            self._launch_cells(self._propagate, dim,
+                               [src, self._accum, self._trans_pos, self._trans_neg, self._level_table, nl,
+                                self._level_on, self._far_from, k + 1, dst, self._accum, self._far, self._change,
+                                self._total], start=lo)
             for lv in np.flatnonzero(on):
                 done[lv] += 1
                 last[int(lv)] = dst
@@ -267,9 +271,8 @@ class LightPropagationVolume:
                 on = on & ~((change <= thresh * total) | (total <= 0.0))
         if hand_over:
             for c in range(len(self.grids) - 1):
-                launch(hand_over_far, self._levels[self.grids[c].level].res ** 3,
-                       [self._far, self._cas_table, len(self.grids), c, self._accum], device=dev,
-                       threads=self.threads, min_items=MIN_CHEAP_ITEMS_PER_THREAD)
+                self._launch_cells(hand_over_far, self._levels[self.grids[c].level].res ** 3,
+                                   [self._far, self._cas_table, len(self.grids), c, self._accum])
         self._last_level = last
         self.iterations_run = [int(done[g.level]) for g in self.fitted]
         self._has_result = True
