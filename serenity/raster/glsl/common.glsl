@@ -15,6 +15,19 @@ vec3 linear_to_srgb(vec3 c) {
     return mix(lo, hi, step(vec3(0.0031308), c));
 }
 
+#ifdef EXACT_FILTER
+// Trilinear interpolation of a 3-D texture with float weights, by texelFetch (raster/context.py
+// EXACT_FILTER: a GPU's texture unit weights texels with 8-bit fractions): the corner texels i0 and
+// i1 (already clamped to the texture) weighted 1 - w and w per axis.
+vec4 trilinear_texels(sampler3D t, ivec3 i0, ivec3 i1, vec3 w) {
+    vec4 c00 = mix(texelFetch(t, i0, 0), texelFetch(t, ivec3(i1.x, i0.y, i0.z), 0), w.x);
+    vec4 c10 = mix(texelFetch(t, ivec3(i0.x, i1.y, i0.z), 0), texelFetch(t, ivec3(i1.x, i1.y, i0.z), 0), w.x);
+    vec4 c01 = mix(texelFetch(t, ivec3(i0.x, i0.y, i1.z), 0), texelFetch(t, ivec3(i1.x, i0.y, i1.z), 0), w.x);
+    vec4 c11 = mix(texelFetch(t, ivec3(i0.x, i1.y, i1.z), 0), texelFetch(t, i1, 0), w.x);
+    return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
+}
+#endif
+
 // Fullscreen triangle from gl_VertexID: covers clip space with one triangle; uv in [0,1] on screen.
 vec2 fullscreen_uv(int id) { return vec2((id << 1) & 2, id & 2); }
 vec4 fullscreen_position(int id) { return vec4(fullscreen_uv(id) * 2.0 - 1.0, 0.0, 1.0); }

@@ -12,6 +12,7 @@
 // u = (p - origin) / cell_size (in cells), texture coordinate u / res.
 #ifndef SERENITY_LPV_GLSL
 #define SERENITY_LPV_GLSL
+#include "common.glsl"
 
 uniform sampler3D u_lpv_r0;
 uniform sampler3D u_lpv_g0;
@@ -69,13 +70,7 @@ void lpv_fetch(sampler3D tr, sampler3D tg, sampler3D tb, int res, vec3 u, out ve
     vec3 w = us - f;
     ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1));
     ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1));
-    sr = vec4(0.0); sg = vec4(0.0); sb = vec4(0.0);
-    for (int k = 0; k < 8; ++k) {
-        bool bx = (k & 1) != 0, by = (k & 2) != 0, bz = (k & 4) != 0;
-        ivec3 ii = ivec3(bx ? i1.x : i0.x, by ? i1.y : i0.y, bz ? i1.z : i0.z);
-        float wk = (bx ? w.x : 1.0 - w.x) * (by ? w.y : 1.0 - w.y) * (bz ? w.z : 1.0 - w.z);
-        sr += wk * texelFetch(tr, ii, 0); sg += wk * texelFetch(tg, ii, 0); sb += wk * texelFetch(tb, ii, 0);
-    }
+    sr = trilinear_texels(tr, i0, i1, w); sg = trilinear_texels(tg, i0, i1, w); sb = trilinear_texels(tb, i0, i1, w);
 #else
     vec3 t = u / float(res);
     sr = textureLod(tr, t, 0.0); sg = textureLod(tg, t, 0.0); sb = textureLod(tb, t, 0.0);

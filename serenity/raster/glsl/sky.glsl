@@ -18,6 +18,7 @@
 //   vec3 u_sky_res; float u_sky_normal_offset;   (sky_irradiance(p, n) uses them)
 #ifndef SERENITY_SKY_GLSL
 #define SERENITY_SKY_GLSL
+#include "common.glsl"
 
 vec2 sky_paraboloid_uv(vec3 d) {
     d.y = max(d.y, 0.0);
@@ -46,17 +47,7 @@ void sky_sh9(vec3 d, out float y[9]) {
 #ifdef EXACT_FILTER
 // Trilinear between the probes around grid point g (clamped to the grid) with float weights: the
 // texture unit's 8-bit weights are too coarse for SH coefficients that cancel (raster/context.py).
-vec4 sky_trilinear(sampler3D t, vec3 g, vec3 res) {
-    ivec3 i0 = ivec3(floor(g));
-    ivec3 i1 = min(i0 + 1, ivec3(res) - 1);
-    vec3 w = g - vec3(i0);
-    vec4 c00 = mix(texelFetch(t, i0, 0), texelFetch(t, ivec3(i1.x, i0.y, i0.z), 0), w.x);
-    vec4 c10 = mix(texelFetch(t, ivec3(i0.x, i1.y, i0.z), 0), texelFetch(t, ivec3(i1.x, i1.y, i0.z), 0), w.x);
-    vec4 c01 = mix(texelFetch(t, ivec3(i0.x, i0.y, i1.z), 0), texelFetch(t, ivec3(i1.x, i0.y, i1.z), 0), w.x);
-    vec4 c11 = mix(texelFetch(t, ivec3(i0.x, i1.y, i1.z), 0), texelFetch(t, i1, 0), w.x);
-    return mix(mix(c00, c10, w.y), mix(c01, c11, w.y), w.z);
-}
-#define SKY_TAP(t) sky_trilinear(t, g, res)
+#define SKY_TAP(t) trilinear_texels(t, gi0, gi1, g - vec3(gi0))
 #else
 #define SKY_TAP(t) texture(t, tc)
 #endif
@@ -65,6 +56,10 @@ vec3 sky_volume_irradiance(sampler3D tex[7], vec3 p, vec3 n, vec3 origin, vec3 c
                            float normal_offset) {
     vec3 g = clamp((p + normal_offset * n - origin) / cell, vec3(0.0), res - 1.0);
     vec3 tc = (g + 0.5) / res;
+#ifdef EXACT_FILTER
+    ivec3 gi0 = ivec3(floor(g));
+    ivec3 gi1 = min(gi0 + 1, ivec3(res) - 1);
+#endif
     float f[28];
     for (int t = 0; t < 6; ++t) {
         vec4 v = SKY_TAP(tex[t]);
