@@ -176,6 +176,11 @@ class SkyConfig:
     transfer_bands: int = 5
     """SH bands of the sky projection the transfer uses (B² functions, 1–5; more: sharper sky —
     the sun's glow needs the most; ``tests/kernels/test_skytransfer.py`` measures each)."""
+    transfer_layers: int = 0
+    """"transfer": y-layers of probes re-lit per update once the volume exists, in a continuous cycle
+    like the paper's sweep (each against the newest sky, so with the sun moving every frame no layer
+    is older than ceil(Y / transfer_layers) frames), and only those layers are uploaded; 0 = every
+    probe in each update (the whole volume current every frame)."""
     sky_steps: int = 24
     """View-ray march steps of each sky-map texel's bake (``atmosphere``; error vs steps in bench_sky)."""
     sky_view_table: int | None = None
@@ -189,6 +194,8 @@ class SkyConfig:
         if not 1 <= self.transfer_bands <= SKY_TRANSFER_MAX_BANDS:
             raise ConfigError(f"SkyConfig.transfer_bands must be in 1..{SKY_TRANSFER_MAX_BANDS}, "
                               f"got {self.transfer_bands}")
+        if not self.transfer_layers >= 0:
+            raise ConfigError(f"SkyConfig.transfer_layers must be >= 0, got {self.transfer_layers}")
         if not 1 <= self.sky_steps <= 1024:
             raise ConfigError(f"SkyConfig.sky_steps must be in 1..1024, got {self.sky_steps}")
         if not (self.sky_view_table is None or self.sky_view_table == 0 or 2 <= self.sky_view_table <= 1024):
@@ -499,18 +506,19 @@ PRESETS: dict[str, dict] = {
     # what `serenity render` and `serenity bench` use unless told: indirect light and SSAO at quarter
     # resolution (the indirect light is smooth: the frontier's FLIP moved by under 0.002 from half
     # resolution, the LPV lighting pass got ~4x cheaper), 1024² shadow cascades redrawn in turn,
-    # fewer PCSS, SSAO and glossy-LPV taps, a 96² sky map baked in 12 steps, coarser RSM and sky VPLs
+    # fewer PCSS, SSAO and glossy-LPV taps, a 96² sky map baked in 12 steps, the sky volume re-lit one
+    # layer per frame after a rebake (the paper's sweep, by transfer), coarser RSM and sky VPLs
     "medium": {"indirect_scale": 4,
                "shadow": {"size": 1024, "blocker_samples": 6, "filter_samples": 12, "stagger": True},
                "ssao": {"directions": 6, "steps": 2},
-               "sky": {"sky_map_size": 96, "sky_steps": 12},
+               "sky": {"sky_map_size": 96, "sky_steps": 12, "transfer_layers": 1},
                "lpv": {"glossy_steps": 4},
                "rsm_size": 128, "sky_vpl_stride": 8},
     # the cheapest: indirect light at quarter resolution, 3 cascades, an 8³ LPV, coarse sky
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "cascades": 3, "blocker_samples": 4, "filter_samples": 8, "stagger": True},
             "ssao": {"directions": 6, "steps": 2, "blur_radius": 4},
-            "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_bands": 4},
+            "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_bands": 4, "transfer_layers": 1},
             "lpv": {"resolution": 8, "iterations": 16},
             "rsm_size": 128, "sky_vpl_stride": 8},
 }

@@ -495,8 +495,13 @@ class Renderer:
                 if sv.sky.version != self._sky_map_version:
                     self.sky_gl.upload_sky_map(sv.sky_map())
                     self._sky_map_version = sv.sky.version
-                self.sky_gl.upload_volume(sv.textures(), sv.grid_origin, sv.cell_size, sv.resolution,
-                                          sv.normal_offset_m)
+                slabs = sv.updated_layers
+                if first or slabs == [(0, sv.resolution[1])] or not slabs:
+                    self.sky_gl.upload_volume(sv.textures(), sv.grid_origin, sv.cell_size, sv.resolution,
+                                              sv.normal_offset_m)
+                else:  # only the layers this update re-lit
+                    for slab in slabs:
+                        self.sky_gl.upload_volume_layers(sv.textures(layers=slab), slab[0])
 
     def _update_lpv(self, gbuf, sun_irradiance: np.ndarray) -> None:
         """Re-inject and propagate (the sun, the sky or the camera changed): the sun's RSM, then

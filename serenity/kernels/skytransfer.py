@@ -145,11 +145,21 @@ def apply_transfer(
     transfer: wp.array2d(dtype=vec9),
     sky_sh: wp.array(dtype=wp.vec3),
     scale: vec9,
+    x: int,
+    y: int,
+    first_layer: int,
+    layers: int,
     # outputs
     coeffs: wp.array2d(dtype=float),
     offset: int,
 ):
-    probe = wp.tid() + offset
+    """Re-light the probes of ``layers`` consecutive y-layers from ``first_layer`` (probes in
+    (z, y, x) storage order; one item per probe of the slab)."""
+    i = wp.tid() + offset
+    slab = layers * x
+    z = i // slab
+    rest = i - z * slab
+    probe = (z * y + first_layer + rest // x) * x + rest % x
     r = vec9()
     g = vec9()
     b = vec9()
@@ -237,11 +247,18 @@ class SkyTransfer:
                                       x, y, *self._args, self.transfer], device=self.device)
         self.grid = (tuple(np.asarray(origin, np.float64)), tuple(np.asarray(cell, np.float64)), tuple(resolution))
 
-    def apply(self, origin, cell, resolution, sky_sh: np.ndarray, scale, coeffs) -> None:
-        """Write every probe's irradiance coefficients (P, 27) for ``project_sky``'s (B² + 1, 3),
+    def apply(self, origin, cell, resolution, sky_sh: np.ndarray, scale, coeffs, first_layer: int = 0,
+              layers: int | None = None) -> None:
+        """Write the irradiance coefficients (P, 27) of the probes in y-layers ``first_layer`` ..
+        ``first_layer + layers - 1`` (default: every probe) for ``project_sky``'s (B² + 1, 3),
         building the transfer first if the grid is new."""
         grid = (tuple(np.asarray(origin, np.float64)), tuple(np.asarray(cell, np.float64)), tuple(resolution))
         if grid != self.grid:
             self.build(origin, cell, resolution)
+        x, y, z = (int(v) for v in resolution)
+        layers = y - int(first_layer) if layers is None else int(layers)
+        if not (0 <= first_layer and layers >= 0 and first_layer + layers <= y):
+            raise ValueError(f"layers {first_layer}..{first_layer + layers - 1} outside the grid's {y}")
         self._sky.assign(np.ascontiguousarray(sky_sh, np.float32))
-        launch(apply_transfer, self.transfer.shape[0], [self.transfer, self._sky, scale, coeffs], device=self.device)
+        launch(apply_transfer, z * layers * x,
+               [self.transfer, self._sky, scale, x, y, int(first_layer), layers, coeffs], device=self.device)

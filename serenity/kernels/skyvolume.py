@@ -309,8 +309,11 @@ class SkyVolume:
         #: sky-map version each layer was last integrated against (-1: never)
         self.layer_versions = np.full(y, -1, np.int64)
         self._next_layer = 0
+        #: (first layer, count) slabs the last ``update``/``rebuild`` changed, for a partial upload
+        self.updated_layers: list[tuple[int, int]] = []
         self._host: np.ndarray | None = None
         self._transfer = None
+        self._projected: tuple[int, np.ndarray] | None = None  # (sky version, project_sky's result)
         if cfg.method == "transfer":
             self._transfer = SkyTransfer(self._quads_wp, len(quads), self._base, n, SEQUENCES.index(cfg.sequence),
                                          cfg.seed, cfg.transfer_bands, dev)
@@ -361,49 +364,69 @@ class SkyVolume:
         return np.asarray(self.scene.sun.direction if sun_direction is None else sun_direction, np.float64)
 
     def update(self, layers: int = 1, sun_direction=None) -> bool:
-        """Bring the volume towards the current sky; returns whether any probe changed.
+        """Bring the volume towards the current sky; returns whether any probe changed
+        (``updated_layers`` then says which y-layers).
 
-        "transfer": every probe is re-lit whenever the sky map was rebaked (nothing to do otherwise).
+        "transfer": after a rebake of the sky map the probes are re-lit from the new sky — every
+        probe at once with ``SkyConfig.transfer_layers`` = 0, else that many layers per update in a
+        continuous cycle (a volume never lit is lit whole); nothing to do while every layer is current.
         "layers" (the paper): the next ``layers`` layers of a continuous cycle over the volume are
         integrated against the newest sky map, so with the sun moving every frame each layer is at
         most ceil(Y / layers) updates old; once every layer has seen the current sky, nothing is done.
         ``sun_direction`` defaults to ``scene.sun.direction``."""
         sky_map, changed = self._current_sky_map(self._sun(sun_direction))
+        self.updated_layers = []
         if self._transfer is not None:
-            if self.pending_layers:  # never lit, or the sky was rebaked since
+            if not self.pending_layers:
+                return False
+            per_update = self.config.transfer_layers
+            if per_update <= 0 or np.any(self.layer_versions < 0):  # all at once, or never lit
                 self._apply_transfer()
                 return True
-            return False
-        y = self.resolution[1]
+            for start, n in self._next_slabs(per_update):
+                self._apply_transfer(start, n)
+            return True
         if layers <= 0 or self.pending_layers == 0:
             return False
-        first = self._next_layer
-        count = min(int(layers), y)
-        # a cycle that wraps is two contiguous launches
-        for start, n in ((first, min(count, y - first)), (0, max(0, first + count - y))):
-            if n:
-                self._integrate(sky_map, start, n)
-                self.layer_versions[start:start + n] = self.sky_version
-        self._next_layer = (first + count) % y
+        for start, n in self._next_slabs(layers):
+            self._integrate(sky_map, start, n)
+            self.layer_versions[start:start + n] = self.sky_version
+            self.updated_layers.append((start, n))
         return True
 
-    def _apply_transfer(self) -> None:
-        sky = self.sky_map()
-        if self._constant_sky:  # the 2×2 map is too coarse a quadrature for the projection
-            sky = np.broadcast_to(sky[:1, :1], (64, 64, 3))
-        f = project_sky(sky, self.ground_radiance, self._transfer.functions)
-        self._transfer.apply(self.grid_origin, self.cell_size, self.resolution, f, self._scale, self._coeffs)
+    def _next_slabs(self, count: int) -> list[tuple[int, int]]:
+        """The next ``count`` layers of the cycle as contiguous (first, n) slabs (a cycle that
+        wraps is two), and the cycle moved on past them."""
+        y = self.resolution[1]
+        first = self._next_layer
+        count = min(int(count), y)
+        self._next_layer = (first + count) % y
+        return [(start, n) for start, n in ((first, min(count, y - first)), (0, max(0, first + count - y))) if n]
+
+    def _apply_transfer(self, first: int = 0, count: int | None = None) -> None:
+        """Re-light y-layers ``first`` .. ``first + count - 1`` (default: all) from the current sky."""
+        count = self.resolution[1] - first if count is None else count
+        if self._projected is None or self._projected[0] != self.sky_version:
+            sky = self.sky_map()
+            if self._constant_sky:  # the 2×2 map is too coarse a quadrature for the projection
+                sky = np.broadcast_to(sky[:1, :1], (64, 64, 3))
+            self._projected = (self.sky_version, project_sky(sky, self.ground_radiance, self._transfer.functions))
+        self._transfer.apply(self.grid_origin, self.cell_size, self.resolution, self._projected[1], self._scale,
+                             self._coeffs, first, count)
         self._host = None
-        self.layer_versions[:] = self.sky_version
+        self.layer_versions[first:first + count] = self.sky_version
+        self.updated_layers.append((first, count))
 
     def rebuild(self, sun_direction=None) -> None:
         """Bring every layer up to date now (rebakes the sky map only if the sun moved)."""
         sky_map, _ = self._current_sky_map(self._sun(sun_direction))
+        self.updated_layers = []
         if self._transfer is not None:
             self._apply_transfer()
             return
         self._integrate(sky_map, 0, self.resolution[1])
         self.layer_versions[:] = self.sky_version
+        self.updated_layers = [(0, self.resolution[1])]
         self._next_layer = 0
 
     @property
@@ -427,9 +450,16 @@ class SkyVolume:
             self._host = self._coeffs.numpy().reshape(z, y, x, COEFFS)
         return self._host.reshape(*self._host.shape[:3], 9, 3)
 
-    def textures(self) -> list[np.ndarray]:
-        """The 7 arrays of the paper's layout: 6 × (Z, Y, X, 4) + (Z, Y, X, 3) float32."""
-        return pack_sh_textures(self.coefficients().reshape(-1, COEFFS), self.resolution)
+    def textures(self, layers: tuple[int, int] | None = None) -> list[np.ndarray]:
+        """The 7 arrays of the paper's layout: 6 × (Z, Y, X, 4) + (Z, Y, X, 3) float32; with
+        ``layers`` = (first, n) only that slab of y-layers, (Z, n, X, ·)."""
+        c = self.coefficients()
+        x, y, z = self.resolution
+        if layers is None:
+            return pack_sh_textures(c.reshape(-1, COEFFS), self.resolution)
+        first, n = (int(v) for v in layers)
+        slab = c[:, first:first + n]
+        return pack_sh_textures(slab.reshape(-1, COEFFS), (x, n, z))
 
     def irradiance_wp(self, points, normals) -> np.ndarray:
         """(N, 3) float32 W·m⁻²: :meth:`irradiance` by a Warp kernel on the volume's device (the

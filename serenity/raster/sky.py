@@ -82,6 +82,20 @@ class SkyTexturesGL:
         self.res = np.asarray(res, np.float64).reshape(3)
         self.normal_offset = float(normal_offset)
 
+    def upload_volume_layers(self, textures: list[np.ndarray], first_layer: int) -> None:
+        """Overwrite y-layers ``first_layer`` .. of the uploaded volume with the 7 slab arrays of
+        ``SkyVolume.textures(layers=...)`` ((Z, n, X, ·); the grid is unchanged)."""
+        if len(textures) != VOLUME_TEXTURES:
+            raise ValueError(f"expected {VOLUME_TEXTURES} volume textures, got {len(textures)}")
+        for t, arr in enumerate(textures):
+            a = np.ascontiguousarray(arr, np.float32)
+            tex = self.volume[t]
+            depth, n, width = a.shape[:3]
+            if (depth, width) != (tex.depth, tex.width) or not 0 <= first_layer <= tex.height - n:
+                raise ValueError(f"volume slab {a.shape[:3]} at layer {first_layer} does not fit the uploaded "
+                                 f"volume ({tex.depth}, {tex.height}, {tex.width})")
+            tex.write(a, viewport=(0, int(first_layer), 0, width, n, depth))
+
     def bind(self, program, first_unit: int) -> int:
         """Bind to texture units first_unit..first_unit+7 and set sky.glsl's uniforms; returns the next free unit."""
         self.sky_map.use(location=first_unit)

@@ -155,6 +155,44 @@ def test_transfer_follows_the_sky_and_skips_when_unchanged(device, courtyard):
     assert not np.allclose(vol.coefficients(), c0)
 
 
+def test_transfer_in_layers_cycles_under_a_moving_sun_and_ends_equal_to_all_at_once(device, courtyard):
+    """Transfer mode with ``transfer_layers`` = 1: the first update lights the whole volume, then each
+    rebake re-lights one layer of a continuous cycle against the newest sky (no layer older than one
+    cycle while the sun moves every frame); once the sun stops, a cycle brings the volume to exactly
+    what re-lighting every probe at once gives, and the slabs it reports cover what changed."""
+    cfg = SkyConfig(rays_per_probe=16, cell_size=8.0, transfer_layers=1)
+    vol = SkyVolume(courtyard, cfg, device=device)
+    sun = courtyard.sun.direction
+    el, az = math.degrees(math.asin(sun[1])), courtyard.sun.azimuth_deg
+    y = vol.resolution[1]
+    assert y >= 3
+    assert vol.update(sun_direction=direction_from_angles(el, az))
+    assert vol.updated_layers == [(0, y)] and vol.pending_layers == 0
+    last_refresh = np.full(y, -1)
+    for frame in range(1, 3 * y):
+        before = vol.coefficients().copy()
+        versions = vol.layer_versions.copy()
+        assert vol.update(sun_direction=direction_from_angles(el - 0.5 * frame, az))
+        changed = np.flatnonzero(vol.layer_versions != versions)
+        assert len(changed) == 1 and vol.updated_layers == [(int(changed[0]), 1)]
+        assert vol.layer_versions[changed[0]] == vol.sky.version  # against the newest sky
+        moved = np.flatnonzero(np.any(vol.coefficients() != before, axis=(0, 2, 3, 4)))
+        assert set(moved) <= set(changed)  # nothing outside the reported slab changed
+        last_refresh[changed] = frame
+        if frame > y:
+            assert (frame - last_refresh).max() < y  # no layer older than one cycle
+    steps = 0
+    while vol.update(sun_direction=direction_from_angles(el - 1.5 * y, az)):
+        steps += 1
+    assert steps == y and vol.pending_layers == 0
+    whole = SkyVolume(courtyard, SkyConfig(rays_per_probe=16, cell_size=8.0), device=device)
+    whole.rebuild(sun_direction=direction_from_angles(el - 1.5 * y, az))
+    assert np.array_equal(vol.coefficients(), whole.coefficients())
+    for first in range(y):  # a slab's textures are the whole textures' rows
+        for ts, tw in zip(vol.textures(layers=(first, 1)), whole.textures(), strict=True):
+            assert np.array_equal(ts, tw[:, first:first + 1])
+
+
 def test_textures_layout(device, courtyard):
     vol = SkyVolume(courtyard, SkyConfig(rays_per_probe=16, cell_size=10.0), device=device)
     vol.rebuild()

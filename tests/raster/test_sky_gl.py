@@ -78,3 +78,20 @@ def test_reupload_same_and_new_size(gl_ctx, sky_gl, volume):
     assert np.allclose(sky_gl.evaluate_sky_map(np.array([[0.0, 1.0, 0.0]])), 2.0)
     sky_gl.upload_sky_map(np.full((8, 8, 3), 3.0, np.float32))
     assert np.allclose(sky_gl.evaluate_sky_map(np.array([[0.3, 0.2, 0.1]])), 3.0)
+
+
+def test_layer_upload_writes_only_its_slab(gl_ctx, volume):
+    """``upload_volume_layers`` (the frame's upload after a partial transfer update): writing one
+    slab of y-layers over a zeroed volume puts exactly that slab's texels there and leaves the rest."""
+    g = SkyTexturesGL(gl_ctx)
+    full = volume.textures()
+    g.upload_volume([np.zeros_like(t) for t in full], volume.grid_origin, volume.cell_size, volume.resolution,
+                    volume.normal_offset_m)
+    first, n = 2, 3
+    g.upload_volume_layers(volume.textures(layers=(first, n)), first)
+    for tex, want in zip(g.volume, full, strict=True):
+        got = np.frombuffer(tex.read(), np.float32).reshape(want.shape)
+        assert np.array_equal(got[:, first:first + n], want[:, first:first + n])
+        assert not got[:, :first].any() and not got[:, first + n:].any()
+    with pytest.raises(ValueError, match="does not fit"):
+        g.upload_volume_layers(volume.textures(layers=(first, n)), volume.resolution[1] - 1)
