@@ -288,6 +288,11 @@ class LPVConfig:
     it takes the thin-wall leak from 0.095 to 0.006 of the lit side, but the Cornell box's ceiling got
     most of its light through the ceiling from the sunlit roof, and without that leak 0.17× the
     reference (README, "The LPV in a closed room")."""
+    stagger: bool = False
+    """Re-inject and propagate one cascade per update, in turn, instead of all of them (each then
+    lags the camera and the light by at most ``cascades`` updates; a cascade that did not change
+    is skipped, and a still scene converges to what updating all at once gives). The finer
+    cascades' hand-over from a coarser one is rebuilt every update from its last propagation."""
     view_distance: float = 64.0
     """Metres the outermost cascade reaches along the view direction (capped by the scene size)."""
     cascade_scale: float = 2.0
@@ -512,14 +517,14 @@ PRESETS: dict[str, dict] = {
                "shadow": {"size": 1024, "blocker_samples": 6, "filter_samples": 12, "stagger": True},
                "ssao": {"directions": 6, "steps": 2},
                "sky": {"sky_map_size": 96, "sky_steps": 12, "transfer_layers": 1},
-               "lpv": {"glossy_steps": 4},
+               "lpv": {"glossy_steps": 4, "stagger": True},
                "rsm_size": 128, "sky_vpl_stride": 8},
     # the cheapest: indirect light at quarter resolution, 3 cascades, an 8³ LPV, coarse sky
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "cascades": 3, "blocker_samples": 4, "filter_samples": 8, "stagger": True},
             "ssao": {"directions": 6, "steps": 2, "blur_radius": 4},
             "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_bands": 4, "transfer_layers": 1},
-            "lpv": {"resolution": 8, "iterations": 16},
+            "lpv": {"resolution": 8, "iterations": 16, "stagger": True},
             "rsm_size": 128, "sky_vpl_stride": 8},
 }
 """Quality presets: field → value, or for a sub-config (shadow, ssao, sky, lpv) its field → value.

@@ -218,6 +218,7 @@ class Renderer:
         self._upload_ms = self._timings.pop("upload")
         self._first = True
         self._changes = ChangeTracker()
+        self._lpv_inputs_version = 0  # counts the changes of the LPV's inputs (its update key)
 
     # ------------------------------------------------------------------------------------ timing
 
@@ -265,6 +266,7 @@ class Renderer:
         """Make the next frame re-inject and re-propagate the LPV even if nothing changed (for
         timing the update, or after editing the scene's geometry in place)."""
         self._changes.forget("lpv")
+        self._lpv_inputs_version += 1
         if self.lpv is not None:
             self.lpv.invalidate()
 
@@ -402,6 +404,8 @@ class Renderer:
                 lpv=np.concatenate([self.scene.sun.direction, light.sun_irradiance, cam.position, cam.target,
                                     [cam.fov_y_deg, self._sky_map_version]]))
             if changed:
+                self._lpv_inputs_version += 1
+            if changed or self.lpv.pending_levels:  # LPVConfig.stagger: the cascades still behind
                 self._update_lpv(gbuf, light.sun_irradiance)
 
     def _light_main_view(self, gbuf, shadow, light: LightingInputs, ao, guide):
@@ -514,7 +518,8 @@ class Renderer:
         with self._stage("lpv inputs", gl=False):
             vpls, surfels = self._lpv_inputs(gbuf, rsm)
         t0 = time.perf_counter()
-        self.lpv.update(cam, scene.bounds, vpls, surfels, key=t0)  # new inputs: a key never seen before
+        # the key: which change of the inputs this is (a staggered LPV's cascades catch up under one key)
+        self.lpv.update(cam, scene.bounds, vpls, surfels, key=self._lpv_inputs_version)
         t_inject = (self.lpv.timings.get("inject", 0.0) + self.lpv.timings.get("inject_geometry", 0.0)) / 1e3
         t1 = time.perf_counter()
         self._record(MAIN_LANE, "lpv inject", t0, min(t1, t0 + t_inject))

@@ -4,6 +4,7 @@ cascades, early stop and re-injection logic. Numbers quoted in comments were mea
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -349,6 +350,59 @@ def test_update_reinjects_only_when_inputs_or_camera_cell_change(device):
     assert v.update((cam[0] + [3 * cell, 0, 0], cam[1]), bounds, changed)
     assert not v.update((cam[0] + [3 * cell, 0, 0], cam[1]), bounds, changed, key=None)
     assert v.update((cam[0] + [3 * cell, 0, 0], cam[1]), bounds, lambda: changed)  # callables: no hash
+
+
+def _room_update_inputs(seed=0):
+    bounds = np.array([[-8.0, 0.0, -8.0], [8.0, 4.0, 8.0]])
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(bounds[0], bounds[1], (400, 3)).astype(np.float32)
+    n = rng.normal(size=(400, 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    vpls = [(p, n, rng.uniform(0, 1, (400, 3)).astype(np.float32))]
+    surfels = [(p, n, np.full(400, 0.5, np.float32))]
+    return bounds, vpls, surfels
+
+
+def test_stagger_refreshes_one_cascade_per_update_in_turn_and_converges_to_updating_all(device):
+    """``LPVConfig.stagger``: the first update fills every cascade; after that, each update with new
+    inputs re-injects and propagates one cascade, the next in turn, so none lags by more than
+    ``cascades`` updates; with the inputs and camera then still, ``pending_levels`` counts down and
+    the volume ends exactly where updating every cascade at once gets (lookups, hand-over included)."""
+    bounds, vpls, surfels = _room_update_inputs()
+    cfg = LPVConfig(resolution=8, iterations=4, view_distance=16.0, scene_cells=0.0, cross_scene=False)
+    v = L.LightPropagationVolume(dataclasses.replace(cfg, stagger=True), device=device)
+    cam = (np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]))
+    assert v.update(cam, bounds, vpls, surfels, key=0)
+    levels = [g.level for g in v.fitted]
+    assert len(levels) == 3 and v.pending_levels == 0
+    cell = v.fitted[-1].cell_size
+    turns = []
+    for k in range(1, 7):  # new inputs and a moving camera every update
+        held = {g.level: g for g in v.fitted}
+        moved = (cam[0] + [k * 2.0 * cell, 0, 0], cam[1])
+        scaled = [(vpls[0][0], vpls[0][1], vpls[0][2] * (1 + 0.1 * k))]
+        assert v.update(moved, bounds, scaled, surfels, key=k)
+        assert v.pending_levels == len(levels) - 1
+        refreshed = [g.level for g in v.fitted if v._held[g.level][1] == k]
+        assert len(refreshed) == 1
+        turns.append(refreshed[0])
+        # the others still hold the grids their light was propagated in
+        assert all(g == held[g.level] for g in v.fitted if g.level != refreshed[0])
+    assert turns == [0, 1, 2, 0, 1, 2]
+    # still inputs: one more cascade per update until none is pending
+    count = 0
+    while v.pending_levels:
+        assert v.update(moved, bounds, scaled, surfels, key=6)
+        count += 1
+    assert count == len(levels) - 1 and not v.update(moved, bounds, scaled, surfels, key=6)
+    whole = L.LightPropagationVolume(cfg, device=device)
+    assert whole.update(moved, bounds, scaled, surfels, key=6)
+    assert v.fitted == whole.fitted and v.iterations_run == whole.iterations_run
+    for g in v.fitted:
+        np.testing.assert_allclose(v.level_grid(g.level), whole.level_grid(g.level), rtol=1e-6, atol=1e-9)
+    q = np.random.default_rng(1).uniform(bounds[0], bounds[1], (500, 3))
+    nq = np.tile([0.0, 1.0, 0.0], (500, 1))
+    np.testing.assert_allclose(v.irradiance(q, nq), whole.irradiance(q, nq), rtol=1e-5, atol=1e-6)
 
 
 def test_split_injection_matches_single_thread():

@@ -65,8 +65,14 @@ class LightPropagationVolume:
     ``timings`` holds the last wall time of each stage in ms (the device is synchronised when
     ``sync_timings``).
 
-    ``fitted``: the cascades placed by ``fit`` (by config level); ``grids``: those that received
-    light at the last ``propagate`` (the ones looked up and exported; index 0 = finest).
+    ``fitted``: the cascades placed by ``fit`` (by config level; with ``LPVConfig.stagger`` the grids
+    each level holds, some placed by earlier updates); ``grids``: those that hold light (the ones
+    looked up and exported; index 0 = finest).
+
+    What a level holds: its own accumulated light (``_accum``), and the grid the lookups read
+    (``_lookup``): that plus the far light handed over from the coarser cascades, rebuilt after
+    every propagation from each coarser level's last far grid, so a level propagated alone (stagger)
+    still sees the others' light.
     """
 
     def __init__(self, config: LPVConfig | None = None, device: str | None = None, threads: int | None = None,
@@ -100,6 +106,7 @@ class LightPropagationVolume:
         self._ping = wp.zeros(base, dtype=wp.vec4, device=dev)
         self._pong = wp.zeros(base, dtype=wp.vec4, device=dev)
         self._accum = wp.zeros(base, dtype=wp.vec4, device=dev)
+        self._lookup = wp.zeros(base, dtype=wp.vec4, device=dev)
         self._far = wp.zeros(base, dtype=wp.vec4, device=dev)
         self._far_from = wp.zeros(len(self._levels), dtype=int, device=dev)
         self._trans_pos = wp.ones(cbase, dtype=wp.vec3, device=dev)
@@ -115,7 +122,14 @@ class LightPropagationVolume:
         self._cas_table = wp.zeros(MAX_CASCADES, dtype=Cascade, device=dev)
         self._last_level: dict[int, wp.array] = {}
         self._staging = Staging(dev)
-        self._state = None  # (grids, input key) of the last update that did work
+        nl = len(self._levels)
+        #: per level: (grid, input key) it was last injected and propagated with
+        self._held: dict[int, tuple] = {}
+        self._target: dict[int, tuple] = {}  # per level: (grid, input key) the last ``update`` asked for
+        self._next_level = 0  # where the stagger's turn goes on
+        self._inject_grids: list[CascadeGrid] = []  # the fitted grids that inject/propagate refresh
+        self._lit = np.zeros(nl, bool)  # per level: received light at its last propagation
+        self._done = np.zeros(nl, np.int64)  # per level: iterations of its last propagation
         self._scene_size = 0.0  # largest side of the scene bounds given to ``fit`` (m)
         self._gv_dirty = True
         self._has_result = False
@@ -150,22 +164,31 @@ class LightPropagationVolume:
 
     # -- stages --------------------------------------------------------------------------------
 
-    def fit(self, camera, scene_bounds) -> bool:
-        """Place the cascades for ``camera`` (a Camera, or (position, view_dir)); True if any moved."""
-        t0 = time.perf_counter()
+    def _place(self, camera, scene_bounds) -> list[CascadeGrid]:
+        """The cascades' grids for ``camera`` (a Camera, or (position, view_dir))."""
         if hasattr(camera, "position"):
             pos, view = camera.position, camera.forward
         else:
             pos, view = camera
-        grids = fit_cascades(pos, view, scene_bounds, self.config)
         b = np.asarray(scene_bounds, np.float64).reshape(2, 3)
         self._scene_size = float(np.max(b[1] - b[0]))
+        return fit_cascades(pos, view, scene_bounds, self.config)
+
+    def fit(self, camera, scene_bounds) -> bool:
+        """Place the cascades for ``camera`` (a Camera, or (position, view_dir)); True if any moved."""
+        t0 = time.perf_counter()
+        grids = self._place(camera, scene_bounds)
         moved = grids != self.fitted
         self.fitted = grids
-        if moved:
-            self._tables(grids, self._fit_table)
+        self._set_inject_grids(grids)
         self._timed("fit", t0)
         return moved
+
+    def _set_inject_grids(self, grids: list[CascadeGrid]) -> None:
+        """The grids the next ``inject``/``inject_geometry``/``propagate`` refresh (their table)."""
+        if grids != self._inject_grids:
+            self._inject_grids = list(grids)
+            self._tables(self._inject_grids, self._fit_table)
 
     def clear(self) -> None:
         """Zero the injected grids and the geometry volume (call before injecting a new frame's lights)."""
@@ -177,14 +200,15 @@ class LightPropagationVolume:
         self._timed("clear", t0)
 
     def inject(self, positions, normals, flux) -> None:
-        """Add VPLs (positions (N,3) m, normals (N,3), flux (N,3) W) to every fitted cascade."""
+        """Add VPLs (positions (N,3) m, normals (N,3), flux (N,3) W) to every fitted cascade (to the
+        one a staggered ``update`` refreshes)."""
         t0 = time.perf_counter()
         p = self._staging.input(positions, "vpl_p", wp.vec3, 3)
         n = self._staging.input(normals, "vpl_n", wp.vec3, 3)
         f = self._staging.input(flux, "vpl_f", wp.vec3, 3)
         if not (p.shape[0] == n.shape[0] == f.shape[0]):
             raise ValueError(f"VPL arrays differ in length: {p.shape[0]}, {n.shape[0]}, {f.shape[0]}")
-        self._inj.scatter(inject_vpls, p.shape[0], [p, n, f, self._fit_table, len(self.fitted),
+        self._inj.scatter(inject_vpls, p.shape[0], [p, n, f, self._fit_table, len(self._inject_grids),
                                                      float(self.config.injection_offset)])
         self._timed("inject", t0)
 
@@ -196,14 +220,15 @@ class LightPropagationVolume:
         a = self._staging.input(areas, "gv_a", float, 1)
         if not (p.shape[0] == n.shape[0] == a.shape[0]):
             raise ValueError(f"surfel arrays differ in length: {p.shape[0]}, {n.shape[0]}, {a.shape[0]}")
-        self._gv.scatter(inject_geometry, p.shape[0], [p, n, a, self._fit_table, len(self.fitted),
+        self._gv.scatter(inject_geometry, p.shape[0], [p, n, a, self._fit_table, len(self._inject_grids),
                                                       self._n_gv if self._moments else 0])
         self._gv_dirty = True
         self._timed("inject_geometry", t0)
 
     def propagate(self, iterations: int | None = None, early_stop: float | None = None) -> list[int]:
-        """Propagate every fitted cascade that received light; return the iterations run per fitted
-        cascade (0 for a skipped one). Restarts from the injected grids each call (so it may be
+        """Propagate every refreshed cascade (the fitted ones, or the one ``update`` staggers to) that
+        received light; return the iterations run per fitted cascade (0 for a skipped one; a level
+        not refreshed keeps its last count). Restarts from the injected grids each call (so it may be
         re-run, e.g. with other settings). ``iterations`` overrides the config for every cascade
         (and turns off ``cross_scene``'s extension)."""
         t0 = time.perf_counter()
@@ -217,19 +242,29 @@ class LightPropagationVolume:
         self._inj.gather()
         self._gv.gather()
         inj = self._inj.array
+        fitted = {g.level for g in self.fitted}
+        upd = sorted(g.level for g in self._inject_grids)  # the levels this call refreshes
+        every = set(upd) == fitted  # all of them (the paper's update): whole-array operations
         # skip cascades that received nothing: not propagated, not looked up
         self._launch_cells(measure_cells, self._n_cells, [inj, self._level_table, nl, self._total])
         injected = self._level_sums(self._total)
-        fitted = {g.level for g in self.fitted}
-        on = np.array([1 if (lv in fitted and injected[lv] > 0.0 and iters[lv] > 0) else 0 for lv in range(nl)],
-                      np.int32)
-        self.grids = [g for g in self.fitted if injected[g.level] > 0.0]
+        for lv in range(nl):
+            if lv in upd:
+                self._lit[lv] = injected[lv] > 0.0
+            elif lv not in fitted:
+                self._lit[lv] = False
+        on = np.array([1 if (lv in upd and self._lit[lv] and iters[lv] > 0) else 0 for lv in range(nl)], np.int32)
+        self.grids = [g for g in self.fitted if self._lit[g.level]]
         self._tables(self.grids, self._cas_table)
         if cfg.geometry_volume and self._gv_dirty:
-            self._launch_cells(eval_face_transmittance, self._n_cells,
-                               [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open,
-                                self._plane, self._n_gv if self._moments else 0,
-                                int(self._coverage) + 2 * int(self._planes)])
+            args = [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open,
+                    self._plane, self._n_gv if self._moments else 0, int(self._coverage) + 2 * int(self._planes)]
+            if every:
+                self._launch_cells(eval_face_transmittance, self._n_cells, args)
+            else:  # the other levels keep the faces of the surfels they were propagated with
+                for lv in upd:
+                    v = self._levels[lv]
+                    self._launch_cells(eval_face_transmittance, v.res**3, args, start=v.cell_base)
             self._gv_dirty = False
         # hand-over: a cascade's iterations past the finer one's reach (in its own cells) go to "far"
         far_from = np.full(nl, 1 << 30, np.int32)
@@ -238,15 +273,29 @@ class LightPropagationVolume:
             for fine, coarse in zip(self.grids, self.grids[1:], strict=False):
                 reach = iters[fine.level] * fine.cell_size / coarse.cell_size
                 far_from[coarse.level] = max(1, math.ceil(reach - 1e-6))
+        if every:
             self._far.zero_()
-        self._far_from.assign(far_from)
-        done = np.zeros(nl, np.int64)
-        last = {lv: inj for lv in range(nl)}
-        bufs = (self._ping, self._pong)
-        if cfg.accumulate_injected:
-            wp.copy(self._accum, inj)
         else:
-            self._accum.zero_()
+            for lv in upd:
+                v = self._levels[lv]
+                self._far[v.base:v.base + v.size].zero_()
+        self._far_from.assign(far_from)
+        for lv in upd:
+            self._done[lv] = 0
+            self._last_level[lv] = inj
+        bufs = (self._ping, self._pong)
+        if every:
+            if cfg.accumulate_injected:
+                wp.copy(self._accum, inj)
+            else:
+                self._accum.zero_()
+        else:
+            for lv in upd:
+                v = self._levels[lv]
+                if cfg.accumulate_injected:
+                    wp.copy(self._accum, inj, dest_offset=v.base, src_offset=v.base, count=v.size)
+                else:
+                    self._accum[v.base:v.base + v.size].zero_()
         for k in range(int(iters.max(initial=0))):
             on = on & (iters > k)
             if not on.any():
@@ -263,18 +312,19 @@ class LightPropagationVolume:
                                 self._level_on, self._far_from, k + 1, dst, self._accum, self._far, self._change,
                                 self._total], start=lo)
             for lv in np.flatnonzero(on):
-                done[lv] += 1
-                last[int(lv)] = dst
+                self._done[lv] += 1
+                self._last_level[int(lv)] = dst
             if thresh > 0.0:
                 live = set(np.flatnonzero(on).tolist())
                 change, total = self._level_sums(self._change, live), self._level_sums(self._total, live)
                 on = on & ~((change <= thresh * total) | (total <= 0.0))
+        # what lookups read: each level's own light plus the far light of every coarser one
+        wp.copy(self._lookup, self._accum)
         if hand_over:
             for c in range(len(self.grids) - 1):
                 self._launch_cells(hand_over_far, self._levels[self.grids[c].level].res ** 3,
-                                   [self._far, self._cas_table, len(self.grids), c, self._accum])
-        self._last_level = last
-        self.iterations_run = [int(done[g.level]) for g in self.fitted]
+                                   [self._far, self._cas_table, len(self.grids), c, self._lookup])
+        self.iterations_run = [int(self._done[g.level]) for g in self.fitted]
         self._has_result = True
         self._timed("propagate", t0)
         return self.iterations_run
@@ -300,24 +350,44 @@ class LightPropagationVolume:
 
     def invalidate(self) -> None:
         """Forget the last update's inputs: the next ``update`` re-injects and propagates."""
-        self._state = None
+        self._held = {}
+
+    @property
+    def pending_levels(self) -> int:
+        """Cascades that do not yet hold what the last ``update`` asked for (> 0 only while
+        ``LPVConfig.stagger`` works through them: call ``update`` again with the same inputs)."""
+        return sum(1 for lv, want in self._target.items() if self._held.get(lv) != want)
 
     def update(self, camera, scene_bounds, vpls, surfels=None, key=None) -> bool:
-        """One frame: refit; re-inject and propagate only when the inputs or a cascade's cells changed.
+        """One frame: refit; re-inject and propagate only the cascades whose inputs or cells changed.
 
         ``vpls``: a sequence of (positions, normals, flux) sets (sun RSM, sky-lit G-buffer, …), or a
         zero-argument callable returning one (called only when work is needed); ``surfels`` likewise
         with (positions, normals, areas). ``key``: any hashable that changes when the inputs do (sun
         direction, scene version, …); None → ``input_key`` fingerprints the arrays. Returns True
-        when it re-injected and propagated.
+        when it re-injected and propagated. Every changed cascade is refreshed, or with
+        ``LPVConfig.stagger`` one of them, the next in turn (``pending_levels`` says how many wait).
         """
         t0 = time.perf_counter()
-        self.fit(camera, scene_bounds)
+        wanted = self._place(camera, scene_bounds)
         ikey = key if key is not None else self.input_key(vpls, surfels)
-        state = (tuple(self.fitted), ikey)
-        if self._has_result and ikey is not None and state == self._state:
+        self._target = {g.level: (g, ikey) for g in wanted}
+        for lv in [lv for lv in self._held if lv not in self._target]:  # a cascade no longer placed
+            del self._held[lv]
+        stale = [g for g in wanted if ikey is None or self._held.get(g.level) != self._target[g.level]]
+        if self._has_result and not stale:
+            self.fitted = wanted
             self.timings["update"] = (time.perf_counter() - t0) * 1e3
             return False
+        if not self.config.stagger or not self._has_result or any(g.level not in self._held for g in wanted):
+            stale = wanted  # every cascade (the paper's update; and whenever one holds no light yet)
+        elif len(stale) > 1:
+            nl = len(self._levels)
+            stale = [min(stale, key=lambda g: (g.level - self._next_level) % nl)]  # the next in turn
+        chosen = {g.level for g in stale}
+        # the cascades not refreshed now keep the grids their light was propagated in
+        self.fitted = [g if g.level in chosen else self._held[g.level][0] for g in wanted]
+        self._set_inject_grids(stale)
         self.clear()
         t_inj = t_gv = 0.0
         for s in vpls() if callable(vpls) else vpls:
@@ -329,7 +399,9 @@ class LightPropagationVolume:
                 t_gv += self.timings["inject_geometry"]
         self.timings["inject"], self.timings["inject_geometry"] = t_inj, t_gv
         self.propagate()
-        self._state = state
+        for g in stale:
+            self._held[g.level] = self._target[g.level]
+        self._next_level = (max(chosen) + 1) % len(self._levels)
         self._timed("update", t0)
         return True
 
@@ -346,7 +418,7 @@ class LightPropagationVolume:
         out = self._staging.buffer("out", p.shape[0], wp.vec3)
         cfg = self.config
         launch(self._lookup_irradiance, p.shape[0],
-               [p, n, self._accum, self._open, self._plane, self._cas_table, len(self.grids), float(cfg.lookup_offset),
+               [p, n, self._lookup, self._open, self._plane, self._cas_table, len(self.grids), float(cfg.lookup_offset),
                 float(cfg.edge_margin), float(cfg.blend_cells if blend else 0.0), out],
                device=self.device, threads=self.threads)
         res = out.numpy().copy()
@@ -368,7 +440,7 @@ class LightPropagationVolume:
         out = self._staging.buffer("out", p.shape[0], wp.vec3)
         cfg = self.config
         launch(lookup_glossy, p.shape[0],
-               [p, d, s, self._accum, self._cas_table, len(self.grids), int(cfg.glossy_steps),
+               [p, d, s, self._lookup, self._cas_table, len(self.grids), int(cfg.glossy_steps),
                 float(self.glossy_step_length()), float(cfg.edge_margin), float(cfg.blend_cells), out],
                device=self.device, threads=self.threads)
         res = out.numpy().copy()
@@ -399,8 +471,9 @@ class LightPropagationVolume:
 
     def level_grid(self, level: int, which: str = "accum") -> np.ndarray:
         """A config level's grid as numpy: (3, res, res, res, 4) float32 (RGB, z, y, x, SH) for
-        ``accum``, ``inj`` or ``last`` (the last iteration's wavefront); (res+1, res+1, res+1, 4)
-        for ``gv``."""
+        ``accum`` (what lookups read: its accumulated light plus the coarser cascades' far light),
+        ``own`` (its accumulated light alone), ``inj`` or ``last`` (the last iteration's wavefront);
+        (res+1, res+1, res+1, 4) for ``gv``."""
         lv = self._levels[level]
         if which == "gv":
             self._gv.gather()
@@ -408,7 +481,7 @@ class LightPropagationVolume:
             return self._gv.array.numpy()[lv.gv_base:lv.gv_base + r1**3].reshape(r1, r1, r1, 4)
         if which == "inj":
             self._inj.gather()
-        arr = {"accum": self._accum, "inj": self._inj.array}.get(which)
+        arr = {"accum": self._lookup, "own": self._accum, "inj": self._inj.array}.get(which)
         if which == "last":
             arr = self._last_level.get(level, self._inj.array)
         if arr is None:
