@@ -54,12 +54,14 @@ def rss_mb() -> float:
 
 
 def camera_path(base: Camera, t: float) -> Camera:
-    """The base camera orbited by up to ±12° around its target and dollied by ±10 %, t ∈ [0, 1]."""
+    """The base camera orbited by up to ±12° around its target and dollied towards it by up to 10 %,
+    t ∈ [0, 1]. (Only towards it: a scene's camera usually stands near a wall, and the earlier ±10 %
+    put the courtyard's camera inside its south wall for a few frames of the path.)"""
     offset = base.position - base.target
     ang = math.radians(12.0) * math.sin(2 * math.pi * t)
     c, s = math.cos(ang), math.sin(ang)
     rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-    pos = base.target + (rot @ offset) * (1.0 + 0.1 * math.sin(4 * math.pi * t))
+    pos = base.target + (rot @ offset) * (1.0 - 0.05 * (1.0 - math.cos(4 * math.pi * t)))
     return Camera(position=pos, target=base.target, up=base.up, fov_y_deg=base.fov_y_deg, near=base.near,
                   far=base.far)
 
