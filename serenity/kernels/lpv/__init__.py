@@ -135,6 +135,15 @@ volume and the defaults (0.20–0.41·M without the lookup planes: the old home 
 above a plane at 0.6 of a cell; exact: 0). With the faces next to a lit patch that share its cells, this
 is most of what is left of the Cornell box's error (README, "The LPV in a closed room").
 
+Stagger (``LPVConfig.stagger``, on in the ``medium`` and ``low`` presets): an update re-injects and
+propagates one cascade, the next in turn, instead of all; the others keep the grids (boxes) and the
+light of their last update, and lookups read each at its own box, so nothing is inconsistent, only
+up to ``cascades`` updates old. Each level keeps its own accumulated light; what lookups read is
+that plus the far light handed over from the coarser cascades, rebuilt from their last far grids
+after every propagation (so a refreshed fine cascade sees the coarse ones' light, and a refreshed
+coarse one reaches the fine ones at once). With still inputs the cascades catch up in at most
+``cascades`` updates and end where refreshing all of them gets (``update``'s ``pending_levels``).
+
 Early stop: per cascade, after each iteration the change Σ|ΔDC| is compared with
 ``early_stop``·Σ|DC accumulated|; in a closed lossless grid the ratio is 1/(k+1), so stopping is
 driven by light leaving the grid or being blocked.
