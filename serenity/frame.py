@@ -61,7 +61,7 @@ from serenity.raster.shadow import STAGGER_PAD, ShadowPass, fit_overlapped, fit_
 from serenity.raster.sky import SkyTexturesGL
 from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
-from serenity.threads import single_threaded_blas, yield_gl_threads
+from serenity.threads import single_threaded_blas
 
 MAIN_LANE = "main (GL + volumes)"
 STAGES = (
@@ -553,7 +553,6 @@ class Renderer:
         if self.config.overlap and str(self.device).startswith("cpu"):
             if self._tracer_proc is None:
                 self._tracer_proc = TracerProcess(self.scene, self.device)
-                yield_gl_threads()  # the tracer gets a core when both want one (``threads`` doc)
             return self._tracer_proc
         if self.tracer is None:
             t0 = time.perf_counter()
