@@ -15,7 +15,7 @@ frames): the Cornell box's indirect light over a grid of resolution × iteration
 Keys: ``lpv_update_ms`` — inject (VPLs + surfels) + propagate of 3 cascades of 32³ with the default
 iterations (8, the coarsest extended to cross the scene: 30 here) = what a frame costs when the
 lights changed, at the paper's grid size; ``lpv_update_ms_32_no_cross_scene`` the same with 8
-iterations everywhere; ``lpv_update_ms_default`` the default config (16³); ``stages_ms`` the 32³
+iterations everywhere; ``lpv_update_ms_default`` the default config (12³); ``stages_ms`` the 32³
 split; ``per_cascade_ms`` inject/propagate (8 iterations)/lookup of one 32³ cascade alone;
 ``lookup_ms`` irradiance/glossy lookups at 320×180 points (the Warp twin of the shader);
 ``sweep`` grid resolution × iterations vs ms; ``cornell_indirect_relmse`` (and ``_trimmed``,
