@@ -245,6 +245,7 @@ class Renderer:
             self.lowres.resize(self.width, self.height)
         self.sky_volume = None
         self._sky_map_version = -1
+        self._sky_volume_version = 0  # counts the sky volume's updates (the sky-light VPLs read it)
         if cfg.sky.enabled:
             self.sky_volume = SkyVolume(self.scene, cfg.sky, self.device)
             self.sky_gl = SkyTexturesGL(ctx)
@@ -402,7 +403,7 @@ class Renderer:
             cam = self.scene.camera
             changed = self._changes.changed(
                 lpv=np.concatenate([self.scene.sun.direction, light.sun_irradiance, cam.position, cam.target,
-                                    [cam.fov_y_deg, self._sky_map_version]]))
+                                    [cam.fov_y_deg, self._sky_volume_version]]))
             if changed:
                 self._lpv_inputs_version += 1
             if changed or self.lpv.pending_levels:  # LPVConfig.stagger: the cascades still behind
@@ -495,6 +496,7 @@ class Renderer:
             changed = sv.update(layers=sv.resolution[1] if first else self.config.sky_layers_per_frame)
             self._sky_built = True
         if changed:
+            self._sky_volume_version += 1
             with self._stage("sky upload"):
                 if sv.sky.version != self._sky_map_version:
                     self.sky_gl.upload_sky_map(sv.sky_map())

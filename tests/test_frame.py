@@ -60,6 +60,46 @@ def test_unchanged_scene_renders_identically_and_skips_work(courtyard):
         r.close()
 
 
+def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
+    """``medium``'s sky layer cycle and LPV stagger: after frames with the camera and sun moving, a
+    still scene keeps updating (one sky layer, one LPV cascade per frame; the LPV again after the sky
+    volume's last layer, since its sky-light VPLs read that volume) only until every layer and
+    cascade holds the newest inputs, then skips the volume work; its image is then the one a renderer
+    that updates everything every frame draws of the same still scene (the same volumes, up to float
+    summation order)."""
+    import dataclasses
+
+    medium = RenderConfig.preset("medium", overlap=False)
+    every = dataclasses.replace(medium, sky=dataclasses.replace(medium.sky, transfer_layers=0),
+                                lpv=dataclasses.replace(medium.lpv, stagger=False))
+    scenes = [copy.deepcopy(courtyard), copy.deepcopy(courtyard)]
+    rs = [Renderer(s, *SIZE, config=c) for s, c in zip(scenes, (medium, every), strict=True)]
+    try:
+        for i in range(4):  # moving
+            for s in scenes:
+                s.camera = camera_path(courtyard.camera, 0.1 * i)
+                s.sun.direction = sun_path(courtyard.sun.direction, 0.1 * i)
+            for r in rs:
+                r.render(read_back=False)
+        amortised = rs[0]
+        assert amortised.lpv.pending_levels > 0 and amortised.sky_volume.pending_layers > 0
+        layers, cascades = amortised.sky_volume.resolution[1], len(amortised.lpv.fitted)
+        catch_up = 0
+        while amortised.lpv.pending_levels or amortised.sky_volume.pending_layers:
+            f = amortised.render(read_back=False)
+            catch_up += 1
+            assert catch_up <= layers + cascades  # the LPV's sky-light VPLs read the sky volume
+        still = amortised.render(read_back={"hdr"})
+        assert not set(LPV_UPDATE_STAGES) & set(still.timings) and "sky upload" not in still.timings
+        rs[1].render(read_back=False)
+        ref = rs[1].render(read_back={"hdr"})
+        np.testing.assert_allclose(still.hdr, ref.hdr, rtol=1e-4, atol=1e-4 * float(ref.hdr.max()))
+        assert f is not None
+    finally:
+        for r in rs:
+            r.close()
+
+
 def test_memory_does_not_grow_over_frames(courtyard):
     """RSS after 30 frames of a moving camera and sun within 25 MiB of RSS after 10 (allocator
     noise; a leak of one 96x54 float image per frame would add ~2.4 MiB per 10 frames, a leak of
