@@ -140,7 +140,8 @@ def chart(result: dict, path: str) -> None:
         row[0].set_xlabel("frame (sun ~0.9° and camera moving every frame)")
         row[0].set_ylabel("FLIP vs every frame")
         row[0].set_title(f"{size}: what the stale layers and cascades cost", fontsize=10)
-        row[0].legend(fontsize=8)
+        row[0].set_ylim(0.0, 1.5 * row[0].get_ylim()[1])  # room above the curves for the legend
+        row[0].legend(fontsize=8, loc="upper left")
         row[0].grid(alpha=0.3)
         names = list(variants)
         x = np.arange(len(names))
@@ -149,13 +150,14 @@ def chart(result: dict, path: str) -> None:
         row[1].set_xticks(x, [n.replace(": ", ":\n").replace(" (", "\n(") for n in names], fontsize=8)
         row[1].set_ylabel("ms (median)")
         row[1].set_title(f"{size}: what they buy", fontsize=10)
+        row[1].set_ylim(0.0, 1.3 * row[1].get_ylim()[1])  # room above the bars for the legend
         row[1].legend(fontsize=8)
         refs = [(n, v) for n, v in variants.items() if "flip_vs_reference_mean" in v]
         if refs:
             frames_ref = ", ".join(str(x["frame"]) for x in refs[0][1]["vs_reference"])
             text = f"vs a path-traced reference\n(frames {frames_ref}), FLIP / relMSE:\n" + "\n".join(
                 f"{n}: {v['flip_vs_reference_mean']:.3f} / {v['rel_mse_vs_reference_mean']:.3f}" for n, v in refs)
-            row[1].set_ylim(0.0, 1.9 * row[1].get_ylim()[1])  # room above the bars for the box
+            row[1].set_ylim(0.0, 1.5 * row[1].get_ylim()[1])  # and for the box
             row[1].text(0.01, 0.98, text, transform=row[1].transAxes, ha="left", va="top", fontsize=7,
                         bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "0.7"})
         row[1].grid(axis="y", alpha=0.3)
