@@ -501,8 +501,8 @@ class Renderer:
                 if sv.sky.version != self._sky_map_version:
                     self.sky_gl.upload_sky_map(sv.sky_map())
                     self._sky_map_version = sv.sky.version
-                slabs = sv.updated_layers
-                if first or slabs == [(0, sv.resolution[1])] or not slabs:
+                slabs = sv.updated_layers  # the first update always re-lights the whole volume
+                if slabs == [(0, sv.resolution[1])]:
                     self.sky_gl.upload_volume(sv.textures(), sv.grid_origin, sv.cell_size, sv.resolution,
                                               sv.normal_offset_m)
                 else:  # only the layers this update re-lit

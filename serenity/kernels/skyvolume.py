@@ -454,7 +454,7 @@ class SkyVolume:
         """The 7 arrays of the paper's layout: 6 × (Z, Y, X, 4) + (Z, Y, X, 3) float32; with
         ``layers`` = (first, n) only that slab of y-layers, (Z, n, X, ·)."""
         c = self.coefficients()
-        x, y, z = self.resolution
+        x, _, z = self.resolution
         if layers is None:
             return pack_sh_textures(c.reshape(-1, COEFFS), self.resolution)
         first, n = (int(v) for v in layers)

@@ -244,7 +244,13 @@ class LightPropagationVolume:
         inj = self._inj.array
         fitted = {g.level for g in self.fitted}
         upd = sorted(g.level for g in self._inject_grids)  # the levels this call refreshes
-        every = set(upd) == fitted  # all of them (the paper's update): whole-array operations
+        # their span in the shared arrays (levels are stored in order; a level between two refreshed
+        # ones is one that is not fitted, so rewriting it is harmless): cells [c0, c1), vec4s [v0, v1)
+        refreshed = [self._levels[lv] for lv in upd]
+        c0 = min((v.cell_base for v in refreshed), default=0)
+        c1 = max((v.cell_base + v.res**3 for v in refreshed), default=0)
+        v0 = min((v.base for v in refreshed), default=0)
+        v1 = max((v.base + v.size for v in refreshed), default=0)
         # skip cascades that received nothing: not propagated, not looked up
         self._launch_cells(measure_cells, self._n_cells, [inj, self._level_table, nl, self._total])
         injected = self._level_sums(self._total)
@@ -259,12 +265,8 @@ class LightPropagationVolume:
         if cfg.geometry_volume and self._gv_dirty:
             args = [self._gv.array, self._level_table, nl, self._trans_pos, self._trans_neg, self._open,
                     self._plane, self._n_gv if self._moments else 0, int(self._coverage) + 2 * int(self._planes)]
-            if every:
-                self._launch_cells(eval_face_transmittance, self._n_cells, args)
-            else:  # the other levels keep the faces of the surfels they were propagated with
-                for lv in upd:
-                    v = self._levels[lv]
-                    self._launch_cells(eval_face_transmittance, v.res**3, args, start=v.cell_base)
+            # the other levels keep the faces of the surfels they were propagated with
+            self._launch_cells(eval_face_transmittance, c1 - c0, args, start=c0)
             self._gv_dirty = False
         # hand-over: a cascade's iterations past the finer one's reach (in its own cells) go to "far"
         far_from = np.full(nl, 1 << 30, np.int32)
@@ -273,29 +275,18 @@ class LightPropagationVolume:
             for fine, coarse in zip(self.grids, self.grids[1:], strict=False):
                 reach = iters[fine.level] * fine.cell_size / coarse.cell_size
                 far_from[coarse.level] = max(1, math.ceil(reach - 1e-6))
-        if every:
-            self._far.zero_()
-        else:
-            for lv in upd:
-                v = self._levels[lv]
-                self._far[v.base:v.base + v.size].zero_()
+        if v1 > v0:
+            self._far[v0:v1].zero_()
         self._far_from.assign(far_from)
         for lv in upd:
             self._done[lv] = 0
             self._last_level[lv] = inj
         bufs = (self._ping, self._pong)
-        if every:
+        if v1 > v0:
             if cfg.accumulate_injected:
-                wp.copy(self._accum, inj)
+                wp.copy(self._accum, inj, dest_offset=v0, src_offset=v0, count=v1 - v0)
             else:
-                self._accum.zero_()
-        else:
-            for lv in upd:
-                v = self._levels[lv]
-                if cfg.accumulate_injected:
-                    wp.copy(self._accum, inj, dest_offset=v.base, src_offset=v.base, count=v.size)
-                else:
-                    self._accum[v.base:v.base + v.size].zero_()
+                self._accum[v0:v1].zero_()
         for k in range(int(iters.max(initial=0))):
             on = on & (iters > k)
             if not on.any():
