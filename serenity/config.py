@@ -49,7 +49,13 @@ class ShadowConfig:
     """Sun shadows: cascaded shadow maps + PCSS (paper §6). See ``serenity/raster/shadow.py``."""
 
     size: int = 2048
-    """Resolution of one cascade (texels per side); the atlas holds 2×2 tiles."""
+    """Resolution of one cascade (texels per side); the atlas holds 2×2 tiles. With
+    ``texels_per_pixel`` the most it may be."""
+    texels_per_pixel: float = 0.0
+    """> 0: size each cascade to this many texels per pixel of the image's longer side (multiples of
+    64, at least 256, at most ``size``; ``size_for``), so a small image does not draw and clear
+    shadow maps far finer than its pixels can show; 0: always ``size``. The paper's 2048² at
+    1280×720 is 1.6 texels per pixel."""
     cascades: int = 4
     """Number of cascades, 1–4."""
     split_lambda: float = 0.75
@@ -91,6 +97,9 @@ class ShadowConfig:
             raise ConfigError(f"ShadowConfig.size must be in 16..{MAX_IMAGE_SIZE}, got {self.size}")
         if not 1 <= self.cascades <= 4:
             raise ConfigError(f"ShadowConfig.cascades must be 1..4, got {self.cascades}")
+        if not (isinstance(self.texels_per_pixel, (int, float)) and math.isfinite(self.texels_per_pixel)
+                and 0.0 <= self.texels_per_pixel <= 16.0):
+            raise ConfigError(f"ShadowConfig.texels_per_pixel must be in 0..16, got {self.texels_per_pixel!r}")
         if self.filter not in ("hard", "pcf", "pcss"):
             raise ConfigError(f"ShadowConfig.filter must be hard, pcf or pcss, got {self.filter!r}")
         if not 1 <= self.blocker_samples <= 128:
@@ -103,6 +112,13 @@ class ShadowConfig:
             raise ConfigError(f"ShadowConfig.contact_pixels must be > 0, got {self.contact_pixels}")
         if not self.contact_texels > 0:
             raise ConfigError(f"ShadowConfig.contact_texels must be > 0, got {self.contact_texels}")
+
+    def size_for(self, width: int, height: int) -> int:
+        """Texels per side of one cascade for a ``width``×``height`` image (``texels_per_pixel``)."""
+        if self.texels_per_pixel <= 0.0:
+            return self.size
+        want = 64 * math.ceil(self.texels_per_pixel * max(width, height) / 64.0)
+        return int(min(self.size, max(256, want)))
 
 
 @dataclass(frozen=True)
@@ -510,18 +526,21 @@ PRESETS: dict[str, dict] = {
     "high": {},
     # what `serenity render` and `serenity bench` use unless told: indirect light and SSAO at quarter
     # resolution (the indirect light is smooth: the frontier's FLIP moved by under 0.002 from half
-    # resolution, the LPV lighting pass got ~4x cheaper), 1024² shadow cascades redrawn in turn,
+    # resolution, the LPV lighting pass got ~4x cheaper), shadow cascades of 2.4 texels per pixel of
+    # the image (768² at 320×180; at most 1024²: 640×360 and up) redrawn in turn,
     # fewer PCSS, SSAO and glossy-LPV taps, a 96² sky map baked in 12 steps, the sky volume re-lit one
     # layer per frame after a rebake (the paper's sweep, by transfer), coarser RSM and sky VPLs
     "medium": {"indirect_scale": 4,
-               "shadow": {"size": 1024, "blocker_samples": 6, "filter_samples": 12, "stagger": True},
+               "shadow": {"size": 1024, "texels_per_pixel": 2.4, "blocker_samples": 6, "filter_samples": 12,
+                          "stagger": True},
                "ssao": {"directions": 6, "steps": 2},
                "sky": {"sky_map_size": 96, "sky_steps": 12, "transfer_layers": 1},
                "lpv": {"glossy_steps": 4, "stagger": True},
                "rsm_size": 128, "sky_vpl_stride": 8},
     # the cheapest: indirect light at quarter resolution, 3 cascades, an 8³ LPV, coarse sky
     "low": {"indirect_scale": 4,
-            "shadow": {"size": 1024, "cascades": 3, "blocker_samples": 4, "filter_samples": 8, "stagger": True},
+            "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4, "filter_samples": 8,
+                       "stagger": True},
             "ssao": {"directions": 6, "steps": 2, "blur_radius": 4},
             "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_bands": 4, "transfer_layers": 1},
             "lpv": {"resolution": 8, "iterations": 16, "stagger": True},

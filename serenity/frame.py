@@ -184,7 +184,8 @@ class Renderer:
         with self._stage("upload"):
             cfg = self.config
             self.scene_gl = SceneGL(self.ctx, scene)
-            self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, cfg.shadow.size, cfg.shadow.cascades)
+            self.shadow_size = cfg.shadow.size_for(self.width, self.height)
+            self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, self.shadow_size, cfg.shadow.cascades)
             self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl, cfg.texture_taps)
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
@@ -382,7 +383,7 @@ class Renderer:
         with self._stage("shadow maps (CSM)"):
             sc = cfg.shadow
             cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
-                                           sc.cascades, sc.size, sc.split_lambda, sc.max_distance,
+                                           sc.cascades, self.shadow_size, sc.split_lambda, sc.max_distance,
                                            pad=STAGGER_PAD if sc.stagger else 0.0)
             shadow = self.shadow_pass.render(cascades, stagger=sc.stagger)
         ao = guide = None

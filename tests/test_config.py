@@ -21,6 +21,8 @@ from serenity.errors import SerenityError
     (RenderConfig, {"exposure": 0.0}, "RenderConfig.exposure"),
     (ShadowConfig, {"filter_samples": 0}, "ShadowConfig.filter_samples"),
     (ShadowConfig, {"contact_steps": -1}, "ShadowConfig.contact_steps"),
+    (ShadowConfig, {"texels_per_pixel": -1.0}, "ShadowConfig.texels_per_pixel"),
+    (ShadowConfig, {"texels_per_pixel": float("nan")}, "ShadowConfig.texels_per_pixel"),
     (ShadowConfig, {"contact_pixels": 0.0}, "ShadowConfig.contact_pixels"),
     (ShadowConfig, {"contact_texels": -1.0}, "ShadowConfig.contact_texels"),
     (RenderConfig, {"rt_sun_shadows": "pcss"}, "RenderConfig.rt_sun_shadows"),
@@ -49,6 +51,20 @@ def test_config_imports_no_warp_or_gl():
             "print(sorted(m for m in ('warp', 'moderngl') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_shadow_maps_sized_to_the_image():
+    """texels_per_pixel sizes the cascades to the image's longer side, in multiples of 64 texels,
+    within 256..size; 0 keeps size whatever the image."""
+    cfg = ShadowConfig(size=1024, texels_per_pixel=2.4)
+    assert cfg.size_for(320, 180) == 768          # 2.4 x 320
+    assert cfg.size_for(180, 320) == 768          # the longer side, either way round
+    assert cfg.size_for(330, 180) == 832          # 792 rounded up to a multiple of 64
+    assert cfg.size_for(640, 360) == 1024         # 1536, capped at size
+    assert cfg.size_for(32, 18) == 256            # at least 256
+    assert ShadowConfig(size=1024).size_for(320, 180) == 1024
+    assert RenderConfig.preset("medium").shadow.size_for(320, 180) == 768
+    assert RenderConfig.preset("paper").shadow.size_for(1280, 720) == 2048
 
 
 def test_presets_change_what_they_name_and_nothing_else():

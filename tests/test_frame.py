@@ -82,6 +82,8 @@ def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
             for r in rs:
                 r.render(read_back=False)
         amortised = rs[0]
+        # medium's cascades are sized to the image (ShadowConfig.texels_per_pixel)
+        assert amortised.shadow_pass.size == medium.shadow.size_for(*SIZE) < medium.shadow.size
         assert amortised.lpv.pending_levels > 0 and amortised.sky_volume.pending_layers > 0
         layers, cascades = amortised.sky_volume.resolution[1], len(amortised.lpv.fitted)
         catch_up = 0
