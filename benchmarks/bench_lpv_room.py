@@ -29,7 +29,8 @@ alone — ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — all three, 
   over the worker threads), median of 3 more; ``lpv_lighting_cpu_ms`` the "lpv lighting" GL pass
   the same way (llvmpipe renders on the calling thread: ``LP_NUM_THREADS=0``, set by this script).
 
-The LPV row "off" is the error to beat. ``--quick`` skips the courtyard.
+The LPV row "off" is the error to beat. ``--quick`` skips the courtyard; ``--only LABEL`` measures only the
+settings whose label contains LABEL and merges them into the existing JSON.
 """
 
 from __future__ import annotations
@@ -69,6 +70,10 @@ VARIANTS = {
     "default + coverage blocking": {"coverage_blocking": True},
     "default + coverage blocking, coarsest cascade 24 iterations": {"coverage_blocking": True,
                                                                     "iterations": (8, 24, 24)},
+    "default + self-illumination damping (2 cells, power 2)": {"self_damping": 2.0, "self_damping_power": 2.0},
+    "default + self-illumination damping (1.5 cells, power 2)": {"self_damping": 1.5, "self_damping_power": 2.0},
+    "default + self-illumination damping (2.5 cells, power 2)": {"self_damping": 2.5, "self_damping_power": 2.0},
+    "default + injection offset 0.75 cell": {"injection_offset": 0.75},
 }
 
 COST_VARIANTS = {k: VARIANTS[k] for k in ("before (paper transfer, view-fitted cells)", "face clamp",
@@ -247,13 +252,41 @@ def synthetic_cost(variants, reps=7):
     return out
 
 
+def _merge(out: dict, key: str, new) -> None:
+    """Merge one section's results for some settings into ``out[key]`` (rows replaced by label)."""
+    old = out.setdefault(key, {})
+    if "rows" in new:
+        rows = {r["config"]: r for r in old.get("rows", [])}
+        rows.update({r["config"]: r for r in new["rows"]})
+        out[key] = {**old, **{k: v for k, v in new.items() if k != "rows"}, "rows": list(rows.values())}
+    else:
+        old.update(new)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--json", default=os.path.join(HERE, "results", "lpv_room.json"))
     ap.add_argument("--quick", action="store_true", help="skip the courtyard")
     ap.add_argument("--cost-only", action="store_true",
                     help="only the synthetic CPU-ms, merged into an existing --json")
+    ap.add_argument("--only", action="append", default=[], metavar="LABEL",
+                    help="measure only this setting of VARIANTS (repeatable; a substring of its label) and merge "
+                         "its rows into an existing --json (the Cornell 'off' row is re-measured too)")
     args = ap.parse_args(argv)
+    if args.only:
+        picked = {k: v for k, v in VARIANTS.items() if any(o in k for o in args.only)}
+        if not picked:
+            ap.error(f"no setting matches {args.only}")
+        with open(args.json) as fh:
+            out = json.load(fh)
+        _merge(out, "plane_self_illumination", plane_self_illumination(picked))
+        _merge(out, "thin_wall", thin_wall(picked))
+        _merge(out, "cornell_indirect", cornell_indirect(picked))
+        _merge(out, "open_ground", open_ground(picked))
+        if not args.quick:
+            _merge(out, "courtyard", courtyard(picked))
+        write_results(args.json, out)
+        return 0
     if args.cost_only:
         with open(args.json) as fh:
             out = json.load(fh)

@@ -297,6 +297,13 @@ class LPVConfig:
     cells (the surfels' mean offset along each axis), and a surface on the far side of a blocker that
     shares its cell takes its home cell across it (a wall row just under a ceiling that lies in a
     cell's lower half no longer reads the light above the roof; compiled in/out)."""
+    self_damping: float = 0.0
+    """Self-illumination damping (``kernels/lpv`` docstring, "Self-illumination"; 0 = off): an irradiance
+    lookup's SH is scaled by (DC self_damping cells further along the normal / DC where it looks up)^
+    ``self_damping_power``, clamped to [0, 1] (Kaplanyan & Dachsbacher 2010: light whose intensity falls
+    off along the normal flows away from the surface, most of it the surface's own)."""
+    self_damping_power: float = 2.0
+    """The exponent of ``self_damping``'s ratio."""
     coverage_blocking: bool = False
     """With the geometry volume: propagation through a face is also attenuated by the projected coverage
     of its surfels (Σ A·n²/s² along the axis, either side): a two-sided wall thinner than a cell blocks

@@ -39,6 +39,8 @@ class LPVTexturesGL:
         self.leak_guard = True
         self.occlusion = False
         self.planes = False
+        self.damp_dist = 0.0
+        self.damp_pow = 2.0
         self.margin = 0.5
         self.band = 2.0
         self.glossy_steps = 8
@@ -69,6 +71,8 @@ class LPVTexturesGL:
         self.leak_guard = bool(cfg.leak_guard)
         self.occlusion = bool(cfg.leak_guard and cfg.lookup_occlusion and cfg.geometry_volume)
         self.planes = self.occlusion and bool(cfg.lookup_planes)
+        self.damp_dist = float(cfg.self_damping)
+        self.damp_pow = float(cfg.self_damping_power)
         self.margin = float(cfg.edge_margin)
         self.band = float(cfg.blend_cells)
         self.glossy_steps = int(cfg.glossy_steps)
@@ -96,7 +100,8 @@ class LPVTexturesGL:
                             ("u_lpv_occlusion", self.occlusion), ("u_lpv_planes", self.planes),
                             ("u_lpv_glossy_steps", int(self.glossy_steps)),
                             ("u_lpv_lookup_offset", self.lookup_offset), ("u_lpv_margin", self.margin),
-                            ("u_lpv_band", self.band), ("u_lpv_glossy_step", self.glossy_step)):
+                            ("u_lpv_band", self.band), ("u_lpv_glossy_step", self.glossy_step),
+                            ("u_lpv_damp_dist", self.damp_dist), ("u_lpv_damp_pow", self.damp_pow)):
             if name in program:
                 program[name].value = value
 

@@ -12,9 +12,9 @@ from serenity.raster import context
 from serenity.raster.lpv_gl import LPVProbeGL
 
 
-def _volume(leak_guard: bool, cascades: int = 3, occlusion: bool = True, planes: bool = True):
+def _volume(leak_guard: bool, cascades: int = 3, occlusion: bool = True, planes: bool = True, damping: float = 0.0):
     cfg = LPVConfig(resolution=16, cascades=cascades, iterations=6, early_stop=0.0, view_distance=12.0,
-                      leak_guard=leak_guard, lookup_occlusion=occlusion, lookup_planes=planes)
+                      leak_guard=leak_guard, lookup_occlusion=occlusion, lookup_planes=planes, self_damping=damping)
     v = L.LightPropagationVolume(cfg, device="cpu")
     bounds = np.array([[-10.0, 0.0, -10.0], [10.0, 6.0, 10.0]])
     v.fit((np.array([0.0, 2.0, -3.0]), np.array([0.2, 0.0, 1.0])), bounds)
@@ -27,22 +27,23 @@ def _volume(leak_guard: bool, cascades: int = 3, occlusion: bool = True, planes:
     return v, bounds, rng
 
 
-@pytest.mark.parametrize("leak_guard,cascades,occlusion,planes", [(True, 3, True, True), (True, 3, True, False),
-                                                                  (True, 3, False, True), (False, 3, True, True),
-                                                                  (True, 1, True, True)])
-def test_glsl_lookups_match_warp(gl_ctx, leak_guard, cascades, occlusion, planes):
-    _check_lookups(gl_ctx, leak_guard, cascades, occlusion, planes)
+@pytest.mark.parametrize("leak_guard,cascades,occlusion,planes,damping",
+                         [(True, 3, True, True, 0.0), (True, 3, True, False, 0.0), (True, 3, False, True, 0.0),
+                          (False, 3, True, True, 0.0), (True, 1, True, True, 0.0), (True, 3, True, True, 2.0),
+                          (False, 3, True, True, 1.5)])
+def test_glsl_lookups_match_warp(gl_ctx, leak_guard, cascades, occlusion, planes, damping):
+    _check_lookups(gl_ctx, leak_guard, cascades, occlusion, planes, damping)
 
 
-@pytest.mark.parametrize("leak_guard", [True, False])
-def test_glsl_exact_filter_matches_warp(gl_ctx, monkeypatch, leak_guard):
+@pytest.mark.parametrize("leak_guard,damping", [(True, 0.0), (False, 0.0), (True, 2.0)])
+def test_glsl_exact_filter_matches_warp(gl_ctx, monkeypatch, leak_guard, damping):
     # the shader's own trilinear filter (hardware GL's default, raster/context.EXACT_FILTER), run here too
     monkeypatch.setattr(context, "EXACT_FILTER", True)
-    _check_lookups(gl_ctx, leak_guard, 3, True, True)
+    _check_lookups(gl_ctx, leak_guard, 3, True, True, damping)
 
 
-def _check_lookups(gl_ctx, leak_guard, cascades, occlusion, planes):
-    v, bounds, rng = _volume(leak_guard, cascades, occlusion, planes)
+def _check_lookups(gl_ctx, leak_guard, cascades, occlusion, planes, damping=0.0):
+    v, bounds, rng = _volume(leak_guard, cascades, occlusion, planes, damping)
     assert len(v.grids) == cascades
     m = 3000
     q = rng.uniform(bounds[0] - 1, bounds[1] + 1, (m, 3)).astype(np.float32)

@@ -329,10 +329,21 @@ def eval_radiance(s: wp.vec4, w: wp.vec3, a1: float, inv_area: float) -> float:
 
 
 @wp.func
+def self_damping(near: float, far: float, power: float) -> float:
+    """Self-illumination damping (package doc, "Self-illumination"): (far / near)^power clamped to [0, 1],
+    near the DC where the surface looks up, far the DC damp_dist cells further along its normal; 1
+    where near ≤ 0 (nothing to damp)."""
+    if not (near > 0.0):
+        return 1.0
+    r = wp.clamp(far / near, 0.0, 1.0)
+    return wp.pow(r, power)
+
+
+@wp.func
 def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p: wp.vec3, n: wp.vec3,
                        lookup_offset: float, leak_guard: bool, margin: float, band: float, keep: float,
                        opn: wp.array(dtype=wp.vec3), occlusion: bool, plane: wp.array(dtype=wp.vec3),
-                       planes: bool) -> wp.vec4:
+                       planes: bool, damp_dist: float, damp_pow: float) -> wp.vec4:
     """Cascade g's share of the irradiance at p (normal n): (α·E_rgb, α), α its blend weight times
     what the finer cascades left (``keep``). The twin of lpv.glsl's lpv_cascade_irradiance."""
     us = grid_coord(g, p)
@@ -348,6 +359,11 @@ def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p
     sr = trilinear_sh(grids, g.base, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion, h)
     sg = trilinear_sh(grids, g.base + n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion, h)
     sb = trilinear_sh(grids, g.base + 2 * n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion, h)
+    if damp_dist > 0.0:
+        uf = u + n * damp_dist
+        sr = sr * self_damping(sr[0], sample_sh(grids, g.base, g.res, uf)[0], damp_pow)
+        sg = sg * self_damping(sg[0], sample_sh(grids, g.base + n3, g.res, uf)[0], damp_pow)
+        sb = sb * self_damping(sb[0], sample_sh(grids, g.base + 2 * n3, g.res, uf)[0], damp_pow)
     return wp.vec4(alpha * eval_irradiance(sr, n, inv_area), alpha * eval_irradiance(sg, n, inv_area),
                    alpha * eval_irradiance(sb, n, inv_area), alpha)
 
@@ -717,6 +733,8 @@ def lookup_irradiance_kernel(leak_guard: bool, occlusion: bool = False, planes: 
         lookup_offset: float,
         margin: float,
         band: float,
+        damp_dist: float,
+        damp_pow: float,
         # outputs
         out: wp.array(dtype=wp.vec3),
         offset: int,
@@ -729,7 +747,7 @@ def lookup_irradiance_kernel(leak_guard: bool, occlusion: bool = False, planes: 
         for c in range(n_cascades):
             r = cascade_irradiance(grids, cascades[c], c == n_cascades - 1, p, n, lookup_offset,
                                    wp.static(leak_guard), margin, band, keep, opn,
-                                   wp.static(occlusion), plane, wp.static(planes))
+                                   wp.static(occlusion), plane, wp.static(planes), damp_dist, damp_pow)
             e += wp.vec3(r[0], r[1], r[2])
             keep = keep - r[3]
         out[i] = e

@@ -410,7 +410,8 @@ class LightPropagationVolume:
         cfg = self.config
         launch(self._lookup_irradiance, p.shape[0],
                [p, n, self._lookup, self._open, self._plane, self._cas_table, len(self.grids), float(cfg.lookup_offset),
-                float(cfg.edge_margin), float(cfg.blend_cells if blend else 0.0), out],
+                float(cfg.edge_margin), float(cfg.blend_cells if blend else 0.0), float(cfg.self_damping),
+                float(cfg.self_damping_power), out],
                device=self.device, threads=self.threads)
         res = out.numpy().copy()
         self._timed("lookup", t0)

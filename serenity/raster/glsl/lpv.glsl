@@ -37,6 +37,8 @@ uniform float u_lpv_margin;           // cells at a non-last cascade's border wi
 uniform float u_lpv_band;             // cells of the blend band (0: hard switch)
 uniform int u_lpv_glossy_steps;       // samples along the reflected direction
 uniform float u_lpv_glossy_step;      // metres between glossy samples
+uniform float u_lpv_damp_dist;        // self-illumination damping: cells along the normal (0: off)
+uniform float u_lpv_damp_pow;         // its exponent (LPVConfig.self_damping_power)
 
 const float LPV_C0 = 0.28209479177387814;   // 1 / (2 sqrt(pi))
 const float LPV_C1 = 0.48860251190291992;   // sqrt(3) / (2 sqrt(pi))
@@ -155,6 +157,13 @@ float lpv_eval_irradiance(vec4 s, vec3 n, float inv_area) {
     return max((LPV_E0 * s.x - LPV_E1 * dot(s.yzw, n)) * inv_area, 0.0);
 }
 
+// Self-illumination damping (the twin of kernels.self_damping): (far / near)^power clamped to [0, 1],
+// near the DC where the surface looks up, far the DC u_lpv_damp_dist cells further along the normal.
+float lpv_self_damping(float near, float far) {
+    if (!(near > 0.0)) return 1.0;
+    return pow(clamp(far / near, 0.0, 1.0), u_lpv_damp_pow);
+}
+
 float lpv_eval_radiance(vec4 s, vec3 w, float a1, float inv_area) {
     return max((LPV_C0 * s.x + a1 * LPV_C1 * dot(s.yzw, w)) * inv_area, 0.0);
 }
@@ -172,6 +181,11 @@ vec3 lpv_cascade_irradiance(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D 
     vec4 sr, sg, sb;
     if (u_lpv_leak_guard) lpv_fetch_guarded(tr, tg, tb, to, res, u, us, n, sr, sg, sb);
     else lpv_fetch(tr, tg, tb, res, u, sr, sg, sb);
+    if (u_lpv_damp_dist > 0.0) {
+        vec4 fr, fg, fb;
+        lpv_fetch(tr, tg, tb, res, u + n * u_lpv_damp_dist, fr, fg, fb);
+        sr *= lpv_self_damping(sr.x, fr.x); sg *= lpv_self_damping(sg.x, fg.x); sb *= lpv_self_damping(sb.x, fb.x);
+    }
     float inv_area = 1.0 / (cell * cell);
     keep -= alpha;
     return alpha * vec3(lpv_eval_irradiance(sr, n, inv_area), lpv_eval_irradiance(sg, n, inv_area),
