@@ -133,7 +133,21 @@ plane's VPLs send sideways reaches the plane itself: a plane of exitance M recei
 itself with the paper's transfer and no geometry volume, 0.33–0.41·M with its surfels in the geometry
 volume and the defaults (0.20–0.41·M without the lookup planes: the old home cell dropped the cells
 above a plane at 0.6 of a cell; exact: 0). With the faces next to a lit patch that share its cells, this
-is most of what is left of the Cornell box's error (README, "The LPV in a closed room").
+is most of what is left of the Cornell box's error (README, "The LPV in a closed room"). No choice of
+injection offset fixes it (0.33 at best over 0.5–1 cell): the cells above the plane hold mostly isotropic
+light after a step or two of propagation, whose downward half lights the plane.
+
+Self-illumination damping (``LPVConfig.self_damping`` = d cells, off by default; Kaplanyan & Dachsbacher
+2010's remedy, gradient along the normal): an irradiance lookup's SH, per cascade and channel, is scaled
+by 1 − o·(1 − min(1, DC(u + d·n) / DC)^p), DC the looked-up (guarded) SH's, DC(u + d·n) plain trilinear
+d cells further along the normal, p = ``self_damping_power``: in front of a lit surface its own light falls
+off along the normal (a lit plane's cells: DC 41, 36, 16, 6, 1.7 going up), light from something in front
+grows towards it and is kept. o (with the lookup occlusion; else 1) is the product of the openness of the
+⌈d⌉ faces met going from the home cell along the normal's dominant axis: the far sample is trusted only as
+far as the space in front is open (under an overhang one cell above the ground it would read below the
+ground and damp everything: the courtyard's undersides went 0.54 → 0.17 of the reference without o,
+0.47 with it). Measured (``bench_lpv_room.py``): the lit plane 0.33–0.42 → 0.02–0.05 at d = 2.5, but it
+also takes light the LPV gets right in the courtyard (README, "The LPV in a closed room").
 
 Stagger (``LPVConfig.stagger``, on in the ``medium`` and ``low`` presets): an update re-injects and
 propagates one cascade, the next in turn, instead of all; the others keep the grids (boxes) and the

@@ -340,6 +340,30 @@ def self_damping(near: float, far: float, power: float) -> float:
 
 
 @wp.func
+def open_ahead(opn: wp.array(dtype=wp.vec3), cell_base: int, res: int, h: wp.vec3i, n: wp.vec3, steps: int) -> float:
+    """Π of the openness of the ``steps`` faces met going from the home cell h along the normal's dominant
+    axis (stops at the grid's edge): the self-illumination damping's far sample is only trusted as far as
+    the space in front of the surface is open (under an overhang it would read the ground's far side)."""
+    a = int(0)
+    if wp.abs(n[1]) > wp.abs(n[a]):
+        a = 1
+    if wp.abs(n[2]) > wp.abs(n[a]):
+        a = 2
+    st = int(1)
+    if n[a] < 0.0:
+        st = -1
+    c = wp.vec3i(h[0], h[1], h[2])
+    o = float(1.0)
+    for _k in range(steps):
+        if c[a] + st >= 0 and c[a] + st <= res - 1:
+            lo = wp.vec3i(c[0], c[1], c[2])
+            lo[a] = wp.min(c[a], c[a] + st)
+            o = o * opn[cell_base + (lo[2] * res + lo[1]) * res + lo[0]][a]
+            c[a] = c[a] + st
+    return o
+
+
+@wp.func
 def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p: wp.vec3, n: wp.vec3,
                        lookup_offset: float, leak_guard: bool, margin: float, band: float, keep: float,
                        opn: wp.array(dtype=wp.vec3), occlusion: bool, plane: wp.array(dtype=wp.vec3),
@@ -361,9 +385,12 @@ def cascade_irradiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, p
     sb = trilinear_sh(grids, g.base + 2 * n3, g.res, u, us, n, leak_guard, opn, g.cell_base, occlusion, h)
     if damp_dist > 0.0:
         uf = u + n * damp_dist
-        sr = sr * self_damping(sr[0], sample_sh(grids, g.base, g.res, uf)[0], damp_pow)
-        sg = sg * self_damping(sg[0], sample_sh(grids, g.base + n3, g.res, uf)[0], damp_pow)
-        sb = sb * self_damping(sb[0], sample_sh(grids, g.base + 2 * n3, g.res, uf)[0], damp_pow)
+        o = float(1.0)
+        if occlusion:
+            o = open_ahead(opn, g.cell_base, g.res, h, n, int(wp.ceil(damp_dist)))
+        sr = sr * (1.0 - o * (1.0 - self_damping(sr[0], sample_sh(grids, g.base, g.res, uf)[0], damp_pow)))
+        sg = sg * (1.0 - o * (1.0 - self_damping(sg[0], sample_sh(grids, g.base + n3, g.res, uf)[0], damp_pow)))
+        sb = sb * (1.0 - o * (1.0 - self_damping(sb[0], sample_sh(grids, g.base + 2 * n3, g.res, uf)[0], damp_pow)))
     return wp.vec4(alpha * eval_irradiance(sr, n, inv_area), alpha * eval_irradiance(sg, n, inv_area),
                    alpha * eval_irradiance(sb, n, inv_area), alpha)
 

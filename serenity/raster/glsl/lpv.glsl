@@ -164,6 +164,26 @@ float lpv_self_damping(float near, float far) {
     return pow(clamp(far / near, 0.0, 1.0), u_lpv_damp_pow);
 }
 
+// Product of the openness of the `steps` faces met going from the home cell h along the normal's
+// dominant axis, stopping at the grid's edge (the twin of kernels.open_ahead).
+float lpv_open_ahead(sampler3D to, int res, ivec3 h, vec3 n, int steps) {
+    int a = 0;
+    if (abs(n.y) > abs(n[a])) a = 1;
+    if (abs(n.z) > abs(n[a])) a = 2;
+    int st = n[a] < 0.0 ? -1 : 1;
+    ivec3 c = h;
+    float o = 1.0;
+    for (int k = 0; k < steps; ++k) {
+        if (c[a] + st >= 0 && c[a] + st <= res - 1) {
+            ivec3 lo = c;
+            lo[a] = min(c[a], c[a] + st);
+            o *= texelFetch(to, lo, 0)[a];
+            c[a] += st;
+        }
+    }
+    return o;
+}
+
 float lpv_eval_radiance(vec4 s, vec3 w, float a1, float inv_area) {
     return max((LPV_C0 * s.x + a1 * LPV_C1 * dot(s.yzw, w)) * inv_area, 0.0);
 }
@@ -184,7 +204,11 @@ vec3 lpv_cascade_irradiance(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D 
     if (u_lpv_damp_dist > 0.0) {
         vec4 fr, fg, fb;
         lpv_fetch(tr, tg, tb, res, u + n * u_lpv_damp_dist, fr, fg, fb);
-        sr *= lpv_self_damping(sr.x, fr.x); sg *= lpv_self_damping(sg.x, fg.x); sb *= lpv_self_damping(sb.x, fb.x);
+        float o = u_lpv_leak_guard && u_lpv_occlusion
+            ? lpv_open_ahead(to, res, lpv_home(to, res, us, n), n, int(ceil(u_lpv_damp_dist))) : 1.0;
+        sr *= 1.0 - o * (1.0 - lpv_self_damping(sr.x, fr.x));
+        sg *= 1.0 - o * (1.0 - lpv_self_damping(sg.x, fg.x));
+        sb *= 1.0 - o * (1.0 - lpv_self_damping(sb.x, fb.x));
     }
     float inv_area = 1.0 / (cell * cell);
     keep -= alpha;
