@@ -4,7 +4,8 @@
 
 For each LPV setting (``VARIANTS``: the settings before the closed-room work, each of its three changes
 alone — ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — all three, the default (all three +
-``lookup_planes``), and near-field / coverage-blocking alternatives that were measured and not adopted):
+``lookup_planes``), and near-field / coverage-blocking / self-illumination-damping alternatives that were
+measured and not adopted):
 
 - ``cornell_indirect``: the Cornell box's indirect light alone at 160×90 (ours = frame with the LPV −
   frame without it; the reference = Mitsuba full − direct, 4096 spp, cached — the same as
