@@ -261,8 +261,11 @@ class Renderer:
             self.gbuffer_samples = GBufferSamples(ctx, cfg.sky_vpl_stride)
             self.gbuffer_samples.resize(self.width, self.height)
             self.lpv_gl = LPVTexturesGL(ctx)
-            self.lpv_pass = IndirectPass(ctx, "lpv")
-            self.lpv_pass_lo = IndirectPass(ctx, "lpv", lowres=True) if self.lowres else None
+            # the self-illumination damping is compiled in only when the LPV has it on (lpv.glsl's
+            # LPV_DAMPING; like the LPV's other lookup settings, fixed when the renderer is built)
+            damping = {"LPV_DAMPING": int(cfg.lpv.self_damping > 0)}
+            self.lpv_pass = IndirectPass(ctx, "lpv", defines=damping)
+            self.lpv_pass_lo = IndirectPass(ctx, "lpv", lowres=True, defines=damping) if self.lowres else None
 
     def invalidate_lpv(self) -> None:
         """Make the next frame re-inject and re-propagate the LPV even if nothing changed (for

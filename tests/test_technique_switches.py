@@ -91,6 +91,23 @@ def test_lpv_terms_add_up_and_both_off_skip_the_pass(courtyard):
     assert np.any(np.abs(diffuse) > 0, axis=-1)[covered].mean() > 0.9
 
 
+def test_lpv_self_damping_is_compiled_in_when_on(courtyard):
+    """``LPVConfig.self_damping`` is compiled into the LPV lighting passes only when on (lpv.glsl's
+    LPV_DAMPING; fixed when the renderer is built, like the LPV's other lookup settings): a renderer
+    built with it dims the LPV's light (never brightens it) and leaves the rest."""
+    base = RenderConfig.preset("medium", indirect_scale=1)
+    r = Renderer(load("courtyard"), W, H, config=dataclasses.replace(
+        base, lpv=dataclasses.replace(base.lpv, self_damping=2.5)))
+    try:
+        r.render()
+        damped = r.render().hdr
+    finally:
+        r.close()
+    full = courtyard.full.hdr
+    assert np.abs(damped - full).max() > 0
+    assert np.all(damped <= full * (1 + 1e-4) + 1e-4 * full.max())
+
+
 def test_reflections_off_changes_only_reflecting_pixels(courtyard):
     full = courtyard.full
     off = courtyard(reflections=False)

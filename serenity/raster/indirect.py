@@ -33,7 +33,9 @@ LOWRES_DRAWS = {"sky": ((3, 1.0),), "lpv": ((1, 1.0), (2, -0.25))}
 
 
 class IndirectPass:
-    def __init__(self, ctx, technique: str, lowres: bool = False):
+    def __init__(self, ctx, technique: str, lowres: bool = False, defines: dict | None = None):
+        """``defines``: more compile-time switches of indirect.glsl and what it includes (e.g.
+        lpv.glsl's ``LPV_DAMPING``)."""
         if technique not in TECHNIQUES:
             raise ValueError(f"technique must be one of {sorted(TECHNIQUES)}")
         self.ctx = ctx
@@ -41,10 +43,10 @@ class IndirectPass:
         self.lowres = lowres
         self._draws = []  # (program, vao, LPV terms it adds)
         for terms, z in (LOWRES_DRAWS[technique] if lowres else ((3, None),)):
-            defines = {"TECHNIQUE": TECHNIQUES[technique], "LOWRES": int(lowres), "LPV_TERMS": terms}
+            d = {"TECHNIQUE": TECHNIQUES[technique], "LOWRES": int(lowres), "LPV_TERMS": terms, **(defines or {})}
             if z is not None:
-                defines["FULLSCREEN_Z"] = z
-            program = load_program(ctx, "indirect.glsl", defines=defines)
+                d["FULLSCREEN_Z"] = z
+            program = load_program(ctx, "indirect.glsl", defines=d)
             self._draws.append((program, fullscreen_vao(ctx, program), terms))
         self._targets = BlendedTargets(ctx)
 
