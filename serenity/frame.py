@@ -52,7 +52,7 @@ from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.indirect import IndirectPass, LowResIndirect
 from serenity.raster.interop import read_texture
 from serenity.raster.lowres import GBufferSamples, LowResGuide
-from serenity.raster.lpv_gl import LPVTexturesGL
+from serenity.raster.lpv_gl import LPVTexturesGL, lookup_defines
 from serenity.raster.raycast import RayCastingBuffer, RayCastPass
 from serenity.raster.rsm import RSMPass
 from serenity.raster.rt_gbuffer import RTGBufferUpload
@@ -261,11 +261,11 @@ class Renderer:
             self.gbuffer_samples = GBufferSamples(ctx, cfg.sky_vpl_stride)
             self.gbuffer_samples.resize(self.width, self.height)
             self.lpv_gl = LPVTexturesGL(ctx)
-            # the self-illumination damping is compiled in only when the LPV has it on (lpv.glsl's
-            # LPV_DAMPING; like the LPV's other lookup settings, fixed when the renderer is built)
-            damping = {"LPV_DAMPING": int(cfg.lpv.self_damping > 0)}
-            self.lpv_pass = IndirectPass(ctx, "lpv", defines=damping)
-            self.lpv_pass_lo = IndirectPass(ctx, "lpv", lowres=True, defines=damping) if self.lowres else None
+            # the lookup's switches compiled in (lpv.glsl; fixed with the LPV's config when the renderer
+            # is built): only the paths the config takes are run
+            switches = lookup_defines(cfg.lpv)
+            self.lpv_pass = IndirectPass(ctx, "lpv", defines=switches)
+            self.lpv_pass_lo = IndirectPass(ctx, "lpv", lowres=True, defines=switches) if self.lowres else None
 
     def invalidate_lpv(self) -> None:
         """Make the next frame re-inject and re-propagate the LPV even if nothing changed (for

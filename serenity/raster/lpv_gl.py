@@ -24,6 +24,22 @@ CHANNELS = ("r", "g", "b")
 UNITS = MAX_CASCADES * (len(CHANNELS) + 1)  # texture units ``bind`` uses, from ``first_unit`` on
 
 
+def lookup_switches(cfg) -> dict[str, bool]:
+    """lpv.glsl's lookup switches for an LPVConfig: the leak guard, the lookup occlusion (with the
+    guard and the geometry volume) and the lookup planes (with the occlusion)."""
+    occlusion = bool(cfg.leak_guard and cfg.lookup_occlusion and cfg.geometry_volume)
+    return {"leak_guard": bool(cfg.leak_guard), "occlusion": occlusion, "planes": occlusion and bool(cfg.lookup_planes)}
+
+
+def lookup_defines(cfg) -> dict[str, int]:
+    """The same switches (and the self-illumination damping) as lpv.glsl's compile-time defines: a
+    program built with them runs only the lookup paths the config takes (llvmpipe runs the code of a
+    branch a uniform skips)."""
+    sw = lookup_switches(cfg)
+    return {"LPV_LEAK_GUARD": int(sw["leak_guard"]), "LPV_OCCLUSION": int(sw["occlusion"]),
+            "LPV_PLANES": int(sw["planes"]), "LPV_DAMPING": int(cfg.self_damping > 0)}
+
+
 class LPVTexturesGL:
     """The LPV's cascades as 12 sampler3D (3 cascades × RGB + openness) plus the lookup uniforms of lpv.glsl."""
 
@@ -68,9 +84,8 @@ class LPVTexturesGL:
                         tex.release()
                     self.textures[c][k] = upload_texture3d(self.ctx, arr)
         self.lookup_offset = float(cfg.lookup_offset)
-        self.leak_guard = bool(cfg.leak_guard)
-        self.occlusion = bool(cfg.leak_guard and cfg.lookup_occlusion and cfg.geometry_volume)
-        self.planes = self.occlusion and bool(cfg.lookup_planes)
+        sw = lookup_switches(cfg)
+        self.leak_guard, self.occlusion, self.planes = sw["leak_guard"], sw["occlusion"], sw["planes"]
         self.damp_dist = float(cfg.self_damping)
         self.damp_pow = float(cfg.self_damping_power)
         self.margin = float(cfg.edge_margin)
@@ -120,11 +135,12 @@ class LPVTexturesGL:
 
 class LPVProbeGL:
     """Evaluate ``lpv_irradiance`` and ``lpv_glossy`` at given points with a fullscreen pass
-    (``glsl/lpv_probe.glsl``): the GL half of the Warp-vs-GLSL lookup check."""
+    (``glsl/lpv_probe.glsl``): the GL half of the Warp-vs-GLSL lookup check. ``defines``: the lookup's
+    switches compiled in (``lookup_defines``, as the renderer's passes have them); else the uniforms."""
 
-    def __init__(self, ctx):
+    def __init__(self, ctx, defines: dict | None = None):
         self.ctx = ctx
-        self.program = load_program(ctx, "lpv_probe.glsl")
+        self.program = load_program(ctx, "lpv_probe.glsl", defines=defines)
         self.vao = fullscreen_vao(ctx, self.program)
         self.textures = LPVTexturesGL(ctx)
         self._size = None

@@ -9,7 +9,7 @@ import pytest
 from serenity.config import LPVConfig
 from serenity.kernels import lpv as L
 from serenity.raster import context
-from serenity.raster.lpv_gl import LPVProbeGL
+from serenity.raster.lpv_gl import LPVProbeGL, lookup_defines
 
 
 def _volume(leak_guard: bool, cascades: int = 3, occlusion: bool = True, planes: bool = True, damping: float = 0.0):
@@ -51,12 +51,15 @@ def _check_lookups(gl_ctx, leak_guard, cascades, occlusion, planes, damping=0.0)
     d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
     shin = rng.uniform(1, 64, m).astype(np.float32)
     ref_e, ref_g = v.irradiance(q, d), v.glossy(q, d, shin)
-    probe = LPVProbeGL(gl_ctx)
-    try:
-        gl_e, gl_g = probe.evaluate(v, q, d, shin)
-    finally:
-        probe.release()
-    for ours, ref in ((gl_e, ref_e), (gl_g, ref_g)):
+    results = []
+    # the switches as uniforms (the probe's default) and compiled in, as the renderer's passes have them
+    for defines in (None, lookup_defines(v.config)):
+        probe = LPVProbeGL(gl_ctx, defines=defines)
+        try:
+            results += probe.evaluate(v, q, d, shin)
+        finally:
+            probe.release()
+    for ours, ref in zip(results, (ref_e, ref_g, ref_e, ref_g), strict=True):
         assert ref.max() > 0
         # relative to each value, floored at 1e-3 of the largest (values near 0 after the clamp)
         scale = np.maximum(np.abs(ref), 1e-3 * np.abs(ref).max())

@@ -13,8 +13,26 @@
 #ifndef SERENITY_LPV_GLSL
 #define SERENITY_LPV_GLSL
 #include "common.glsl"
-// LPV_DAMPING 0 leaves the self-illumination damping out of the program (llvmpipe runs a branch's
-// code even when a uniform skips it: compiled in, the off switch cost ~20 % of the LPV lighting pass)
+// The lookup's switches are compile-time where the program defines them (the renderer's LPV
+// lighting passes, lpv_gl.lookup_defines: llvmpipe runs the code of a branch that a uniform skips,
+// e.g. the plain trilinear fetch beside the guarded one, ~14 % of the pass), else the uniforms of
+// the same names (the probe pass that checks the lookups against the Warp twin). LPV_DAMPING 0 leaves
+// the self-illumination damping out (~20 % of the pass while off).
+#ifdef LPV_LEAK_GUARD
+#define LPV_GUARD (LPV_LEAK_GUARD != 0)
+#else
+#define LPV_GUARD u_lpv_leak_guard
+#endif
+#ifdef LPV_OCCLUSION
+#define LPV_OCCL (LPV_OCCLUSION != 0)
+#else
+#define LPV_OCCL u_lpv_occlusion
+#endif
+#ifdef LPV_PLANES
+#define LPV_PLANE (LPV_PLANES != 0)
+#else
+#define LPV_PLANE u_lpv_planes
+#endif
 #ifndef LPV_DAMPING
 #define LPV_DAMPING 1
 #endif
@@ -100,7 +118,7 @@ vec3 lpv_planes(sampler3D to, ivec3 i) {
 ivec3 lpv_home(sampler3D to, int res, vec3 us, vec3 n) {
     vec3 q = us + 0.25 * n;
     ivec3 h = clamp(ivec3(floor(q)), ivec3(0), ivec3(res - 1));
-    if (!u_lpv_planes) return h;
+    if (!LPV_PLANE) return h;
     ivec3 h0 = h;
     vec4 oh = texelFetch(to, h0, 0);
     vec3 thi = lpv_planes(to, h0);
@@ -129,10 +147,10 @@ void lpv_fetch_guarded(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D to, i
     vec3 t = p - f;
     ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1));
     ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1));
-    ivec3 h = u_lpv_occlusion ? lpv_home(to, res, us, n) : ivec3(0);
+    ivec3 h = LPV_OCCL ? lpv_home(to, res, us, n) : ivec3(0);
     // openness of the face between h and i0 / i1 on each axis (1 where they coincide)
     vec3 o0 = vec3(1.0), o1 = vec3(1.0);
-    if (u_lpv_occlusion) {
+    if (LPV_OCCL) {
         if (i0.x != h.x) o0.x = texelFetch(to, ivec3(min(i0.x, h.x), h.y, h.z), 0).r;
         if (i1.x != h.x) o1.x = texelFetch(to, ivec3(min(i1.x, h.x), h.y, h.z), 0).r;
         if (i0.y != h.y) o0.y = texelFetch(to, ivec3(h.x, min(i0.y, h.y), h.z), 0).g;
@@ -204,13 +222,13 @@ vec3 lpv_cascade_irradiance(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D 
     float alpha = lpv_cascade_weight(u, res, c == u_lpv_count - 1) * keep;
     if (alpha <= 0.0) return vec3(0.0);
     vec4 sr, sg, sb;
-    if (u_lpv_leak_guard) lpv_fetch_guarded(tr, tg, tb, to, res, u, us, n, sr, sg, sb);
+    if (LPV_GUARD) lpv_fetch_guarded(tr, tg, tb, to, res, u, us, n, sr, sg, sb);
     else lpv_fetch(tr, tg, tb, res, u, sr, sg, sb);
 #if LPV_DAMPING
     if (u_lpv_damp_dist > 0.0) {
         vec4 fr, fg, fb;
         lpv_fetch(tr, tg, tb, res, u + n * u_lpv_damp_dist, fr, fg, fb);
-        float o = u_lpv_leak_guard && u_lpv_occlusion
+        float o = LPV_GUARD && LPV_OCCL
             ? lpv_open_ahead(to, res, lpv_home(to, res, us, n), n, int(ceil(u_lpv_damp_dist))) : 1.0;
         sr *= 1.0 - o * (1.0 - lpv_self_damping(sr.x, fr.x));
         sg *= 1.0 - o * (1.0 - lpv_self_damping(sg.x, fg.x));
