@@ -90,26 +90,30 @@ float contact_visibility(vec3 p, vec3 n, float view_depth) {
     float p11 = length(vec3(u_view_proj[0][1], u_view_proj[1][1], u_view_proj[2][1]));
     float pixel = 2.0 * view_depth / (p11 * size.y);       // metres per pixel at the receiver
     float len = min(u_contact_pixels * pixel, u_contact_texels * cascade_texel_at(view_depth));
+    // march point i: m = p + d i, in clip space c0 + dc i (linear), seen from the camera along r0 + d i
+    vec3 d = u_sun_dir * (len / float(CONTACT_STEPS));
+    vec4 c0 = u_view_proj * vec4(p, 1.0), dc = u_view_proj * vec4(d, 0.0);
+    vec3 r0 = p - u_camera_pos;
+    float k_near = 2.0 * pixel / max(view_depth, 1e-6);   // metres of plane per metre of depth
     for (int i = 1; i <= CONTACT_STEPS; ++i) {
-        vec3 m = p + u_sun_dir * (len * float(i) / float(CONTACT_STEPS));
-        vec4 c = u_view_proj * vec4(m, 1.0);
+        vec4 c = c0 + dc * float(i);
         if (c.w <= 0.0) break;
         vec2 uv = c.xy / c.w * 0.5 + 0.5;
         if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0)))) break;
         vec4 g = texture(g_position, uv);
         if (g.w == 0.0) continue;                            // sky
-        vec3 gn = normalize(texture(g_normal, uv).xyz);
-        vec3 r = m - u_camera_pos;
-        float dist = length(r);
-        r /= dist;
+        vec3 gn = texture(g_normal, uv).xyz;                 // unit to f16 precision; s is scale-free
+        vec3 r = r0 + d * float(i);                          // camera to m
         float rn = dot(r, gn);
-        if (abs(rn) < 1e-3) continue;
-        float t = dot(g.xyz - u_camera_pos, gn) / rn;       // that pixel's plane along the ray to m
+        float dist = length(r);
+        if (abs(rn) < 1e-3 * dist) continue;
+        float s = dot(g.xyz - u_camera_pos, gn) / rn;        // that pixel's plane at camera + r s
+        float t = s * dist;
         float behind = dist - t;
         // the plane only near its pixel (a grazing plane extrapolated far past it is not the occluder)
-        float near_g = 2.0 * pixel * max(t, 0.0) / max(view_depth, 1e-6);
-        if (t > 0.0 && behind > 0.05 * pixel && behind < len
-            && length(u_camera_pos + r * t - g.xyz) < near_g) return 0.0;
+        vec3 e = u_camera_pos + r * s - g.xyz;
+        float near_g = k_near * max(t, 0.0);
+        if (t > 0.0 && behind > 0.05 * pixel && behind < len && dot(e, e) < near_g * near_g) return 0.0;
     }
     return 1.0;
 }
