@@ -240,23 +240,14 @@ def intersect_triangle(
     b_y = b[ky] - sy * b[kz]
     c_x = c[kx] - sx * c[kz]
     c_y = c[ky] - sy * c[kz]
-    hit = False
-    t = float(0.0)
-    u = float(0.0)
-    v = float(0.0)
-    # float32 edge functions first: a nonzero rounded difference of rounded products has the sign
-    # of the exact one (rounding is monotone), so two of opposite signs reject the triangle exactly
-    # as the float64 test would; only what passes (about one triangle per ray) pays for float64
-    fu = c_x * b_y - c_y * b_x
-    fv = a_x * c_y - a_y * c_x
-    fw = b_x * a_y - b_y * a_x
-    if (fu < 0.0 or fv < 0.0 or fw < 0.0) and (fu > 0.0 or fv > 0.0 or fw > 0.0):
-        return hit, t, u, v
     eu = wp.float64(c_x) * wp.float64(b_y) - wp.float64(c_y) * wp.float64(b_x)
     ev = wp.float64(a_x) * wp.float64(c_y) - wp.float64(a_y) * wp.float64(c_x)
     ew = wp.float64(b_x) * wp.float64(a_y) - wp.float64(b_y) * wp.float64(a_x)
     zero = wp.float64(0.0)
     hit = True
+    t = float(0.0)
+    u = float(0.0)
+    v = float(0.0)
     if (eu < zero or ev < zero or ew < zero) and (eu > zero or ev > zero or ew > zero):
         hit = False
     else:
