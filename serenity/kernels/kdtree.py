@@ -137,6 +137,8 @@ _TOL = wp.constant(T_TOLERANCE)
 _TINY = wp.constant(TINY_DIRECTION)
 _FLT_MAX = wp.constant(float(np.finfo(np.float32).max))
 _SORT_BITS = wp.constant(SORT_ORIGIN_BITS)
+_NODE_MASK = wp.constant((1 << 27) - 1)  # node indices are < 2^27 (``KdTree.device_data``)
+_REF_MASK = wp.constant((1 << 29) - 1)  # reference indices are < 2^29 (``KdTree.device_data``)
 _SORT_CELLS = wp.constant(float(1 << SORT_ORIGIN_BITS))
 
 
@@ -356,7 +358,9 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
     st_t0 = _stack_f()
     st_t1 = _stack_f()
     while not done:
-        nd = tree.nodes[node]
+        # the mask (nodes < 2^27, checked in device_data) tells the compiler the index is not negative:
+        # Warp's array load otherwise adds a negative-index wrap (sar, and, add) on the step's chain
+        nd = tree.nodes[node & _NODE_MASK]
         head = nd.head
         axis = head & 3
         leaf_end = False  # a leaf is done (or an empty one skipped): stop or pop
@@ -404,7 +408,7 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
             first_ref = head >> 2
             n = int(nd.split)
             for j in range(n):
-                rf = tree.refs[first_ref + j]
+                rf = tree.refs[(first_ref + j) & _REF_MASK]  # not negative: no wrap
                 hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, rf.v0, rf.v1, rf.v2, tlo, best_t)
                 f = int(-1)
                 if hit:
@@ -670,6 +674,8 @@ class KdTree:
             empty = leaf & (count == 0)
             if len(head) >= 1 << 27:
                 raise SerenityError(f"kd-tree of {len(head):,} nodes: at most 2^27 fit the 8-byte node")
+            if len(self.prims) >= 1 << 29:
+                raise SerenityError(f"kd-tree of {len(self.prims):,} leaf slots: at most 2^29 fit the 8-byte node")
             if self.stats.depth >= STACK_SIZE:
                 raise SerenityError(f"kd-tree of depth {self.stats.depth}: the traversal stack has {STACK_SIZE} slots")
             right = np.minimum(child + 1, len(head) - 1)
