@@ -129,6 +129,8 @@ SORT_MIN_RAYS = 1 << 15
 SORT_MIN_RUN = 4  # ... whose keys change on average more often than every this many rays (``ray_order``)
 SORT_ORIGIN_BITS = 3  # at most 4: octant + 3 × bits must fit the 16-bit keys numpy radix-sorts
 
+assert STACK_SIZE & (STACK_SIZE - 1) == 0  # a power of 2: the stack index is masked (``_STACK_MASK``)
+_STACK_MASK = wp.constant(STACK_SIZE - 1)
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 _stack_f = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
 
@@ -381,9 +383,10 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
             if ia == 0.0:
                 # parallel to the plane: only the side of the origin, both when on the plane
                 if oa == split and empty_second == 0:
-                    st_node[sp] = second
-                    st_t0[sp] = t0
-                    st_t1[sp] = t1
+                    k = sp & _STACK_MASK  # not negative: no index wrap
+                    st_node[k] = second
+                    st_t0[k] = t0
+                    st_t1[k] = t1
                     sp += 1
                 node = first
                 leaf_end = empty_first != 0
@@ -397,9 +400,10 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                     leaf_end = empty_second != 0
                 else:
                     if empty_second == 0:
-                        st_node[sp] = second
-                        st_t0[sp] = wp.max(t0, ts - teps)
-                        st_t1[sp] = t1
+                        k = sp & _STACK_MASK
+                        st_node[k] = second
+                        st_t0[k] = wp.max(t0, ts - teps)
+                        st_t1[k] = t1
                         sp += 1
                     node = first
                     t1 = wp.min(t1, ts + teps)
@@ -428,9 +432,10 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                 popped = int(0)
                 while sp > 0 and popped == 0:
                     sp -= 1
-                    node = st_node[sp]
-                    t0 = st_t0[sp]
-                    t1 = st_t1[sp]
+                    k = sp & _STACK_MASK
+                    node = st_node[k]
+                    t0 = st_t0[k]
+                    t1 = st_t1[k]
                     if t0 <= best_t:
                         popped = 1
                 if popped == 0:
