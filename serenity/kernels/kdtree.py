@@ -139,8 +139,6 @@ _TOL = wp.constant(T_TOLERANCE)
 _TINY = wp.constant(TINY_DIRECTION)
 _FLT_MAX = wp.constant(float(np.finfo(np.float32).max))
 _SORT_BITS = wp.constant(SORT_ORIGIN_BITS)
-_NODE_MASK = wp.constant((1 << 27) - 1)  # node indices are < 2^27 (``KdTree.device_data``)
-_REF_MASK = wp.constant((1 << 29) - 1)  # reference indices are < 2^29 (``KdTree.device_data``)
 _SORT_CELLS = wp.constant(float(1 << SORT_ORIGIN_BITS))
 
 
@@ -185,6 +183,48 @@ class KdTreeData:
 # ----------------------------------------------------------------------------------------------
 # functions
 # ----------------------------------------------------------------------------------------------
+
+
+# Loads without Warp's index arithmetic. Warp's ``a[i]`` multiplies ``i`` by the array's run-time
+# stride and wraps a negative ``i``, both on the traversal's chain of dependent loads (node, next
+# node, ...); these read element ``i`` of a contiguous array (``device_data`` makes them so) at
+# ``data + i * sizeof(element)``, a compile-time size: one scaled-index load. ``i`` must be in range.
+
+
+@wp.func_native("return nodes.data[(unsigned)i].head;")
+def node_head(nodes: wp.array(dtype=KdNode), i: int) -> int:
+    """``nodes[i].head`` (see the note above)."""
+    ...
+
+
+@wp.func_native("return nodes.data[(unsigned)i].split;")
+def node_split(nodes: wp.array(dtype=KdNode), i: int) -> float:
+    """``nodes[i].split`` (see the note above)."""
+    ...
+
+
+@wp.func_native("return refs.data[(unsigned)i].v0;")
+def ref_v0(refs: wp.array(dtype=KdRef), i: int) -> wp.vec3:
+    """``refs[i].v0`` (see the note above)."""
+    ...
+
+
+@wp.func_native("return refs.data[(unsigned)i].v1;")
+def ref_v1(refs: wp.array(dtype=KdRef), i: int) -> wp.vec3:
+    """``refs[i].v1`` (see the note above)."""
+    ...
+
+
+@wp.func_native("return refs.data[(unsigned)i].v2;")
+def ref_v2(refs: wp.array(dtype=KdRef), i: int) -> wp.vec3:
+    """``refs[i].v2`` (see the note above)."""
+    ...
+
+
+@wp.func_native("return refs.data[(unsigned)i].prim;")
+def ref_prim(refs: wp.array(dtype=KdRef), i: int) -> int:
+    """``refs[i].prim`` (see the note above)."""
+    ...
 
 
 @wp.func
@@ -360,14 +400,11 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
     st_t0 = _stack_f()
     st_t1 = _stack_f()
     while not done:
-        # the mask (nodes < 2^27, checked in device_data) tells the compiler the index is not negative:
-        # Warp's array load otherwise adds a negative-index wrap (sar, and, add) on the step's chain
-        nd = tree.nodes[node & _NODE_MASK]
-        head = nd.head
+        head = node_head(tree.nodes, node)  # a load at data + 8 node (no stride multiply, no index wrap)
         axis = head & 3
         leaf_end = False  # a leaf is done (or an empty one skipped): stop or pop
         if axis != 3:
-            split = nd.split
+            split = node_split(tree.nodes, node)
             child = head >> 4
             oa = o[axis]
             first = child
@@ -410,13 +447,16 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                     leaf_end = empty_first != 0
         else:
             first_ref = head >> 2
-            n = int(nd.split)
+            n = int(node_split(tree.nodes, node))
             for j in range(n):
-                rf = tree.refs[(first_ref + j) & _REF_MASK]  # not negative: no wrap
-                hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, rf.v0, rf.v1, rf.v2, tlo, best_t)
+                r = first_ref + j
+                p0 = ref_v0(tree.refs, r)
+                p1 = ref_v1(tree.refs, r)
+                p2 = ref_v2(tree.refs, r)
+                hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, p0, p1, p2, tlo, best_t)
                 f = int(-1)
                 if hit:
-                    f = rf.prim
+                    f = ref_prim(tree.refs, r)
                 if hit and (t < best_t or f < prim):
                     best_t = t
                     prim = f
