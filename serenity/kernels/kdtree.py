@@ -292,7 +292,11 @@ def intersect_triangle(
     t = float(0.0)
     u = float(0.0)
     v = float(0.0)
-    if (eu < zero or ev < zero or ew < zero) and (eu > zero or ev > zero or ew > zero):
+    # outside when two edge functions have opposite signs; as bit operations on 0/1 rather than
+    # Python's short-circuit 'or'/'and', which Warp turns into a chain of branches
+    neg = wp.where(eu < zero, 1, 0) | wp.where(ev < zero, 1, 0) | wp.where(ew < zero, 1, 0)
+    pos = wp.where(eu > zero, 1, 0) | wp.where(ev > zero, 1, 0) | wp.where(ew > zero, 1, 0)
+    if (neg & pos) != 0:
         hit = False
     else:
         det = eu + ev + ew
