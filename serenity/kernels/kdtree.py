@@ -284,14 +284,25 @@ def intersect_triangle(
     b_y = b[ky] - sy * b[kz]
     c_x = c[kx] - sx * c[kz]
     c_y = c[ky] - sy * c[kz]
+    hit = False
+    t = float(0.0)
+    u = float(0.0)
+    v = float(0.0)
+    # float32 edge functions first: a nonzero rounded difference of rounded products has the sign of
+    # the exact one (rounding is monotone), so two of opposite signs reject the triangle exactly as
+    # the float64 test below would; only what passes (about one triangle per ray) pays for float64
+    fu = c_x * b_y - c_y * b_x
+    fv = a_x * c_y - a_y * c_x
+    fw = b_x * a_y - b_y * a_x
+    fneg = wp.where(fu < 0.0, 1, 0) | wp.where(fv < 0.0, 1, 0) | wp.where(fw < 0.0, 1, 0)
+    fpos = wp.where(fu > 0.0, 1, 0) | wp.where(fv > 0.0, 1, 0) | wp.where(fw > 0.0, 1, 0)
+    if (fneg & fpos) != 0:
+        return hit, t, u, v
     eu = wp.float64(c_x) * wp.float64(b_y) - wp.float64(c_y) * wp.float64(b_x)
     ev = wp.float64(a_x) * wp.float64(c_y) - wp.float64(a_y) * wp.float64(c_x)
     ew = wp.float64(b_x) * wp.float64(a_y) - wp.float64(b_y) * wp.float64(a_x)
     zero = wp.float64(0.0)
     hit = True
-    t = float(0.0)
-    u = float(0.0)
-    v = float(0.0)
     # outside when two edge functions have opposite signs; as bit operations on 0/1 rather than
     # Python's short-circuit 'or'/'and', which Warp turns into a chain of branches
     neg = wp.where(eu < zero, 1, 0) | wp.where(ev < zero, 1, 0) | wp.where(ew < zero, 1, 0)
