@@ -6,7 +6,8 @@ a front-to-back stack traversal that stops at the first leaf whose hit lies insi
 (binned SAH, disk cache) is :mod:`serenity.kernels.kdtree_build`; its settings are
 :class:`serenity.config.KdBuildConfig`.
 
-Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`KdTree.device_data`):
+Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`KdTree.device_data`;
+``nodes`` and ``refs`` contiguous, as the traversal's native loads :func:`node_head` etc. assume):
     nodes (nodes,) KdNode, 8 bytes: inner node: ``head`` = (first child << 4) | (right child is an
         empty leaf) << 3 | (left child is an empty leaf) << 2 | axis (children are consecutive: left
         at first child, right at first child + 1), ``split`` = the split position (world units);
@@ -28,7 +29,9 @@ scale) so that rays through split planes, cell corners and box faces never skip 
 a leaf ends the search once it lies before the leaf's far end. Ray–triangle test: Woop, Benthin &
 Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013), with the edge functions evaluated in
 float64 (products of float32 values are exact there), so shared edges and vertices are hit by one
-of their triangles and no ray leaks through a closed mesh. Closest-hit results: ``t`` (N,) float32
+of their triangles and no ray leaks through a closed mesh; a float32 pass rejects first (as Woop et
+al. do: a nonzero float32 edge function has the exact sign), so only the ~1 triangle per ray that
+passes it pays for float64, with the same results. Closest-hit results: ``t`` (N,) float32
 (inf on a miss), ``prim`` (N,) int32 (−1), barycentrics ``u``, ``v`` (N,) float32 with
 p = (1−u−v)·v0 + u·v1 + v·v2 (Embree's convention); equal t resolve to the lower triangle index
 within a leaf. Any-hit (``occluded``): (N,) bool, a hit with tmin < t < tmax.
@@ -63,14 +66,20 @@ empty-leaf flags, and fewer empty-space cuts in the build (``KdBuildConfig.min_e
 -O2, -march=native): ``wp.isfinite`` is a call out of line into Warp's runtime, so the ray set-up
 uses :func:`finite` (inline, ~10 per ray); a vector component at a run-time index is a load from
 the stack, so the triangle test is inlined in its six axis permutations with literal axes
-(:func:`intersect_triangle_fixed`). Tried without a measurable gain
-(``benchmarks/bench_kdtree_steps.py``, ``benchmarks/results/kdtree_ab.json``): ordering the children
-by the direction's sign instead of the origin's side, a branch-free step, selects instead of the
-step's indexed loads, deeper trees, nodes in 64-byte cache-line treelets, 36-byte leaf records
-(the index in its own array) packed in depth-first leaf order, packets of 4 coherent rays sharing
-one traversal (without SIMD lanes Warp's scalar code does each ray's work anyway, plus the
-packet's bookkeeping: slower), -O3 instead of -O2; earlier, two rays per thread with interleaved
-steps, other SAH cost ratios.
+(:func:`intersect_triangle_fixed`); Warp's ``a[i]`` wraps a negative ``i`` and multiplies it by the
+array's run-time stride, both on the chain of dependent node loads, so the nodes and leaf references
+are read by native snippets at a compile-time element size (:func:`node_head`; with the index masks
+that came first, +21 % coherent and +17 % incoherent rays per CPU-second against the plain loads,
+``benchmarks/results/kdtree_ab_issue17.json``), and the stack index is masked to its range.
+Tried without a measurable gain (``benchmarks/bench_kdtree_steps.py``,
+``benchmarks/results/kdtree_ab.json``): ordering the children by the direction's sign instead of the
+origin's side, a branch-free step, selects instead of the step's indexed loads, deeper trees, nodes
+in 64-byte cache-line treelets, 36-byte leaf records (the index in its own array) packed in
+depth-first leaf order, packets of 4 coherent rays sharing one traversal (without SIMD lanes Warp's
+scalar code does each ray's work anyway, plus the packet's bookkeeping: slower), -O3 instead of -O2;
+earlier, two rays per thread with interleaved steps, other SAH cost ratios; the child order as 0/1
+arithmetic instead of a branch (slower: the branch is mostly predicted, the arithmetic lengthens the
+chain to the next node).
 """
 
 from __future__ import annotations
@@ -851,4 +860,5 @@ class KdTree:
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "PROGRESS_MIN_TRIANGLES", "SORT_MIN_RAYS", "Hits",
            "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_float",
            "gather_in_order", "gather_vec3", "intersect_rays", "intersect_triangle", "intersect_triangle_fixed",
-           "occlude_rays", "ray_order", "ray_sort_key", "setup_ray", "sort_keys", "start_ray", "trace_kd"]
+           "node_head", "node_split", "occlude_rays", "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1",
+           "ref_v2", "sample_key_changes", "setup_ray", "sort_keys", "start_ray", "trace_kd"]
