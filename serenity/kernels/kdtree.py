@@ -29,11 +29,10 @@ scale) so that rays through split planes, cell corners and box faces never skip 
 a leaf ends the search once it lies before the leaf's far end. Ray–triangle test: Woop, Benthin &
 Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013), with the edge functions evaluated in
 float64 (products of float32 values are exact there), so shared edges and vertices are hit by one
-of their triangles and no ray leaks through a closed mesh; a float32 pass rejects first (as Woop et
-al. do: a float32 edge function beyond its rounding error bound has the exact sign, with or without
-a fused multiply-add), so only the ~1 triangle per ray that passes it pays for float64, with the
-same results. Closest-hit results: ``t`` (N,) float32
-(inf on a miss), ``prim`` (N,) int32 (−1), barycentrics ``u``, ``v`` (N,) float32 with
+of their triangles and no ray leaks through a closed mesh. (A float32 pre-test that rejects on edge
+functions of certain sign was tried: within the noise alone, and its sign is only certain beyond a
+rounding-error margin once a compiler fuses the products, as CUDA does — not kept.) Closest-hit
+results: ``t`` (N,) float32 (inf on a miss), ``prim`` (N,) int32 (−1), barycentrics ``u``, ``v`` (N,) float32 with
 p = (1−u−v)·v0 + u·v1 + v·v2 (Embree's convention); equal t resolve to the lower triangle index
 within a leaf. Any-hit (``occluded``): (N,) bool, a hit with tmin < t < tmax.
 Degenerate rays — a zero, NaN or infinite direction (or a direction whose largest component is
@@ -142,11 +141,6 @@ SORT_MIN_RUN = 4  # ... whose keys change on average more often than every this 
 SORT_SAMPLE_PAIRS = 4096
 SORT_ORIGIN_BITS = 3  # at most 4: octant + 3 × bits must fit the 16-bit keys numpy radix-sorts
 
-#: the float32 edge functions' sign is trusted beyond this fraction of |p| + |q| (p − q, two rounded
-#: products; error ≤ 2^-23 (|p| + |q|) with or without a fused multiply-add: 4x slack) ...
-F32_EDGE_MARGIN = wp.constant(2.0**-21)
-#: ... plus this (products in float32's subnormal range lose their relative precision)
-F32_EDGE_FLOOR = wp.constant(1e-30)
 assert STACK_SIZE & (STACK_SIZE - 1) == 0  # a power of 2: the stack index is masked (``_STACK_MASK``)
 _STACK_MASK = wp.constant(STACK_SIZE - 1)
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
@@ -302,31 +296,9 @@ def intersect_triangle(
     b_y = b[ky] - sy * b[kz]
     c_x = c[kx] - sx * c[kz]
     c_y = c[ky] - sy * c[kz]
-    hit = False
     t = float(0.0)
     u = float(0.0)
     v = float(0.0)
-    # float32 edge functions first: one whose magnitude exceeds its rounding error bound (F32_EDGE_MARGIN
-    # of its two products' magnitudes, which covers a compiler fusing a product into the subtraction
-    # as CUDA does, plus an absolute floor for underflow) has the sign of the exact one, so two of
-    # certain opposite signs reject the triangle exactly as the float64 test below would; the rest, and
-    # what passes (about one triangle per ray), pay for float64
-    pu = c_x * b_y
-    qu = c_y * b_x
-    pv = a_x * c_y
-    qv = a_y * c_x
-    pw = b_x * a_y
-    qw = b_y * a_x
-    fu = pu - qu
-    fv = pv - qv
-    fw = pw - qw
-    mu = F32_EDGE_MARGIN * (wp.abs(pu) + wp.abs(qu)) + F32_EDGE_FLOOR
-    mv = F32_EDGE_MARGIN * (wp.abs(pv) + wp.abs(qv)) + F32_EDGE_FLOOR
-    mw = F32_EDGE_MARGIN * (wp.abs(pw) + wp.abs(qw)) + F32_EDGE_FLOOR
-    fneg = wp.where(fu < -mu, 1, 0) | wp.where(fv < -mv, 1, 0) | wp.where(fw < -mw, 1, 0)
-    fpos = wp.where(fu > mu, 1, 0) | wp.where(fv > mv, 1, 0) | wp.where(fw > mw, 1, 0)
-    if (fneg & fpos) != 0:
-        return hit, t, u, v
     eu = wp.float64(c_x) * wp.float64(b_y) - wp.float64(c_y) * wp.float64(b_x)
     ev = wp.float64(a_x) * wp.float64(c_y) - wp.float64(a_y) * wp.float64(c_x)
     ew = wp.float64(b_x) * wp.float64(a_y) - wp.float64(b_y) * wp.float64(a_x)
