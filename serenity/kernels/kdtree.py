@@ -30,8 +30,9 @@ a leaf ends the search once it lies before the leaf's far end. Ray–triangle te
 Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013), with the edge functions evaluated in
 float64 (products of float32 values are exact there), so shared edges and vertices are hit by one
 of their triangles and no ray leaks through a closed mesh. (A float32 pre-test that rejects on edge
-functions of certain sign was tried: within the noise alone, and its sign is only certain beyond a
-rounding-error margin once a compiler fuses the products, as CUDA does — not kept.) Closest-hit
+functions of opposite signs was tried — exact here, since the module is compiled without FMA
+contraction, ``TRACE_MODULE_OPTIONS`` — and measured within the noise of float64 alone in
+interleaved A/Bs, ``kdtree_ab_no_f32.json``: not kept.) Closest-hit
 results: ``t`` (N,) float32 (inf on a miss), ``prim`` (N,) int32 (−1), barycentrics ``u``, ``v`` (N,) float32 with
 p = (1−u−v)·v0 + u·v1 + v·v2 (Embree's convention); equal t resolve to the lower triangle index
 within a leaf. Any-hit (``occluded``): (N,) bool, a hit with tmin < t < tmax.
