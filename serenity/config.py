@@ -53,7 +53,7 @@ class ShadowConfig:
     ``texels_per_pixel`` the most it may be."""
     texels_per_pixel: float = 0.0
     """> 0: size each cascade to this many texels per pixel of the image's longer side (multiples of
-    64, at least 256, at most ``size``; ``size_for``), so a small image does not draw and clear
+    64, at least 512, at most ``size``; ``size_for``), so a small image does not draw and clear
     shadow maps far finer than its pixels can show; 0: always ``size``. The paper's 2048² at
     1280×720 is 1.6 texels per pixel."""
     cascades: int = 4
@@ -118,7 +118,7 @@ class ShadowConfig:
         if self.texels_per_pixel <= 0.0:
             return self.size
         want = 64 * math.ceil(self.texels_per_pixel * max(width, height) / 64.0)
-        return int(min(self.size, max(256, want)))
+        return int(min(self.size, max(512, want)))
 
 
 @dataclass(frozen=True)
