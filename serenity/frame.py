@@ -302,8 +302,10 @@ class Renderer:
         with self._stage("g-buffer"):
             gbuf = self.gbuffer_pass.render(view_proj, self.scene.camera.position)
         rcb, join = self._start_ray_tracing(view_proj, gbuf)            # sync 1
-        shadow, ao, guide = self._main_view(view_proj, gbuf)
+        # the volumes first: their Warp kernels mostly keep one core busy, so the tracer process gets
+        # the other; the GL passes that follow keep both busy (llvmpipe's threads)
         self._update_volumes(gbuf, light)
+        shadow, ao, guide = self._main_view(view_proj, gbuf)
         lit = self._light_main_view(gbuf, shadow, light, ao, guide)
         out_hdr = self._ray_traced_views(rcb, join, gbuf, lit, light)  # sync 2
         if self.fxaa_pass is not None:
