@@ -32,8 +32,8 @@ float64 (products of float32 values are exact there), so shared edges and vertic
 of their triangles and no ray leaks through a closed mesh. (A float32 pre-test that rejects on edge
 functions of opposite signs was tried — exact here, since the module is compiled without FMA
 contraction, ``TRACE_MODULE_OPTIONS`` — and measured within the noise of float64 alone in
-interleaved A/Bs, ``kdtree_ab_no_f32.json``: not kept.) Closest-hit
-results: ``t`` (N,) float32 (inf on a miss), ``prim`` (N,) int32 (−1), barycentrics ``u``, ``v`` (N,) float32 with
+interleaved A/Bs, ``kdtree_ab_no_f32.json``: not kept.) Closest-hit results: ``t`` (N,) float32
+(inf on a miss), ``prim`` (N,) int32 (−1), barycentrics ``u``, ``v`` (N,) float32 with
 p = (1−u−v)·v0 + u·v1 + v·v2 (Embree's convention); equal t resolve to the lower triangle index
 within a leaf. Any-hit (``occluded``): (N,) bool, a hit with tmin < t < tmax.
 Degenerate rays — a zero, NaN or infinite direction (or a direction whose largest component is
