@@ -136,13 +136,18 @@ def lpv_thin_wall_case(fracs=(0.1, 0.3, 0.5, 0.7, 0.9), device=None) -> Case:
                 extra={"wall_position_in_cell": list(fracs), "ratio_plain": plain, "ratio_mitigated": both})
 
 
-def lpv_self_illumination(y0: float, leak_guard: bool = True, device=None) -> float:
+def lpv_self_illumination(y0: float, leak_guard: bool = True, device=None, surfels: bool = False,
+                          **lpv) -> float:
     """A plane of exitance M = 50 W/m² at height ``y0`` (1 m cells, 8 iterations); returns the
-    irradiance it receives from its own VPLs over M. Exact: 0 (a plane cannot see itself)."""
-    v = _unit_lpv(16, 1.0, 8, device, leak_guard=leak_guard)
+    irradiance it receives from its own VPLs over M. Exact: 0 (a plane cannot see itself).
+    ``surfels``: the plane's surfels go into the geometry volume too; ``lpv``: other LPVConfig fields."""
+    v = _unit_lpv(16, 1.0, 8, device, leak_guard=leak_guard, **lpv)
     xs, zs = np.meshgrid(np.arange(0, 14, 0.25) + 0.125, np.arange(0, 14, 0.25) + 0.125)
     p = np.stack([xs.ravel(), np.full(xs.size, y0), zs.ravel()], 1)
-    v.inject(p, np.tile(UP, (xs.size, 1)), np.full((xs.size, 3), 0.0625 * 50.0))
+    nrm = np.tile(UP, (xs.size, 1))
+    v.inject(p, nrm, np.full((xs.size, 3), 0.0625 * 50.0))
+    if surfels:
+        v.inject_geometry(p, nrm, np.full(xs.size, 0.0625))
     v.propagate()
     return float(v.irradiance(np.array([[7.0, y0, 7.0]]), UP[None])[0, 0]) / 50.0
 

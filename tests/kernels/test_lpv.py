@@ -510,17 +510,10 @@ def test_self_illumination_damping_of_a_lit_plane(device):
     """``LPVConfig.self_damping`` (off by default; README, "The LPV in a closed room"): the lit plane of the
     test above, with its surfels in the geometry volume and the default lookups, receives at most 0.1 of
     its exitance back with the damping at 2.5 cells (measured 0.018–0.047; 0.33–0.42 without it; exact 0)."""
-    ratios = []
-    for y0 in (3.01, 3.3, 3.6, 3.9):
-        v = unit_grid_volume(device, res=16, iterations=8, geometry_volume=True, clamp_faces=True,
-                             self_damping=2.5)
-        xs, zs = np.meshgrid(np.arange(0, 14, 0.25) + 0.125, np.arange(0, 14, 0.25) + 0.125)
-        p = np.stack([xs.ravel(), np.full(xs.size, y0), zs.ravel()], 1)
-        nrm = np.tile([0, 1.0, 0], (xs.size, 1))
-        v.inject(p, nrm, np.full((xs.size, 3), 0.0625 * 50.0))
-        v.inject_geometry(p, nrm, np.full(xs.size, 0.0625))
-        v.propagate()
-        ratios.append(float(v.irradiance(np.array([[7.0, y0, 7.0]]), np.array([[0, 1.0, 0]]))[0, 0]) / 50.0)
+    from serenity.eval.stability import lpv_self_illumination
+
+    ratios = [lpv_self_illumination(y0, device=device, surfels=True, geometry_volume=True, clamp_faces=True,
+                                    self_damping=2.5) for y0 in (3.01, 3.3, 3.6, 3.9)]
     print("damped self-illumination E/M:", [round(r, 3) for r in ratios])
     assert all(0.0 <= r <= 0.1 for r in ratios)
 
