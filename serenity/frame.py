@@ -67,9 +67,9 @@ MAIN_LANE = "main (GL + volumes)"
 STAGES = (
     "upload",
     "g-buffer", "ray casting buffer", "kd-tree build", "cpu ray tracing",  # sync 1, the tracer starts
-    "shadow maps (CSM)", "low-res guide", "ssao",                      # the main view
     "sky volume build", "sky volume update", "sky upload",             # paper §7
     "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload",  # paper §8
+    "shadow maps (CSM)", "low-res guide", "ssao",                      # the main view
     "direct lighting", "sky lighting", "lpv lighting",
     "wait for ray tracing", "rt g-buffer upload", "shadow maps (OSM)",  # sync 2, paper §9
     "rt direct lighting", "rt sky lighting", "rt lpv lighting", "composite",
