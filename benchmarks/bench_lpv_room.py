@@ -75,6 +75,8 @@ VARIANTS = {
     "default + self-illumination damping (1.5 cells, power 2)": {"self_damping": 1.5, "self_damping_power": 2.0},
     "default + self-illumination damping (2.5 cells, power 2)": {"self_damping": 2.5, "self_damping_power": 2.0},
     "default + injection offset 0.75 cell": {"injection_offset": 0.75},
+    "default + self-illumination damping (2.5 cells) and coverage blocking": {"self_damping": 2.5,
+                                                                              "coverage_blocking": True},
 }
 
 COST_VARIANTS = {k: VARIANTS[k] for k in ("before (paper transfer, view-fitted cells)", "face clamp",
