@@ -499,7 +499,7 @@ def cascade_seams(shadow, size=(320, 180), elevation: float = 30.0):
     cam = scene.camera
     depth = (pos[near] - cam.position) @ cam.forward
     cascades = fit_shadow_cascades(cam, size[0] / size[1], scene.sun.direction, scene.bounds, shadow.cascades,
-                                   shadow.size, shadow.split_lambda, shadow.max_distance)
+                                   shadow.size_for(*size), shadow.split_lambda, shadow.max_distance)
     jumps = []
     v = vis[near]
     for c in cascades[:-1]:
