@@ -703,3 +703,34 @@ def test_coverage_blocking_stops_the_thin_wall_leak(device):
 
     assert worst(False) > 0.05
     assert worst(True) < 0.02
+
+
+@pytest.mark.parametrize("kw", [{}, {"geometry_volume": True, "early_stop": 0.0},
+                                {"geometry_volume": True, "clamp_faces": True, "iterations": (6, 9, 14)}],
+                         ids=["early-stop", "geometry-volume", "clamped"])
+def test_one_launch_propagation_equals_a_launch_per_iteration(device, kw):
+    # propagate(one_launch=True) runs every iteration inside one single-threaded kernel (on the CPU
+    # it saves a launch's Python per iteration); the light, the far light handed over, the last
+    # wavefront and the iteration counts (early stop included) must be those of the per-iteration path
+    rng = np.random.default_rng(11)
+    cfg = LPVConfig(resolution=(10, 10, 12), cascades=3, early_stop=kw.pop("early_stop", 0.15), **kw)
+    bounds = np.array([[0.0, 0.0, 0.0], [30.0, 12.0, 30.0]])
+    p = rng.uniform(bounds[0], bounds[1], (3000, 3))
+    n = rng.normal(size=(3000, 3))
+    f = rng.uniform(0, 1, (3000, 3))
+    v = L.LightPropagationVolume(cfg, device=device)
+    v.fit((np.array([5.0, 2.0, 5.0]), np.array([1.0, 0.0, 1.0])), bounds)
+    v.clear()
+    v.inject(p, n, f)
+    v.inject_geometry(p[:1000], n[:1000], f[:1000, 0])
+    got = {}
+    for one in (False, True):
+        runs = v.propagate(one_launch=one)
+        got[one] = (runs, [(v.level_grid(k, "accum").copy(), v.level_grid(k, "last").copy())
+                           for k in range(3)], v._far.numpy().copy())
+    # two cascades fitted; the early stop (0.15) ends them at 5 and 6 of their 8 iterations
+    assert got[False][0] == got[True][0] and len(got[True][0]) == 2 and min(got[True][0]) >= 1
+    for (a, la), (b, lb) in zip(got[False][1], got[True][1], strict=True):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(la, lb)
+    np.testing.assert_array_equal(got[False][2], got[True][2])

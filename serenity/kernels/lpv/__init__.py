@@ -166,7 +166,10 @@ and surfels from the G-buffer and the RSM, numpy), ``kernels`` (Warp functions a
 ``Cascade`` struct per cascade), ``volume`` (the host class). The injection is a scatter: on the
 CPU, where Warp's ``atomic_add`` is not atomic, it goes through ``serenity.kernels.launch``'s
 ``ScatterGrid`` (one private grid per worker thread, summed after); every launch is split over all
-CPU cores by ``serenity.kernels.launch``.
+CPU cores by ``serenity.kernels.launch``. The propagation is the exception where that split does not pay:
+a 3 × 12³ LPV's cells are too few to hand to a second thread, and a launch per iteration cost more
+Python than its cells cost to compute, so on the CPU every iteration (early stop included) runs in one
+single-threaded launch (``propagate_kernel(loop=True)``; bit for bit the per-iteration result).
 """
 
 from serenity.kernels.lpv.basis import (

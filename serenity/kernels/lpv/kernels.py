@@ -602,37 +602,32 @@ def eval_face_transmittance(
         opn[i] = o
 
 
-@kernel_factory(geometry_volume=(False, True), clamp_faces=(False, True))
-def propagate_kernel(geometry_volume: bool, clamp_faces: bool = False):
-    """The propagation kernel (one launch covers every cascade), geometry volume and the face clamp
-    (package doc, "Clamped faces") compiled in or out."""
+@kernel_factory(geometry_volume=(False, True), clamp_faces=(False, True), loop=(False, True))
+def propagate_kernel(geometry_volume: bool, clamp_faces: bool = False, loop: bool = False):
+    """The propagation kernel, geometry volume and the face clamp (package doc, "Clamped faces")
+    compiled in or out. ``loop=False``: one iteration, one thread per cell (one launch covers every
+    cascade). ``loop=True``: every iteration in one single-threaded launch, cascades stopping as
+    their counts or the early stop say (``LightPropagationVolume.propagate``: on the CPU, a launch
+    per iteration cost more Python than the few thousand cells of a 12³ cascade cost to compute)."""
 
-    @wp.kernel(enable_backward=False, module="unique")
-    def propagate_lpv(
-        # inputs
+    @wp.func
+    def propagate_cell(
+        i: int,
+        l: int,
         src: wp.array(dtype=wp.vec4),
         acc_src: wp.array(dtype=wp.vec4),
         trans_pos: wp.array(dtype=wp.vec3),
         trans_neg: wp.array(dtype=wp.vec3),
         levels: wp.array(dtype=Cascade),
-        n_levels: int,
-        level_on: wp.array(dtype=int),
         far_from: wp.array(dtype=int),
         iteration: int,
-        # outputs
         dst: wp.array(dtype=wp.vec4),
         accum: wp.array(dtype=wp.vec4),
         far: wp.array(dtype=wp.vec4),
-        change: wp.array(dtype=float),
-        total: wp.array(dtype=float),
-        offset: int,
-    ):
-        i = wp.tid() + offset
-        l = find_level(i, levels, n_levels)
-        if l < 0:
-            return
-        if level_on[l] == 0:
-            return
+    ) -> wp.vec2:
+        """Cell i (of level l) gathers one iteration from its 6 neighbours in ``src``: written to
+        ``dst``, added to ``accum`` (and to ``far`` past the level's hand-over iteration); returns
+        (Σ_RGB |DC| of what it gathered, Σ_RGB |DC| of its accumulated light)."""
         e = levels[l]
         res = e.res
         k = i - e.cell_base
@@ -695,10 +690,110 @@ def propagate_kernel(geometry_volume: bool, clamp_faces: bool = False):
                 far[j] = far[j] + out
             dc_change += wp.abs(out[0])
             dc_total += wp.abs(a[0])
-        change[i] = dc_change
-        total[i] = dc_total
+        return wp.vec2(dc_change, dc_total)
 
-    return propagate_lpv
+    if not loop:
+
+        @wp.kernel(enable_backward=False, module="unique")
+        def propagate_lpv(
+            # inputs
+            src: wp.array(dtype=wp.vec4),
+            acc_src: wp.array(dtype=wp.vec4),
+            trans_pos: wp.array(dtype=wp.vec3),
+            trans_neg: wp.array(dtype=wp.vec3),
+            levels: wp.array(dtype=Cascade),
+            n_levels: int,
+            level_on: wp.array(dtype=int),
+            far_from: wp.array(dtype=int),
+            iteration: int,
+            # outputs
+            dst: wp.array(dtype=wp.vec4),
+            accum: wp.array(dtype=wp.vec4),
+            far: wp.array(dtype=wp.vec4),
+            change: wp.array(dtype=float),
+            total: wp.array(dtype=float),
+            offset: int,
+        ):
+            i = wp.tid() + offset
+            l = find_level(i, levels, n_levels)
+            if l < 0:
+                return
+            if level_on[l] == 0:
+                return
+            ct = propagate_cell(i, l, src, acc_src, trans_pos, trans_neg, levels, far_from, iteration, dst, accum,
+                                far)
+            change[i] = ct[0]
+            total[i] = ct[1]
+
+        return propagate_lpv
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def propagate_lpv_loop(
+        # inputs
+        inj: wp.array(dtype=wp.vec4),
+        trans_pos: wp.array(dtype=wp.vec3),
+        trans_neg: wp.array(dtype=wp.vec3),
+        levels: wp.array(dtype=Cascade),
+        n_levels: int,
+        iters: wp.array(dtype=int),
+        far_from: wp.array(dtype=int),
+        n_iter: int,
+        lo: int,
+        hi: int,
+        thresh: wp.float64,
+        # in/out
+        level_on: wp.array(dtype=int),
+        ping: wp.array(dtype=wp.vec4),
+        pong: wp.array(dtype=wp.vec4),
+        accum: wp.array(dtype=wp.vec4),
+        far: wp.array(dtype=wp.vec4),
+        # outputs
+        done: wp.array(dtype=int),
+        sums: wp.array(dtype=wp.float64),
+        offset: int,
+    ):
+        """Iterations k = 0 … n_iter−1 over cells [lo, hi) of the levels still on: iteration k reads
+        ``inj`` (k = 0) or the ping-pong buffer k−1 wrote and writes buffer k % 2 (ping, pong); a level
+        stops after iters[l] iterations, or (thresh > 0) once what it gathered in an iteration is at most
+        thresh × its accumulated light (Σ over its cells, float64). done[l]: the iterations it ran."""
+        for l in range(n_levels):
+            done[l] = 0
+        for k in range(n_iter):
+            live = int(0)
+            for l in range(n_levels):
+                if level_on[l] != 0 and iters[l] <= k:
+                    level_on[l] = 0
+                live += level_on[l]
+                sums[2 * l] = wp.float64(0.0)
+                sums[2 * l + 1] = wp.float64(0.0)
+            if live == 0:
+                break
+            for i in range(lo, hi):
+                l = find_level(i, levels, n_levels)
+                if l >= 0:
+                    if level_on[l] != 0:
+                        ct = wp.vec2()
+                        if k == 0:
+                            ct = propagate_cell(i, l, inj, accum, trans_pos, trans_neg, levels, far_from, k + 1,
+                                                ping, accum, far)
+                        elif k % 2 == 0:
+                            ct = propagate_cell(i, l, pong, accum, trans_pos, trans_neg, levels, far_from, k + 1,
+                                                ping, accum, far)
+                        else:
+                            ct = propagate_cell(i, l, ping, accum, trans_pos, trans_neg, levels, far_from, k + 1,
+                                                pong, accum, far)
+                        sums[2 * l] = sums[2 * l] + wp.float64(ct[0])
+                        sums[2 * l + 1] = sums[2 * l + 1] + wp.float64(ct[1])
+            for l in range(n_levels):
+                if level_on[l] != 0:
+                    done[l] = done[l] + 1
+                    if thresh > wp.float64(0.0):
+                        c = sums[2 * l]
+                        t = sums[2 * l + 1]
+                        if c <= thresh * t or t <= wp.float64(0.0):
+                            level_on[l] = 0
+
+    return propagate_lpv_loop
 
 
 @wp.kernel(enable_backward=False)
