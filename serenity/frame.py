@@ -387,7 +387,7 @@ class Renderer:
         cfg, scene, cam = self.config, self.scene, self.scene.camera
         with self._stage("shadow maps (CSM)"):
             sc = cfg.shadow
-            cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, scene.bounds,
+            cascades = fit_shadow_cascades(cam, self.width / self.height, scene.sun.direction, self.scene_gl.bounds,
                                            sc.cascades, self.shadow_size, sc.split_lambda, sc.max_distance,
                                            pad=STAGGER_PAD if sc.stagger else 0.0)
             shadow = self.shadow_pass.render(cascades, stagger=sc.stagger)
@@ -460,7 +460,7 @@ class Renderer:
         if self.osm_pass is not None:
             with self._stage("shadow maps (OSM)"):
                 stagger = cfg.shadow.stagger
-                osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, scene.bounds, 3,
+                osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, self.scene_gl.bounds, 3,
                                                           cfg.osm_size, pad=STAGGER_PAD if stagger else 0.0),
                                            stagger=stagger)
         with self._stage("rt direct lighting"):
@@ -521,13 +521,13 @@ class Renderer:
         propagated, then uploaded."""
         scene, cam = self.scene, self.scene.camera
         with self._stage("rsm"):
-            self.rsm_pass.render(scene.sun.direction, sun_irradiance, scene.bounds)
+            self.rsm_pass.render(scene.sun.direction, sun_irradiance, self.scene_gl.bounds)
             rsm = self.rsm_pass.read()
         with self._stage("lpv inputs", gl=False):
             vpls, surfels = self._lpv_inputs(gbuf, rsm)
         t0 = time.perf_counter()
         # the key: which change of the inputs this is (a staggered LPV's cascades catch up under one key)
-        self.lpv.update(cam, scene.bounds, vpls, surfels, key=self._lpv_inputs_version)
+        self.lpv.update(cam, self.scene_gl.bounds, vpls, surfels, key=self._lpv_inputs_version)
         t_inject = (self.lpv.timings.get("inject", 0.0) + self.lpv.timings.get("inject_geometry", 0.0)) / 1e3
         t1 = time.perf_counter()
         self._record(MAIN_LANE, "lpv inject", t0, min(t1, t0 + t_inject))
