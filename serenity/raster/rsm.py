@@ -80,6 +80,8 @@ class RSMPass:
 
     def read(self) -> VPLs:
         flux, nrm, pos = (read_texture(t, 4).reshape(-1, 4) for t in self.targets)
-        keep = (flux[:, 3] > 0) & (flux[:, :3].max(axis=1) > 0)
-        return VPLs(np.ascontiguousarray(pos[keep, :3]), np.ascontiguousarray(nrm[keep, :3]),
-                    np.ascontiguousarray(flux[keep, :3]), float(self.texel_area))
+        # covered texels with flux (channel by channel and np.take: a max over the strided (N, 3) view
+        # and boolean indexing of it cost 1.5 ms of a 128² map's 1.8 ms)
+        keep = np.flatnonzero((flux[:, 3] > 0) & ((flux[:, 0] > 0) | (flux[:, 1] > 0) | (flux[:, 2] > 0)))
+        pos, nrm, flux = (np.take(a, keep, axis=0)[:, :3].copy() for a in (pos, nrm, flux))
+        return VPLs(pos, nrm, flux, float(self.texel_area))
