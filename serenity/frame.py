@@ -40,7 +40,13 @@ from serenity.config import RenderConfig, check_image_size
 from serenity.device import resolve_device
 from serenity.errors import SerenityError
 from serenity.kernels.atmosphere import scene_sun_irradiance
-from serenity.kernels.lpv import LightPropagationVolume, gbuffer_surfels, rsm_surfels, sky_vpls_from_gbuffer
+from serenity.kernels.lpv import (
+    LightPropagationVolume,
+    rsm_surfels,
+    sample_gbuffer,
+    sky_vpls_from_samples,
+    surfels_from_samples,
+)
 from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.skyvolume import SkyVolume
 from serenity.kernels.tracer_process import TracerProcess
@@ -543,13 +549,11 @@ class Renderer:
         surfels = [rsm_surfels(rsm, scene.sun.direction)]
         g = self.gbuffer_samples.read(gbuf)  # every sky_vpl_stride-th pixel, gathered on the GL side
         pos, nrm = g["position"], g["normal"][..., :3]
-        covered = pos[..., 3] > 0
-        surfels.append(gbuffer_surfels(pos, nrm, cam.position, cam.forward, cam.fov_y_deg, stride=1, valid=covered))
+        samples = sample_gbuffer(pos, nrm, cam.position, cam.forward, cam.fov_y_deg, stride=1, valid=pos[..., 3] > 0)
+        surfels.append(surfels_from_samples(samples))
         e_sky = self._sky_irradiance_at(pos[..., :3], nrm)
         if e_sky is not None:
-            alb = g["albedo"][..., :3]
-            vpls.append(sky_vpls_from_gbuffer(pos, nrm, alb, e_sky, cam.position, cam.forward, cam.fov_y_deg,
-                                              stride=1, valid=covered))
+            vpls.append(sky_vpls_from_samples(samples, g["albedo"][..., :3], e_sky))
         return vpls, surfels
 
     # ------------------------------------------------------------------------------ ray tracing

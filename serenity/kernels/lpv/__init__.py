@@ -196,6 +196,8 @@ from serenity.kernels.lpv.inputs import (
     rsm_surfels,
     sample_gbuffer,
     sky_vpls_from_gbuffer,
+    sky_vpls_from_samples,
+    surfels_from_samples,
 )
 from serenity.kernels.lpv.volume import LightPropagationVolume
 
@@ -208,7 +210,9 @@ __all__ = [
     "sample_gbuffer",
     "GBufferSamples",
     "sky_vpls_from_gbuffer",
+    "sky_vpls_from_samples",
     "gbuffer_surfels",
+    "surfels_from_samples",
     "rsm_surfels",
     "COS_LOBE_0",
     "COS_LOBE_1",

@@ -83,6 +83,11 @@ def sky_vpls_from_gbuffer(position, normal, albedo, sky_irradiance, camera_posit
     only VPLs with positive flux.
     """
     s = sample_gbuffer(position, normal, camera_position, camera_forward, fov_y_deg, stride, valid)
+    return sky_vpls_from_samples(s, albedo, sky_irradiance)
+
+
+def sky_vpls_from_samples(s: GBufferSamples, albedo, sky_irradiance):
+    """``sky_vpls_from_gbuffer`` from its ``sample_gbuffer`` samples (shared with ``surfels_from_samples``)."""
     rho = np.asarray(albedo, np.float32)[s.pixels][..., :3]
     e = np.asarray(sky_irradiance, np.float32)[s.pixels][..., :3]
     flux = rho * e * s.area[..., None]
@@ -94,7 +99,12 @@ def sky_vpls_from_gbuffer(position, normal, albedo, sky_irradiance, camera_posit
 def gbuffer_surfels(position, normal, camera_position, camera_forward, fov_y_deg: float, stride: int = 4,
                     valid=None):
     """Occluding surfels for the geometry volume from a G-buffer: (positions, normals, areas (M,))."""
-    s = sample_gbuffer(position, normal, camera_position, camera_forward, fov_y_deg, stride, valid)
+    return surfels_from_samples(sample_gbuffer(position, normal, camera_position, camera_forward, fov_y_deg,
+                                               stride, valid))
+
+
+def surfels_from_samples(s: GBufferSamples):
+    """``gbuffer_surfels`` from its ``sample_gbuffer`` samples."""
     ok = s.valid & np.isfinite(s.area) & (s.area > 0)
     return (np.ascontiguousarray(s.position[ok][:, :3]), np.ascontiguousarray(s.normal[ok]),
             np.ascontiguousarray(s.area[ok]))
