@@ -211,7 +211,7 @@ def thin_wall(variants):
 def synthetic_cost(variants, reps=7):
     """CPU-ms (process time, summed over the worker threads) of one LPV update — clear, inject,
     inject_geometry, propagate — on ``bench_lpv.py``'s synthetic courtyard-sized workload (107 k VPLs,
-    58 k surfels, 3 cascades of 16³), median of ``reps`` after a warm-up, per setting; the settings
+    58 k surfels, the default 3 cascades), median of ``reps`` after a warm-up, per setting; the settings
     interleaved round by round so a load change hits them alike."""
     from bench_lpv import BOUNDS, CAMERA, workload
 
