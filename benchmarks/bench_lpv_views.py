@@ -4,12 +4,15 @@ the courtyard from 4 camera positions and the Cornell box from 3, at 160×90 aga
 references (rendered once and cached; the LPV lives in world space, so a small image judges it).
 
     python benchmarks/bench_lpv_views.py [--json benchmarks/results/lpv_views.json] [--chart ...png]
+                                         [--resolutions 12] [--lpv FIELD=VALUE ...]
 
 Per scene, view and resolution: FLIP and relMSE (without the worst 0.1 % of pixels) of one frame; per
 scene and resolution: their means over the views, and the median milliseconds of the LPV update
 (the sun's RSM, the G-buffer VPLs, injection, propagation, upload: what a moving camera or sun pays
 each frame) over ``--frames`` forced re-updates in the first view. The chart plots each of the three
-against the resolution, one line per scene.
+against the resolution, one line per scene. ``--lpv FIELD=VALUE`` (repeatable; VALUE parsed as JSON)
+sets an ``LPVConfig`` field for every row as well, e.g. ``--lpv view_distance=192`` to judge the
+cascades fitted to the scene instead of the view (the JSON records the overrides).
 """
 
 from __future__ import annotations
@@ -53,13 +56,13 @@ def view_scene(name: str, view):
     return scene
 
 
-def config(resolution: int) -> RenderConfig:
+def config(resolution: int, lpv: dict | None = None) -> RenderConfig:
     m = RenderConfig.preset("medium")
-    return dataclasses.replace(m, lpv=dataclasses.replace(m.lpv, resolution=resolution))
+    return dataclasses.replace(m, lpv=dataclasses.replace(m.lpv, resolution=resolution, **(lpv or {})))
 
 
-def update_ms(scene, resolution: int, frames: int) -> float:
-    r = Renderer(copy.deepcopy(scene), *SIZE, config=config(resolution))
+def update_ms(scene, resolution: int, frames: int, lpv: dict | None = None) -> float:
+    r = Renderer(copy.deepcopy(scene), *SIZE, config=config(resolution, lpv))
     try:
         r.render(read_back=False)
         out = []
@@ -72,7 +75,7 @@ def update_ms(scene, resolution: int, frames: int) -> float:
         r.close()
 
 
-def run(resolutions, frames: int, progress: bool = True) -> dict:
+def run(resolutions, frames: int, progress: bool = True, lpv: dict | None = None) -> dict:
     from tqdm import tqdm
 
     out = {}
@@ -88,7 +91,7 @@ def run(resolutions, frames: int, progress: bool = True) -> dict:
                 row = {"view": vi, "camera": camera, "by_resolution": {}}
                 for res in resolutions:
                     bar.set_description(f"{name} view {vi}: {res}^3")
-                    r = Renderer(copy.deepcopy(scene), *SIZE, config=config(res))
+                    r = Renderer(copy.deepcopy(scene), *SIZE, config=config(res, lpv))
                     try:
                         f = r.render(read_back=("hdr",))
                         img = f.hdr[..., :3]
@@ -106,7 +109,7 @@ def run(resolutions, frames: int, progress: bool = True) -> dict:
                 vals = [v["by_resolution"][str(res)] for v in per_view]
                 summary[str(res)] = {"flip_mean": float(np.mean([v["flip"] for v in vals])),
                                      "rel_mse_trimmed_mean": float(np.mean([v["rel_mse_trimmed"] for v in vals])),
-                                     "update_ms": update_ms(scene, res, frames)}
+                                     "update_ms": update_ms(scene, res, frames, lpv)}
                 bar.update(1)
             out[name] = {"views": per_view, "summary": summary}
     return out
@@ -147,22 +150,29 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=9)
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--chart-only", action="store_true", help="redraw the chart from --json")
+    ap.add_argument("--lpv", action="append", default=[], metavar="FIELD=VALUE",
+                    help="an LPVConfig field for every row (VALUE as JSON)")
     args = ap.parse_args()
-    if args.chart_only:
-        import json
+    import json
 
+    if args.chart_only:
         with open(args.json) as f:
             chart(json.load(f)["scenes"], args.chart)
         return
     resolutions = [int(x) for x in args.resolutions.split(",")]
+    lpv = {}
+    for pair in args.lpv:
+        key, _, raw = pair.partition("=")
+        lpv[key] = json.loads(raw)
     t0 = time.perf_counter()
-    results = run(resolutions, args.frames, progress=not args.no_progress)
+    results = run(resolutions, args.frames, progress=not args.no_progress, lpv=lpv)
     for name, res in results.items():
         for k, v in res["summary"].items():
             print(f"{name:9s} {k:>2s}^3  FLIP {v['flip_mean']:.4f}  relMSE* {v['rel_mse_trimmed_mean']:.4f}  "
                   f"update {v['update_ms']:6.1f} ms")
     write_results(args.json, {"benchmark": "lpv_views", "size": list(SIZE), "reference_spp": REF_SPP,
-                              "preset": "medium", "resolutions": resolutions, "frames": args.frames,
+                              "preset": "medium", "lpv_overrides": lpv, "resolutions": resolutions,
+                              "frames": args.frames,
                               "update_stages": list(LPV_UPDATE_STAGES), "scenes": results,
                               "seconds": time.perf_counter() - t0})
     chart(results, args.chart)
