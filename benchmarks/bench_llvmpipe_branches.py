@@ -46,12 +46,6 @@ BODIES = {"taps_unrolled": 0, "taps_dynamic": 1, "alu_unrolled": 2}
 PLACEMENTS = {"none": 0, "always": 1, "if_none": 2, "if_half": 3, "return_all": 4, "loop_none": 5}
 
 
-def program_source(stage: str, body: int, placement: int) -> str:
-    with open(SHADER) as fh:
-        text = fh.read()
-    return f"#version 430\n#define {stage}\n#define BODY {body}\n#define PLACEMENT {placement}\n{text}"
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", default="640x360")
@@ -62,7 +56,7 @@ def main(argv=None) -> int:
 
     import moderngl
 
-    from serenity.raster.context import get_context
+    from serenity.raster.context import compile_program, get_context
 
     ctx = get_context()
     tex = ctx.texture((64, 64), 4, data=np.random.default_rng(0).random((64, 64, 4), np.float32).tobytes(),
@@ -71,11 +65,12 @@ def main(argv=None) -> int:
     target = ctx.texture((w, h), 4, dtype="f4")
     fbo = ctx.framebuffer([target])
     fbo.use()
+    with open(SHADER) as fh:
+        text = fh.read()
     programs = {}
     for body_name, body in BODIES.items():
         for placement, pl in PLACEMENTS.items():
-            prog = ctx.program(vertex_shader=program_source("VERTEX_SHADER", body, pl),
-                               fragment_shader=program_source("FRAGMENT_SHADER", body, pl))
+            prog = compile_program(ctx, text, os.path.basename(SHADER), {"BODY": body, "PLACEMENT": pl})
             for name, value in (("u_tex", 0), ("u_flag", 0.0), ("u_zero", 0)):
                 if name in prog:
                     prog[name].value = value

@@ -549,7 +549,7 @@ class Renderer:
         surfels = [rsm_surfels(rsm, scene.sun.direction)]
         g = self.gbuffer_samples.read(gbuf)  # every sky_vpl_stride-th pixel, gathered on the GL side
         pos, nrm = g["position"], g["normal"][..., :3]
-        samples = sample_gbuffer(pos, nrm, cam.position, cam.forward, cam.fov_y_deg, stride=1, valid=pos[..., 3] > 0)
+        samples = sample_gbuffer(pos, nrm, cam.position, cam.forward, cam.fov_y_deg, stride=1)  # w = 0: no surface
         surfels.append(surfels_from_samples(samples))
         e_sky = self._sky_irradiance_at(pos[..., :3], nrm)
         if e_sky is not None:

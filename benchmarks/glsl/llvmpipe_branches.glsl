@@ -1,5 +1,5 @@
 // bench_llvmpipe_branches.py: a full-screen triangle whose fragment shader does BODY (12 steps of one
-// kind of work) placed as PLACEMENT. The Python side prepends "#version 430" and the two #defines.
+// kind of work) placed as PLACEMENT (#defines: serenity.raster.context.compile_program prepends them).
 //   BODY 0: 12 texture taps in a loop of compile-time length (unrolled)
 //        1: the same loop with a run-time trip count (12 + u_zero: not unrolled)
 //        2: 12 steps of arithmetic (unrolled)

@@ -114,7 +114,14 @@ def shader_source(name: str, _seen: frozenset = frozenset()) -> str:
 
 def load_program(ctx, name: str, defines: dict | None = None, stages=("VERTEX_SHADER", "FRAGMENT_SHADER")):
     """Compile ``glsl/<name>`` for the given stages with ``#define``s prepended."""
-    body = shader_source(name)
+    return compile_program(ctx, shader_source(name), name, defines, stages)
+
+
+def compile_program(ctx, body: str, name: str, defines: dict | None = None,
+                    stages=("VERTEX_SHADER", "FRAGMENT_SHADER")):
+    """Compile GLSL text ``body`` (one file with ``#if defined VERTEX_SHADER`` / ``FRAGMENT_SHADER``
+    sections, includes expanded) for the given stages, with the version line, the ``#define``s and
+    the stage's define prepended; ``name`` names it in the error (a benchmark's shader uses this)."""
     defines = {**({"EXACT_FILTER": 1} if exact_filter(ctx) else {}), **(defines or {})}
     head = [GLSL_VERSION] + [f"#define {k} {v}" for k, v in defines.items()]
     srcs = {}

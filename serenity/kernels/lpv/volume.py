@@ -132,7 +132,6 @@ class LightPropagationVolume:
         # injection table (fitted cascades) and lookup table (active cascades)
         self._fit_table = wp.zeros(MAX_CASCADES, dtype=Cascade, device=dev)
         self._cas_table = wp.zeros(MAX_CASCADES, dtype=Cascade, device=dev)
-        self._last_level: dict[int, wp.array] = {}
         self._staging = Staging(dev)
         nl = len(self._levels)
         #: per level: (grid, input key) it was last injected and propagated with
@@ -173,6 +172,12 @@ class LightPropagationVolume:
             if levels is None or k in levels:
                 out[k] = np.sum(h[v.cell_base:v.cell_base + v.res**3], dtype=np.float64)
         return out
+
+    def _last_wavefront(self, level: int) -> wp.array:
+        """The array holding a level's last propagation iteration: iteration k writes ping-pong buffer
+        k % 2 (the injected grid before the first), and a level's cells are not written once it stops."""
+        done = int(self._done[level])
+        return self._inj.array if done == 0 else (self._ping, self._pong)[(done - 1) % 2]
 
     # -- stages --------------------------------------------------------------------------------
 
@@ -296,7 +301,6 @@ class LightPropagationVolume:
         self._far_from.assign(far_from)
         for lv in upd:
             self._done[lv] = 0
-            self._last_level[lv] = inj
         bufs = (self._ping, self._pong)
         if v1 > v0:
             if cfg.accumulate_injected:
@@ -320,30 +324,25 @@ class LightPropagationVolume:
             done = self._done_dev.numpy()
             for lv in np.flatnonzero(on):
                 self._done[lv] = int(done[lv])
-                self._last_level[int(lv)] = inj if done[lv] == 0 else bufs[(int(done[lv]) - 1) % 2]
-            n_iter = 0
-        for k in range(n_iter):
-            on = on & (iters > k)
-            if not on.any():
-                break
-            src = inj if k == 0 else bufs[(k - 1) % 2]
-            dst = bufs[k % 2]
-            self._level_on.assign(on)
-            # threads only for the cells of the cascades still iterating (the coarsest may run on alone)
-            active = [self._levels[lv] for lv in np.flatnonzero(on)]
-            lo = min(v.cell_base for v in active)
-            dim = max(v.cell_base + v.res**3 for v in active) - lo
-            self._launch_cells(self._propagate, dim,
-                               [src, self._accum, self._trans_pos, self._trans_neg, self._level_table, nl,
-                                self._level_on, self._far_from, k + 1, dst, self._accum, self._far, self._change,
-                                self._total], start=lo)
-            for lv in np.flatnonzero(on):
-                self._done[lv] += 1
-                self._last_level[int(lv)] = dst
-            if thresh > 0.0:
-                live = set(np.flatnonzero(on).tolist())
-                change, total = self._level_sums(self._change, live), self._level_sums(self._total, live)
-                on = on & ~((change <= thresh * total) | (total <= 0.0))
+        else:
+            for k in range(n_iter):
+                on = on & (iters > k)
+                if not on.any():
+                    break
+                self._level_on.assign(on)
+                # threads only for the cells of the cascades still iterating (the coarsest may run on alone)
+                active = [self._levels[lv] for lv in np.flatnonzero(on)]
+                lo = min(v.cell_base for v in active)
+                dim = max(v.cell_base + v.res**3 for v in active) - lo
+                self._launch_cells(self._propagate, dim,
+                                   [inj if k == 0 else bufs[(k - 1) % 2], self._accum, self._trans_pos,
+                                    self._trans_neg, self._level_table, nl, self._level_on, self._far_from, k + 1,
+                                    bufs[k % 2], self._accum, self._far, self._change, self._total], start=lo)
+                self._done[np.flatnonzero(on)] += 1
+                if thresh > 0.0:
+                    live = set(np.flatnonzero(on).tolist())
+                    change, total = self._level_sums(self._change, live), self._level_sums(self._total, live)
+                    on = on & ~((change <= thresh * total) | (total <= 0.0))
         # what lookups read: each level's own light plus the far light of every coarser one
         wp.copy(self._lookup, self._accum)
         if hand_over:
@@ -510,7 +509,7 @@ class LightPropagationVolume:
             self._inj.gather()
         arr = {"accum": self._lookup, "own": self._accum, "inj": self._inj.array}.get(which)
         if which == "last":
-            arr = self._last_level.get(level, self._inj.array)
+            arr = self._last_wavefront(level)
         if arr is None:
             raise ValueError(f"unknown grid {which!r}")
         return arr.numpy()[lv.base:lv.base + lv.size].reshape(3, lv.res, lv.res, lv.res, 4)
