@@ -91,6 +91,10 @@ class ShadowConfig:
     """Length of the contact-shadow march, in pixel footprints at the receiver ..."""
     contact_texels: float = 32.0
     """... and at most this many shadow-map texels of the receiver's cascade."""
+    visibility_scale: int = 1
+    """The main view's sun visibility (the filter above and the contact march) is computed at
+    1/scale of the view per axis, in a pass of its own, and joint-bilaterally upsampled by the
+    lighting pass (``glsl/visibility_upsample.glsl``); 1 = per pixel, in the lighting pass."""
 
     def __post_init__(self):
         if not 16 <= self.size <= MAX_IMAGE_SIZE:
@@ -112,6 +116,8 @@ class ShadowConfig:
             raise ConfigError(f"ShadowConfig.contact_pixels must be > 0, got {self.contact_pixels}")
         if not self.contact_texels > 0:
             raise ConfigError(f"ShadowConfig.contact_texels must be > 0, got {self.contact_texels}")
+        if not (isinstance(self.visibility_scale, int) and 1 <= self.visibility_scale <= 4):
+            raise ConfigError(f"ShadowConfig.visibility_scale must be an int in 1..4, got {self.visibility_scale!r}")
 
     def size_for(self, width: int, height: int) -> int:
         """Texels per side of one cascade for a ``width``×``height`` image (``texels_per_pixel``)."""

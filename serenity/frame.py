@@ -76,7 +76,7 @@ STAGES = (
     "sky volume build", "sky volume update", "sky upload",             # paper §7
     "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload",  # paper §8
     "shadow maps (CSM)", "low-res guide", "ssao",                      # the main view
-    "direct lighting", "sky lighting", "lpv lighting",
+    "sun visibility", "direct lighting", "sky lighting", "lpv lighting",
     "wait for ray tracing", "rt g-buffer upload", "shadow maps (OSM)",  # sync 2, paper §9
     "rt direct lighting", "rt sky lighting", "rt lpv lighting", "composite",
     "anti-aliasing", "tone map", "readback",
@@ -425,10 +425,14 @@ class Renderer:
         """Phong + CSM/PCSS and the sky volume's and the LPV's light: at full resolution added onto
         the lit image; at 1/indirect_scale drawn first and upsampled by the deferred pass."""
         sky_gl = self.sky_gl if self.sky_volume is not None else None
+        vis = None
+        if self.config.shadow.visibility_scale > 1:  # the sun's visibility at reduced resolution
+            with self._stage("sun visibility"):
+                vis = self.deferred_pass.render_visibility(gbuf, shadow, light, self.config.shadow.visibility_scale)
         lo = self.lowres
         if lo is None:  # full resolution: the indirect passes add onto the lit image
             with self._stage("direct lighting"):
-                lit = self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl)
+                lit = self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, visibility=vis)
             self._indirect_passes(lit.hdr, gbuf, ao, sky_gl, full_res=True)
             return lit
         # reduced resolution: the indirect passes first, into the low-res targets; the deferred pass
@@ -437,7 +441,7 @@ class Renderer:
         lo.use_depth(self.lowres_guide.depth)  # the texels' classes: the passes shade only theirs
         self._indirect_passes(lo, gbuf, ao, sky_gl, full_res=False)
         with self._stage("direct lighting"):  # the upsampling included
-            return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide))
+            return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide), visibility=vis)
 
     def _indirect_passes(self, target, gbuf, ao, sky_gl, full_res: bool) -> None:
         """The sky volume's and the LPV's light of the main view, added onto ``target``."""

@@ -9,10 +9,12 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from serenity.raster.context import FullscreenPass, draw_fullscreen, fullscreen_vao, load_program
+from serenity.raster.context import FullscreenPass, draw_fullscreen, fullscreen_vao, load_program, low_res_size
 
 UPSAMPLE_UNIT = 16
 """First of the 3 texture units of the upsampled indirect light (units 0..15: G-buffer, shadows, sky)."""
+VISIBILITY_UNIT = UPSAMPLE_UNIT + 3
+"""Texture unit of the reduced-resolution sun visibility (``DeferredPass.render_visibility``)."""
 SHADOW_FILTERS = {"hard": 0, "pcf": 1, "pcss": 2}
 """ShadowConfig.filter → glsl/shadow_sampling.glsl's SHADOW_FILTER."""
 
@@ -54,23 +56,35 @@ class DeferredPass(FullscreenPass):
         self.size = None
         self._variants: dict[tuple, tuple] = {}
         self._split = None  # (G-buffer depth texture, framebuffer of our targets + that depth)
+        self._vis = None    # (scale, target texture, framebuffer) of render_visibility
 
     def resize(self, width: int, height: int) -> None:
         if self.size != (width, height) and self._split is not None:
             self._split[1].release()
             self._split = None
+        if self.size != (width, height):
+            self._release_visibility()
         super().resize(width, height)
 
+    def _release_visibility(self) -> None:
+        if self._vis is not None:
+            self._vis[2].release()
+            self._vis[1].release()
+            self._vis = None
+
     def _variant(self, rt_view: bool, traced_sun: bool, contact_steps: int, upsample: bool, shadow_cfg=None,
-                 split: int = 0):
-        """(program, vao) of one variant; ``split`` 1 = surfaces only, 2 = sky only (glsl/deferred.glsl)."""
+                 split: int = 0, vis_pass: bool = False, vis_upsample: bool = False):
+        """(program, vao) of one variant; ``split`` 1 = surfaces only, 2 = sky only; ``vis_pass``: the
+        reduced-resolution sun visibility instead of the lighting; ``vis_upsample``: the lighting with
+        that visibility (glsl/deferred.glsl)."""
         # the shadow filter and its tap counts are compiled in too (glsl/shadow_sampling.glsl)
         filt = None if shadow_cfg is None else (SHADOW_FILTERS[shadow_cfg.filter], int(shadow_cfg.blocker_samples),
                                                 int(shadow_cfg.filter_samples))
-        key = (rt_view, traced_sun, contact_steps, upsample, filt, split)
+        key = (rt_view, traced_sun, contact_steps, upsample, filt, split, vis_pass, vis_upsample)
         if key not in self._variants:
             defines = {"RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_STEPS": int(contact_steps),
-                       "UPSAMPLE": int(upsample), "SPLIT": int(split)}
+                       "UPSAMPLE": int(upsample), "SPLIT": int(split), "VIS_PASS": int(vis_pass),
+                       "VIS_UPSAMPLE": int(vis_upsample)}
             if filt is not None:
                 defines.update(SHADOW_FILTER=filt[0], BLOCKER_SAMPLES=filt[1], FILTER_SAMPLES=filt[2])
             program = load_program(self.ctx, self.SHADER, defines=defines)
@@ -86,14 +100,41 @@ class DeferredPass(FullscreenPass):
                                                         depth_attachment=depth))
         return self._split[1]
 
+    def render_visibility(self, gbuffer, shadow, light: LightingInputs, scale: int):
+        """The main view's sun visibility — the shadow maps' filter and the contact march, as
+        :meth:`render` would compute them — at 1/``scale`` of the view per axis, with each texel's
+        guide (normal, view depth): the RGBA32F texture :meth:`render` takes as ``visibility``
+        (``glsl/visibility_upsample.glsl``). One texel per scale×scale block of pixels, so the
+        filter's taps cost 1/scale² of a full-resolution pass; the upsampling costs 4 fetches a pixel."""
+        scale = int(scale)
+        size = low_res_size(*self.size, scale)
+        if self._vis is None or self._vis[0] != scale:
+            self._release_visibility()
+            tex = self.ctx.texture(size, 4, dtype="f4")
+            self._vis = (scale, tex, self.ctx.framebuffer(color_attachments=[tex]))
+        _, tex, fbo = self._vis
+        contact = int(light.shadow.contact_steps)
+        p, vao = self._variant(False, False, contact, False, light.shadow, vis_pass=True)
+        with self.ctx.debug_scope("sun visibility"):
+            for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
+                t.use(location=i)
+            shadow.depth.use(location=4)
+            self._set_uniforms(p, shadow, light, None, True, None, None, contact)
+            self._set(p, "u_vis_scale", scale)
+            fbo.use()
+            vao.render(vertices=3)
+        return tex
+
     def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None,
-               upsample=None) -> LitImage:
+               upsample=None, visibility=None) -> LitImage:
         """Light ``gbuffer``. ``rt_view`` (an object with ``eye`` and ``ray_dir`` textures) marks a
         ray-traced G-buffer: each pixel's viewer is its ray origin, misses show the sky along the
         ray, untraced pixels are black, and SSAO is not applied. ``shadow`` None (rt views only):
         the sun's visibility is the tracer's shadow ray, ``eye.w``. ``upsample`` (main view only):
         (the frame's :class:`~serenity.raster.indirect.LowResIndirect`, already drawn, and the
         low-res guide texture): its light is upsampled and added in this pass (``glsl/upsample.glsl``).
+        ``visibility`` (main view only): the texture of :meth:`render_visibility`, just drawn: the
+        sun's visibility is upsampled from it instead of computed per pixel.
         The main view is drawn in two halves over the G-buffer's depth: the sky's pixels, then the
         surfaces' (``SPLIT`` in the shader: llvmpipe shades neither half's pixels with the other's code)."""
         if shadow is None and rt_view is None:
@@ -102,8 +143,10 @@ class DeferredPass(FullscreenPass):
         contact = int(light.shadow.contact_steps) if main else 0  # march steps, 0 = no contact shadow
         shadow_cfg = None if shadow is None else light.shadow
         if main:
+            vis_up = visibility is not None
             draws = [self._variant(False, False, 0, False, None, split=2),
-                     self._variant(False, False, contact, upsample is not None, shadow_cfg, split=1)]
+                     self._variant(False, False, 0 if vis_up else contact, upsample is not None,
+                                   None if vis_up else shadow_cfg, split=1, vis_upsample=vis_up)]
         else:
             draws = [self._variant(True, shadow is None, 0, False, shadow_cfg)]
         ctx = self.ctx
@@ -121,8 +164,13 @@ class DeferredPass(FullscreenPass):
                 lo, guide = upsample
                 for loc, tex in enumerate((lo.irr, lo.gloss, guide), start=UPSAMPLE_UNIT):
                     tex.use(location=loc)
+            if main and visibility is not None:
+                visibility.use(location=VISIBILITY_UNIT)
             for p, _ in draws:
                 self._set_uniforms(p, shadow, light, ao, main, upsample, sky, contact)
+                if main and visibility is not None:
+                    self._set(p, "u_vis", VISIBILITY_UNIT)
+                    self._set(p, "u_vis_scale", self._vis[0])
             if not main:
                 self.fbo.use()
                 draw_fullscreen(ctx, draws[0][1], rt_view.rects)
@@ -172,6 +220,7 @@ class DeferredPass(FullscreenPass):
         self._set(p, "u_sun_radiance", light.sun_radiance)
         self._set(p, "u_sun_cos_radius", light.sun_cos_radius)
         self._set(p, "u_camera_pos", light.camera_position)
+        self._set(p, "u_camera_forward", light.camera_forward)
         self._set(p, "u_sky_radiance", light.sky_radiance)
         self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
 
@@ -198,7 +247,6 @@ class DeferredPass(FullscreenPass):
                         ("u_pcf_radius", cfg.pcf_radius), ("u_sun_tan_half", light.sun_tan_half),
                         ("u_pcss_max_blocker", cfg.pcss_max_blocker), ("u_cascade_blend", cfg.cascade_blend)):
             self._set(p, name, v)
-        self._set(p, "u_camera_forward", light.camera_forward)
 
     @staticmethod
     def _set(p, name, value):

@@ -20,6 +20,9 @@
 //   visibility is the tracer's shadow ray, g_eye.w (else the shadow maps);  CONTACT_STEPS N > 0 (main
 //   view): the screen-space contact shadow, N march steps;  UPSAMPLE 1 (main view): add the low-res
 //   indirect light. (The shadow filter and its taps are compiled in too: shadow_sampling.glsl.)
+//   VIS_PASS 1 (main view): not the lighting but the sun's visibility (shadow maps, contact march)
+//   at 1/u_vis_scale resolution, with its guide (visibility_upsample.glsl);  VIS_UPSAMPLE 1 (main
+//   view): the sun's visibility read from that pass's target instead of computed here.
 //   SPLIT (main view): 0 = one program for every pixel; 1 = the G-buffer's surfaces only; 2 = the
 //   sky only. DeferredPass draws 2 then 1 at the far plane over the G-buffer's depth (depth test <=,
 //   then >), and llvmpipe rejects a pixel by depth before shading it: neither half runs the other's
@@ -39,12 +42,21 @@
 #ifndef SPLIT
 #define SPLIT 0
 #endif
+#ifndef VIS_PASS
+#define VIS_PASS 0
+#endif
+#ifndef VIS_UPSAMPLE
+#define VIS_UPSAMPLE 0
+#endif
 
 #if defined FRAGMENT_SHADER
 #include "shadow_sampling.glsl"
 #include "sky.glsl"
 #if UPSAMPLE
 #include "upsample.glsl"
+#endif
+#if VIS_PASS || VIS_UPSAMPLE
+#include "visibility_upsample.glsl"
 #endif
 uniform bool u_use_sky_map;         // sky dome from the paraboloid sky map (else the constant sky)
 uniform sampler2D g_albedo;
@@ -68,8 +80,12 @@ uniform sampler2D g_ray_dir;        // rt view: xyz = ray direction (0 = pixel n
 uniform mat4 u_view_proj;           // main view: world -> clip (contact shadows)
 uniform float u_contact_pixels;     // contact-shadow march length, pixel footprints at the receiver
 uniform float u_contact_texels;     // ... and at most this many shadow-map texels of its cascade
+#if VIS_PASS
+layout(location = 0) out vec4 o_vis;  // visibility_upsample.glsl
+#else
 layout(location = 0) out vec4 o_hdr;
 layout(location = 1) out vec4 o_direct;
+#endif
 
 vec3 sky(vec3 dir) {
     if (dot(dir, u_sun_dir) >= u_sun_cos_radius && u_sun_dir.y > 0.0) return u_sun_radiance;
@@ -119,6 +135,27 @@ float contact_visibility(vec3 p, vec3 n, float view_depth) {
 }
 #endif
 
+#if VIS_PASS
+// the visibility of this texel's representative G-buffer pixel, as the main view's lighting below
+// would compute it there, and that pixel's normal and view depth (the upsampling's guide)
+void main() {
+    ivec2 rq = representative_pixel_at(ivec2(gl_FragCoord.xy), textureSize(g_position, 0), u_vis_scale);
+    vec4 pos = texelFetch(g_position, rq, 0);
+    if (pos.w == 0.0) { o_vis = vec4(0.0, 0.0, -1.0, 1.0); return; }
+    vec3 n = normalize(texelFetch(g_normal, rq, 0).xyz);
+    vec3 p = pos.xyz;
+    float metric = dot(p - u_camera_pos, u_camera_forward);
+    float ndl = dot(n, u_sun_dir);
+    float vis = 0.0;
+    if (ndl > 0.0 && u_sun_dir.y > -0.02) {
+        vis = sun_visibility(p, n, ndl, metric);
+#if CONTACT_STEPS > 0
+        if (vis > 0.0) vis *= contact_visibility(p, n, metric);
+#endif
+    }
+    o_vis = vec4(oct_encode(n), metric, vis);
+}
+#else
 void main() {
     vec4 pos = texture(g_position, v_uv);
 #if RT_VIEW
@@ -157,6 +194,8 @@ void main() {
         float vis = eye_w.w;
 #elif RT_VIEW
         float vis = sun_visibility(p, n, ndl, length(p - u_camera_pos));
+#elif VIS_UPSAMPLE
+        float vis = upsampled_visibility(ivec2(gl_FragCoord.xy), dot(p - u_camera_pos, u_camera_forward), n);
 #else
         float metric = dot(p - u_camera_pos, u_camera_forward);
         float vis = sun_visibility(p, n, ndl, metric);
@@ -178,4 +217,5 @@ void main() {
     o_hdr = vec4(direct + indirect, 1.0);
     o_direct = vec4(direct, 1.0);
 }
+#endif
 #endif

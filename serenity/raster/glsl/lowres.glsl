@@ -17,7 +17,17 @@ const float LOWRES_DEPTH_GLOSSY = 0.25;      // a surface whose k_s >= GLOSSY_MI
 const float LOWRES_DEPTH_SURFACE = 0.5;      // any other surface
 const float LOWRES_DEPTH_BACKGROUND = 1.0;   // no surface (the clear value)
 
-ivec2 representative_pixel(ivec2 low, ivec2 full_size) {
-    return min(low * u_scale + ivec2(u_scale / 2), full_size - 1);
+ivec2 representative_pixel_at(ivec2 low, ivec2 full_size, int scale) {
+    return min(low * scale + ivec2(scale / 2), full_size - 1);
+}
+ivec2 representative_pixel(ivec2 low, ivec2 full_size) { return representative_pixel_at(low, full_size, u_scale); }
+
+// Joint bilateral upsampling (upsample.glsl, visibility_upsample.glsl): how alike a low-res texel's
+// representative (normal gn, view depth gz; gz < 0: background) is to the pixel being filled (n, z):
+// exp(-|gz - z| / (0.05 z)) * max(0, gn . n)^8 — ~0 across a silhouette or a crease.
+float guide_similarity(vec3 gn, float gz, vec3 n, float z) {
+    float c = max(dot(gn, n), 0.0);
+    c *= c; c *= c; c *= c;  // ^8
+    return gz < 0.0 ? 0.0 : exp(-abs(gz - z) / (0.05 * z + 1e-3)) * c;
 }
 #endif

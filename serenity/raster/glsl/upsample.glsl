@@ -3,6 +3,7 @@
 // second one that re-read the G-buffer and blended onto the lit image):
 //   L = albedo * E_lo + G_lo,   E_lo, G_lo = sum_i w_i X_i / sum_i w_i over the 2x2 low-res texels
 //   around the pixel, w_i = bilinear_i * exp(-|z_i - z| / (0.05 z)) * max(0, n_i . n)^8
+//   (guide_similarity in lowres.glsl)
 // where z, n are the pixel's view depth and normal and z_i, n_i those of texel i's representative
 // G-buffer pixel (lowres.glsl), read from the low-res guide (lowres_guide.glsl). Across a silhouette
 // or a crease the texels of the other surface get ~no weight; when every weight vanishes (a pixel
@@ -29,9 +30,7 @@ vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
         ivec2 q = clamp(i0 + o, ivec2(0), low_max);
         vec4 g = texelFetch(u_guide, q, 0);
         float bil = (o.x == 1 ? f.x : 1.0 - f.x) * (o.y == 1 ? f.y : 1.0 - f.y);
-        float c = max(dot(g.xyz, n), 0.0);
-        c *= c; c *= c; c *= c;  // ^8
-        float sim = g.w < 0.0 ? 0.0 : exp(-abs(g.w - z) / (0.05 * z + 1e-3)) * c;
+        float sim = guide_similarity(g.xyz, g.w, n, z);
         float w = (bil + 1e-3) * sim;
         vec3 xi = texelFetch(u_irr, q, 0).rgb, xg = texelFetch(u_gloss, q, 0).rgb;
         irr += w * xi; gloss += w * xg; wsum += w;
