@@ -550,13 +550,16 @@ PRESETS: dict[str, dict] = {
                "sky": {"sky_map_size": 96, "sky_steps": 12, "transfer_layers": 1},
                "lpv": {"glossy_steps": 4, "stagger": True},
                "rsm_size": 128, "sky_vpl_stride": 8},
-    # the cheapest: indirect light at quarter resolution, 3 cascades, an 8³ LPV, coarse sky
+    # the cheapest: indirect light at quarter resolution, 3 cascades, a 6³ LPV (8³ until round 9: 6³ was
+    # better on FLIP and relMSE in both scenes at both frontier sizes, benchmarks/results/
+    # pass_ab_low_lpv6_*.json — though 5³ and 7³ each lost one scene: the LPV is sensitive to how its
+    # cells fall on the walls), coarse sky
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4, "filter_samples": 8,
                        "stagger": True},
             "ssao": {"directions": 6, "steps": 2, "blur_radius": 4},
             "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_bands": 4, "transfer_layers": 1},
-            "lpv": {"resolution": 8, "iterations": 16, "stagger": True},
+            "lpv": {"resolution": 6, "iterations": 16, "stagger": True},
             "rsm_size": 128, "sky_vpl_stride": 8},
 }
 """Quality presets: field → value, or for a sub-config (shadow, ssao, sky, lpv) its field → value.
