@@ -91,10 +91,11 @@ class ShadowConfig:
     """Length of the contact-shadow march, in pixel footprints at the receiver ..."""
     contact_texels: float = 32.0
     """... and at most this many shadow-map texels of the receiver's cascade."""
-    visibility_scale: int = 1
-    """The main view's sun visibility (the filter above and the contact march) is computed at
-    1/scale of the view per axis, in a pass of its own, and joint-bilaterally upsampled by the
-    lighting pass (``glsl/visibility_upsample.glsl``); 1 = per pixel, in the lighting pass."""
+    visibility: str = "pixel"
+    """Where the main view's sun visibility (the filter above and the contact march) is computed:
+    "pixel" = at every pixel, in the lighting pass; "checkerboard" = at every other pixel of each
+    row and column, in a pass of its own, the others from their 4 neighbours; "half" = once per 2×2
+    block, upsampled bilaterally (``glsl/visibility_upsample.glsl``)."""
 
     def __post_init__(self):
         if not 16 <= self.size <= MAX_IMAGE_SIZE:
@@ -116,8 +117,8 @@ class ShadowConfig:
             raise ConfigError(f"ShadowConfig.contact_pixels must be > 0, got {self.contact_pixels}")
         if not self.contact_texels > 0:
             raise ConfigError(f"ShadowConfig.contact_texels must be > 0, got {self.contact_texels}")
-        if not (isinstance(self.visibility_scale, int) and 1 <= self.visibility_scale <= 4):
-            raise ConfigError(f"ShadowConfig.visibility_scale must be an int in 1..4, got {self.visibility_scale!r}")
+        if self.visibility not in ("pixel", "checkerboard", "half"):
+            raise ConfigError(f"ShadowConfig.visibility must be pixel, checkerboard or half, got {self.visibility!r}")
 
     def size_for(self, width: int, height: int) -> int:
         """Texels per side of one cascade for a ``width``×``height`` image (``texels_per_pixel``)."""

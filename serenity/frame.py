@@ -426,9 +426,9 @@ class Renderer:
         the lit image; at 1/indirect_scale drawn first and upsampled by the deferred pass."""
         sky_gl = self.sky_gl if self.sky_volume is not None else None
         vis = None
-        if self.config.shadow.visibility_scale > 1:  # the sun's visibility at reduced resolution
+        if self.config.shadow.visibility != "pixel":  # the sun's visibility sampled sparsely, upsampled
             with self._stage("sun visibility"):
-                vis = self.deferred_pass.render_visibility(gbuf, shadow, light, self.config.shadow.visibility_scale)
+                vis = self.deferred_pass.render_visibility(gbuf, shadow, light, self.config.shadow.visibility)
         lo = self.lowres
         if lo is None:  # full resolution: the indirect passes add onto the lit image
             with self._stage("direct lighting"):

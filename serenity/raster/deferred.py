@@ -14,7 +14,9 @@ from serenity.raster.context import FullscreenPass, draw_fullscreen, fullscreen_
 UPSAMPLE_UNIT = 16
 """First of the 3 texture units of the upsampled indirect light (units 0..15: G-buffer, shadows, sky)."""
 VISIBILITY_UNIT = UPSAMPLE_UNIT + 3
-"""Texture unit of the reduced-resolution sun visibility (``DeferredPass.render_visibility``)."""
+"""Texture unit of the sparsely sampled sun visibility (``DeferredPass.render_visibility``)."""
+VISIBILITY_MODES = {"checkerboard": 1, "half": 2}
+"""ShadowConfig.visibility → glsl/visibility_upsample.glsl's VIS_CHECKERBOARD / VIS_HALF ("pixel": none)."""
 SHADOW_FILTERS = {"hard": 0, "pcf": 1, "pcss": 2}
 """ShadowConfig.filter → glsl/shadow_sampling.glsl's SHADOW_FILTER."""
 
@@ -56,7 +58,7 @@ class DeferredPass(FullscreenPass):
         self.size = None
         self._variants: dict[tuple, tuple] = {}
         self._split = None  # (G-buffer depth texture, framebuffer of our targets + that depth)
-        self._vis = None    # (scale, target texture, framebuffer) of render_visibility
+        self._vis = None    # (mode, target texture, framebuffer, depth texture) of render_visibility
 
     def resize(self, width: int, height: int) -> None:
         if self.size != (width, height) and self._split is not None:
@@ -68,23 +70,24 @@ class DeferredPass(FullscreenPass):
 
     def _release_visibility(self) -> None:
         if self._vis is not None:
-            self._vis[2].release()
-            self._vis[1].release()
+            for obj in self._vis[:0:-1]:  # framebuffer first, then its textures
+                obj.release()
             self._vis = None
 
     def _variant(self, rt_view: bool, traced_sun: bool, contact_steps: int, upsample: bool, shadow_cfg=None,
-                 split: int = 0, vis_pass: bool = False, vis_upsample: bool = False):
+                 split: int = 0, vis_pass: int = 0, vis_upsample: int = 0, vis_step: int = 0):
         """(program, vao) of one variant; ``split`` 1 = surfaces only, 2 = sky only; ``vis_pass``: the
-        reduced-resolution sun visibility instead of the lighting; ``vis_upsample``: the lighting with
-        that visibility (glsl/deferred.glsl)."""
+        sparsely sampled sun visibility (a ``VISIBILITY_MODES`` value) instead of the lighting;
+        ``vis_upsample``: the lighting with that visibility; ``vis_step``: the visibility pass's step
+        (1: guide and class, 2: the visibility) (glsl/deferred.glsl)."""
         # the shadow filter and its tap counts are compiled in too (glsl/shadow_sampling.glsl)
         filt = None if shadow_cfg is None else (SHADOW_FILTERS[shadow_cfg.filter], int(shadow_cfg.blocker_samples),
                                                 int(shadow_cfg.filter_samples))
-        key = (rt_view, traced_sun, contact_steps, upsample, filt, split, vis_pass, vis_upsample)
+        key = (rt_view, traced_sun, contact_steps, upsample, filt, split, vis_pass, vis_upsample, vis_step)
         if key not in self._variants:
             defines = {"RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_STEPS": int(contact_steps),
                        "UPSAMPLE": int(upsample), "SPLIT": int(split), "VIS_PASS": int(vis_pass),
-                       "VIS_UPSAMPLE": int(vis_upsample)}
+                       "VIS_UPSAMPLE": int(vis_upsample), "VIS_STEP": int(vis_step)}
             if filt is not None:
                 defines.update(SHADOW_FILTER=filt[0], BLOCKER_SAMPLES=filt[1], FILTER_SAMPLES=filt[2])
             program = load_program(self.ctx, self.SHADER, defines=defines)
@@ -100,29 +103,47 @@ class DeferredPass(FullscreenPass):
                                                         depth_attachment=depth))
         return self._split[1]
 
-    def render_visibility(self, gbuffer, shadow, light: LightingInputs, scale: int):
+    def render_visibility(self, gbuffer, shadow, light: LightingInputs, mode: str):
         """The main view's sun visibility — the shadow maps' filter and the contact march, as
-        :meth:`render` would compute them — at 1/``scale`` of the view per axis, with each texel's
-        guide (normal, view depth): the RGBA32F texture :meth:`render` takes as ``visibility``
-        (``glsl/visibility_upsample.glsl``). One texel per scale×scale block of pixels, so the
-        filter's taps cost 1/scale² of a full-resolution pass; the upsampling costs 4 fetches a pixel."""
-        scale = int(scale)
-        size = low_res_size(*self.size, scale)
-        if self._vis is None or self._vis[0] != scale:
+        :meth:`render` would compute them — at the pixels that ``mode`` samples ("checkerboard":
+        every other pixel of each row and column, "half": one per 2×2 block), each with its guide
+        (normal, view depth): the RGBA32F texture :meth:`render` takes as ``visibility``
+        (``glsl/visibility_upsample.glsl``). The filter's taps cost 1/2 or 1/4 of the per-pixel pass;
+        the upsampling 5 or 4 fetches a pixel."""
+        code = VISIBILITY_MODES[mode]
+        w, h = self.size
+        size = ((w + 1) // 2, h) if mode == "checkerboard" else low_res_size(w, h, 2)
+        if self._vis is None or self._vis[0] != code:
             self._release_visibility()
             tex = self.ctx.texture(size, 4, dtype="f4")
-            self._vis = (scale, tex, self.ctx.framebuffer(color_attachments=[tex]))
-        _, tex, fbo = self._vis
+            depth = self.ctx.depth_texture(size)
+            self._vis = (code, tex, self.ctx.framebuffer(color_attachments=[tex], depth_attachment=depth), depth)
+        _, tex, fbo, _ = self._vis
         contact = int(light.shadow.contact_steps)
-        p, vao = self._variant(False, False, contact, False, light.shadow, vis_pass=True)
-        with self.ctx.debug_scope("sun visibility"):
-            for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
-                t.use(location=i)
+        steps = (self._variant(False, False, 0, False, None, vis_pass=code, vis_step=1),
+                 self._variant(False, False, contact, False, light.shadow, vis_pass=code, vis_step=2))
+        ctx = self.ctx
+        with ctx.debug_scope("sun visibility"):
+            gbuffer.normal.use(location=1)
+            gbuffer.position.use(location=2)
             shadow.depth.use(location=4)
-            self._set_uniforms(p, shadow, light, None, True, None, None, contact)
-            self._set(p, "u_vis_scale", scale)
-            fbo.use()
-            vao.render(vertices=3)
+            ctx.enable(moderngl.DEPTH_TEST)
+            try:
+                # step 1: every texel's guide, visibility 0 and class; step 2: the visibility (w only)
+                # of the texels on surfaces facing the sun, the others rejected by the depth test
+                for (p, vao), func, mask in zip(steps, ("1", ">"), ((True,) * 4, (False, False, False, True)),
+                                                strict=True):
+                    self._set_uniforms(p, shadow, light, None, True, None, None, contact)
+                    ctx.depth_func = func
+                    fbo.depth_mask = func == "1"
+                    fbo.color_mask = mask
+                    fbo.use()  # (moderngl applies the masks when the framebuffer is bound)
+                    vao.render(vertices=3)
+            finally:
+                ctx.disable(moderngl.DEPTH_TEST)
+                ctx.depth_func = "<"
+                fbo.depth_mask = True
+                fbo.color_mask = (True,) * 4
         return tex
 
     def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None,
@@ -143,7 +164,7 @@ class DeferredPass(FullscreenPass):
         contact = int(light.shadow.contact_steps) if main else 0  # march steps, 0 = no contact shadow
         shadow_cfg = None if shadow is None else light.shadow
         if main:
-            vis_up = visibility is not None
+            vis_up = 0 if visibility is None else self._vis[0]
             draws = [self._variant(False, False, 0, False, None, split=2),
                      self._variant(False, False, 0 if vis_up else contact, upsample is not None,
                                    None if vis_up else shadow_cfg, split=1, vis_upsample=vis_up)]
@@ -170,7 +191,6 @@ class DeferredPass(FullscreenPass):
                 self._set_uniforms(p, shadow, light, ao, main, upsample, sky, contact)
                 if main and visibility is not None:
                     self._set(p, "u_vis", VISIBILITY_UNIT)
-                    self._set(p, "u_vis_scale", self._vis[0])
             if not main:
                 self.fbo.use()
                 draw_fullscreen(ctx, draws[0][1], rt_view.rects)

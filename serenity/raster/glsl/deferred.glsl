@@ -11,6 +11,9 @@
 #if defined(SPLIT) && SPLIT > 0
 #define FULLSCREEN_Z 1.0
 #endif
+#if defined(VIS_STEP) && VIS_STEP == 2
+#define FULLSCREEN_Z 0.5  // window depth 0.75, behind VIS_SHADE_DEPTH (visibility_upsample.glsl), before 1
+#endif
 #include "fullscreen.glsl"
 
 // Compiled per use (DeferredPass picks the variant): llvmpipe runs every path of a fragment shader
@@ -20,9 +23,12 @@
 //   visibility is the tracer's shadow ray, g_eye.w (else the shadow maps);  CONTACT_STEPS N > 0 (main
 //   view): the screen-space contact shadow, N march steps;  UPSAMPLE 1 (main view): add the low-res
 //   indirect light. (The shadow filter and its taps are compiled in too: shadow_sampling.glsl.)
-//   VIS_PASS 1 (main view): not the lighting but the sun's visibility (shadow maps, contact march)
-//   at 1/u_vis_scale resolution, with its guide (visibility_upsample.glsl);  VIS_UPSAMPLE 1 (main
-//   view): the sun's visibility read from that pass's target instead of computed here.
+//   VIS_PASS m > 0 (main view): not the lighting but the sun's visibility at the pixels that
+//   sampling m keeps (visibility_upsample.glsl), in two steps: VIS_STEP 1 writes each sample's guide
+//   and visibility 0, and its class as its depth; VIS_STEP 2, drawn over that depth, computes the
+//   visibility (shadow maps, contact march) of the samples on surfaces facing the sun only;
+//   VIS_UPSAMPLE m > 0 (main view): the sun's visibility read from that pass's target instead of
+//   computed here.
 //   SPLIT (main view): 0 = one program for every pixel; 1 = the G-buffer's surfaces only; 2 = the
 //   sky only. DeferredPass draws 2 then 1 at the far plane over the G-buffer's depth (depth test <=,
 //   then >), and llvmpipe rejects a pixel by depth before shading it: neither half runs the other's
@@ -135,25 +141,31 @@ float contact_visibility(vec3 p, vec3 n, float view_depth) {
 }
 #endif
 
-#if VIS_PASS
-// the visibility of this texel's representative G-buffer pixel, as the main view's lighting below
-// would compute it there, and that pixel's normal and view depth (the upsampling's guide)
+#if VIS_PASS && VIS_STEP == 1
+// the G-buffer pixel this texel samples: its normal and view depth (the upsampling's guide), no
+// light yet, and its class as depth: VIS_SHADE_DEPTH where the lighting would look the sun up
 void main() {
-    ivec2 rq = representative_pixel_at(ivec2(gl_FragCoord.xy), textureSize(g_position, 0), u_vis_scale);
+    ivec2 rq = visibility_sample_pixel(VIS_PASS, ivec2(gl_FragCoord.xy), textureSize(g_position, 0));
     vec4 pos = texelFetch(g_position, rq, 0);
-    if (pos.w == 0.0) { o_vis = vec4(0.0, 0.0, -1.0, 1.0); return; }
     vec3 n = normalize(texelFetch(g_normal, rq, 0).xyz);
-    vec3 p = pos.xyz;
+    float metric = dot(pos.xyz - u_camera_pos, u_camera_forward);
+    bool lit = pos.w != 0.0 && dot(n, u_sun_dir) > 0.0 && u_sun_dir.y > -0.02;
+    o_vis = pos.w == 0.0 ? vec4(0.0, 0.0, -1.0, 1.0) : vec4(oct_encode(n), metric, 0.0);  // open sky: 1
+    gl_FragDepth = lit ? VIS_SHADE_DEPTH : 1.0;
+}
+#elif VIS_PASS
+// the visibility of the G-buffer pixel this texel samples, as the main view's lighting below would
+// compute it there (only the w channel is written: the guide stays)
+void main() {
+    ivec2 rq = visibility_sample_pixel(VIS_PASS, ivec2(gl_FragCoord.xy), textureSize(g_position, 0));
+    vec3 p = texelFetch(g_position, rq, 0).xyz;
+    vec3 n = normalize(texelFetch(g_normal, rq, 0).xyz);
     float metric = dot(p - u_camera_pos, u_camera_forward);
-    float ndl = dot(n, u_sun_dir);
-    float vis = 0.0;
-    if (ndl > 0.0 && u_sun_dir.y > -0.02) {
-        vis = sun_visibility(p, n, ndl, metric);
+    float vis = sun_visibility(p, n, dot(n, u_sun_dir), metric);
 #if CONTACT_STEPS > 0
-        if (vis > 0.0) vis *= contact_visibility(p, n, metric);
+    if (vis > 0.0) vis *= contact_visibility(p, n, metric);
 #endif
-    }
-    o_vis = vec4(oct_encode(n), metric, vis);
+    o_vis = vec4(0.0, 0.0, 0.0, vis);
 }
 #else
 void main() {
