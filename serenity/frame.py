@@ -17,8 +17,10 @@ milliseconds (the worker's ``cpu ray tracing`` included); ``Frame.wall_ms`` is t
 duration, less than the sum when the tracer overlaps the GL work; ``Frame.events`` is the
 timeline (lane, stage, start, end in ms from the frame start) that ``serenity bench`` charts.
 
-Stage timing: GL is asynchronous, so with ``RenderConfig.sync_stages`` (default) each GL stage
-ends with ``ctx.finish()`` and is timed by the wall clock. GL timer queries would not perturb the
+Stage timing: GL is asynchronous, so with ``RenderConfig.sync_stages`` = "each" (what ``serenity
+bench`` uses) each GL stage ends with ``ctx.finish()`` and is timed by the wall clock; the default,
+"cpu", waits only before the stages that run on the CPU, so a GL stage's time is then what it took
+to queue and the queued work shows up in the next wait. GL timer queries would not perturb the
 pipeline, but Mesa's llvmpipe returns garbage for them (elapsed = 0xFFFFFFFF), and the CPU
 "GPU" of this project's CI runs the GL work synchronously anyway.
 """
@@ -236,9 +238,12 @@ class Renderer:
 
     @contextmanager
     def _stage(self, name: str, gl: bool = True) -> Iterator[None]:
+        sync = self.config.sync_stages
+        if not gl and sync == "cpu":  # the queued GL work first: it would contend with this stage's
+            self.ctx.finish()           # CPU work for the cores
         t0 = time.perf_counter()
         yield
-        if gl and self.config.sync_stages:
+        if gl and sync == "each":
             self.ctx.finish()
         self._record(MAIN_LANE, name, t0, time.perf_counter())
 
