@@ -330,6 +330,7 @@ class Renderer:
         self.outputs = {"hdr": out_hdr, "ldr": self.tonemap_pass.ldr, "direct": lit.direct, "ao": ao,
                         "gbuffer": gbuf, "rcb": rcb}
         hdr, ldr, aovs = self._read_back(wanted, out_hdr, gbuf, lit, ao, rcb, cam)
+        self.ctx.finish()  # the frame is done when its GL work is (sync_stages other than "each" leave some queued)
         return self._end_frame(hdr, ldr, aovs, rcb)
 
     def render_accumulated(self, samples: int) -> Frame:
