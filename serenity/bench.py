@@ -77,10 +77,7 @@ def run_frames(scene, width, height, frames, device=None, overlap=True, progress
     """Render ``frames`` frames of the path; returns per-frame records and the last Frame."""
     scene = copy.deepcopy(scene)
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-    # every GL stage waited for (sync_stages "each"), so that each stage's milliseconds are its own:
-    # the profile this bench reports (the default, "cpu", only waits before the CPU stages)
-    renderer = Renderer(scene, width, height, device=device,
-                        config=RenderConfig.preset(quality, overlap=overlap, sync_stages="each"))
+    renderer = Renderer(scene, width, height, device=device, config=RenderConfig.preset(quality, overlap=overlap))
     records, frame, sample = [], None, None
     label = "overlapped" if overlap else "serial"
     for i in tqdm(range(frames), desc=f"bench {scene.name} ({label})", disable=not progress, unit="frame"):

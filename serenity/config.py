@@ -399,14 +399,15 @@ class RenderConfig:
     """Light propagation volumes (paper §8); ``enabled=False`` turns the LPV off. Default: 3 cascades
     of 12³, 8 iterations, the coarsest extended to cross the scene and at most 6 cells across it, far
     light handed over to the finer cascades, clamped face flux, lookup occlusion."""
-    sync_stages: str = "cpu"
+    sync_stages: str = "each"
     """When the frame waits for the GL queue (``ctx.finish()``): "each" = after every GL stage, so each
     stage's wall time is its own (the profile ``serenity bench`` reports); "cpu" = only before the
     stages that run on the CPU (the volumes' kernels, the wait for the tracer), so GL work never runs
     beside them but a run of GL passes is not cut into waits (a GL stage's time is then only what
     it took to queue); "none" = never before the read-back. (True / False read as "each" / "none".)
-    "cpu" by default: still frames 3-10 % faster than "each", the same images
-    (``benchmarks/results/pass_ab_sync_cpu_*.json``)."""
+    "each" by default, as every figure of a stage assumes; "cpu" is what an application that reads
+    no per-stage times would use (the frontier does): still frames 0-6 % faster in interleaved A/Bs,
+    the same images (``benchmarks/results/pass_ab_sync_cpu_*.json``)."""
     ray_tracing: bool = True
     """Ray-traced reflections and refractions for mirror/metal/glass pixels (paper §9)."""
     reflections: bool = True

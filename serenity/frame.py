@@ -17,10 +17,10 @@ milliseconds (the worker's ``cpu ray tracing`` included); ``Frame.wall_ms`` is t
 duration, less than the sum when the tracer overlaps the GL work; ``Frame.events`` is the
 timeline (lane, stage, start, end in ms from the frame start) that ``serenity bench`` charts.
 
-Stage timing: GL is asynchronous, so with ``RenderConfig.sync_stages`` = "each" (what ``serenity
-bench`` uses) each GL stage ends with ``ctx.finish()`` and is timed by the wall clock; the default,
-"cpu", waits only before the stages that run on the CPU, so a GL stage's time is then what it took
-to queue and the queued work shows up in the next wait. GL timer queries would not perturb the
+Stage timing: GL is asynchronous, so with ``RenderConfig.sync_stages`` = "each" (default) each GL
+stage ends with ``ctx.finish()`` and is timed by the wall clock; "cpu" waits only before the stages
+that run on the CPU, so a GL stage's time is then what it took to queue and the queued work shows up
+in the next wait (or the frame's final one). GL timer queries would not perturb the
 pipeline, but Mesa's llvmpipe returns garbage for them (elapsed = 0xFFFFFFFF), and the CPU
 "GPU" of this project's CI runs the GL work synchronously anyway.
 """

@@ -54,9 +54,7 @@ def run(args) -> int:
     load_ms = (time.perf_counter() - t0) * 1e3
     png = args.output or os.path.join(DEFAULT_OUT_DIR, f"{scene_stem(args.scene)}.png")
     exr = args.exr or os.path.splitext(png)[0] + ".exr"
-    # every GL stage waited for, so that the printed per-stage times are each stage's own
-    config = RenderConfig.preset(args.quality, exposure=args.exposure, ambient=args.ambient, overlap=not args.serial,
-                                 sync_stages="each")
+    config = RenderConfig.preset(args.quality, exposure=args.exposure, ambient=args.ambient, overlap=not args.serial)
     renderer = Renderer(scene, width, height, device=args.device, config=config)
     frame = None
     for _ in range(max(1, args.frames)):

@@ -44,9 +44,8 @@ VIEWS = {
 
 def quality_config(name: str) -> RenderConfig:
     """The ``RenderConfig`` of a quality preset (``RenderConfig.preset``, as ``serenity render
-    --quality``: with every GL stage waited for, so that the panel shows each stage's own
-    milliseconds); an unknown name is a one-line ``ConfigError``."""
-    return RenderConfig.preset(name, sync_stages="each")
+    --quality``); an unknown name is a one-line ``ConfigError``."""
+    return RenderConfig.preset(name)
 
 
 @dataclass
