@@ -406,8 +406,9 @@ class RenderConfig:
     beside them but a run of GL passes is not cut into waits (a GL stage's time is then only what
     it took to queue); "none" = never before the read-back. (True / False read as "each" / "none".)
     "each" by default, as every figure of a stage assumes; "cpu" is what an application that reads
-    no per-stage times would use (the frontier does): still frames 0-6 % faster in interleaved A/Bs,
-    the same images (``benchmarks/results/pass_ab_sync_cpu_*.json``)."""
+    no per-stage times would use (the frontier does): still frames 3-12 % faster in four of five
+    interleaved A/Bs (1 % slower in the fifth), the same images
+    (``benchmarks/results/pass_ab_sync_cpu_*.json``)."""
     ray_tracing: bool = True
     """Ray-traced reflections and refractions for mirror/metal/glass pixels (paper §9)."""
     reflections: bool = True
