@@ -10,6 +10,7 @@ import pytest
 
 from serenity.bench import camera_path, rss_mb, sun_path
 from serenity.config import RenderConfig
+from serenity.errors import ConfigError
 from serenity.frame import LPV_UPDATE_STAGES, SKY_UPDATE_STAGES, STAGES, Renderer
 from serenity.scene import load
 
@@ -141,3 +142,32 @@ def test_overlapped_and_serial_schedules_agree(scene_name, device):
             r.close()
     a, b = images
     assert np.abs(a - b).max() <= 1e-4 * a.max()
+
+
+def test_sync_modes_give_the_same_frames(courtyard):
+    """``sync_stages`` only decides when the frame waits for GL: "each", "cpu" and "none" render the
+    same images, frame after frame (the first frame builds the volumes, the next ones move the sun
+    and camera, so the volume stages run with GL work queued or not), and the same stages in order."""
+    images = {}
+    for mode in ("each", "cpu", "none"):
+        scene = copy.deepcopy(courtyard)
+        base_cam, base_sun = scene.camera, scene.sun.direction.copy()
+        r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium", sync_stages=mode))
+        try:
+            frames = []
+            for i in range(3):
+                scene.camera = camera_path(base_cam, i / 4)
+                scene.sun.direction = sun_path(base_sun, i / 4)
+                f = r.render(read_back=("hdr",))
+                assert _in_stage_order(f.timings)
+                frames.append(f.hdr)
+        finally:
+            r.close()
+        images[mode] = frames
+    for mode in ("cpu", "none"):
+        for a, b in zip(images["each"], images[mode], strict=True):
+            assert np.array_equal(a, b), mode
+    assert RenderConfig(sync_stages=True).sync_stages == "each"
+    assert RenderConfig(sync_stages=False).sync_stages == "none"
+    with pytest.raises(ConfigError, match="sync_stages"):
+        RenderConfig(sync_stages="sometimes")

@@ -70,7 +70,8 @@ class DeferredPass(FullscreenPass):
 
     def _release_visibility(self) -> None:
         if self._vis is not None:
-            for obj in self._vis[:0:-1]:  # framebuffer first, then its textures
+            _, tex, fbo, depth = self._vis
+            for obj in (fbo, tex, depth):  # the framebuffer first, then its textures
                 obj.release()
             self._vis = None
 
