@@ -180,6 +180,12 @@ def open_ground(variants):
     return out
 
 
+def _unit_settings(kw: dict) -> dict:
+    """A variant's settings for the one-cascade test LPVs (plane, thin wall), which fix their own
+    iteration count: per-cascade ``iterations`` do not apply there (and would clash with it)."""
+    return {k: v for k, v in kw.items() if k != "iterations"}
+
+
 def plane_self_illumination(variants):
     """``serenity.eval.stability.lpv_self_illumination`` (a lit plane, its surfels in the geometry
     volume, 1 m cells, 8 iterations) at four heights within a cell, per variant."""
@@ -187,6 +193,7 @@ def plane_self_illumination(variants):
 
     out = {}
     for label, kw in variants.items():
+        kw = _unit_settings(kw)
         out[label] = ratios = [lpv_self_illumination(y0, device="cpu", surfels=True, **kw)
                                for y0 in (3.01, 3.3, 3.6, 3.9)]
         print(f"plane E_self/M    {label:<48} {np.round(ratios, 3).tolist()}", flush=True)
@@ -201,7 +208,7 @@ def thin_wall(variants):
 
     out = {}
     for label, kw in variants.items():
-        kw = {k: v for k, v in kw.items() if k != "iterations"}
+        kw = _unit_settings(kw)
         r = [lpv_thin_wall(f, True, True, **kw) for f in (0.1, 0.3, 0.5, 0.7, 0.9)]
         out[label] = [d / lit for d, lit in r]
         print(f"thin wall E_d/E_l {label:<48} worst {max(out[label]):.4f}", flush=True)
