@@ -569,7 +569,7 @@ PRESETS: dict[str, dict] = {
                "rsm_size": 128, "sky_vpl_stride": 8},
     # the cheapest: indirect light at quarter resolution, 3 cascades, a 6³ LPV (8³ until round 9: 6³ was
     # better on FLIP and relMSE in both scenes at both frontier sizes, benchmarks/results/
-    # pass_ab_low_lpv6_*.json — though 5³ and 7³ each lost one scene: the LPV is sensitive to how its
+    # pass_ab_low_lpv6_*.json — though 7³ lost both scenes and 5³ one: the LPV is sensitive to how its
     # cells fall on the walls), coarse sky
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4, "filter_samples": 8,
