@@ -32,13 +32,14 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # (old, new): counters in trace_kd; u carries inner steps + pops / 1000, v leaves * 1000 + triangles
 SUBSTITUTIONS = [
-    ("    while not done:\n        nd = tree.nodes[node]",
+    ("    while not done:\n        head = node_head(tree.nodes, node)",
      "    n_inner = int(0)\n    n_leaf = int(0)\n    n_tri = int(0)\n    n_pop = int(0)\n"
-     "    while not done:\n        nd = tree.nodes[node]"),
-    ("        if axis != 3:\n            split = nd.split", "        if axis != 3:\n            n_inner += 1\n"
-     "            split = nd.split"),
-    ("            n = int(nd.split)\n            for j in range(n):",
-     "            n = int(nd.split)\n            n_leaf += 1\n            n_tri += n\n            for j in range(n):"),
+     "    while not done:\n        head = node_head(tree.nodes, node)"),
+    ("        if axis != 3:\n            split = node_split(tree.nodes, node)",
+     "        if axis != 3:\n            n_inner += 1\n            split = node_split(tree.nodes, node)"),
+    ("            n = int(node_split(tree.nodes, node))\n            for j in range(n):",
+     "            n = int(node_split(tree.nodes, node))\n            n_leaf += 1\n            n_tri += n\n"
+     "            for j in range(n):"),
     ("                    if t0 <= best_t:\n                        popped = 1",
      "                    if t0 <= best_t:\n                        popped = 1\n                        n_pop += 1"),
     ("    if prim < 0:\n        best_t = _INF\n    return prim, best_t, hit_u, hit_v",
