@@ -1,5 +1,6 @@
 """The `serenity` command: it renders what it says, and bad input ends in one line, not a traceback."""
 
+import json
 import os
 import subprocess
 import sys
@@ -22,8 +23,13 @@ def test_render_writes_png_and_multilayer_exr(tmp_path, capsys):
     from serenity.io.exr import read_exr
 
     png = tmp_path / "out" / "plane.png"
-    code, out, err = _run(["render", "plane", "--size", "48x32", "-o", str(png), "--frames", "1"], capsys)
+    js = tmp_path / "out" / "plane.json"
+    code, out, err = _run(["render", "plane", "--size", "48x32", "-o", str(png), "--frames", "1", "--json", str(js)],
+                          capsys)
     assert code == 0, err
+    rec = json.loads(js.read_text())  # what it printed, as data
+    assert rec["size"] == [48, 32] and rec["scene"] == "plane" and rec["frame_ms"] > 0
+    assert "g-buffer" in rec["stages_ms"] and "beauty" in rec["layers"]
     assert Image.open(png).size == (48, 32)
     layers = read_exr(str(png.with_suffix(".exr")))
     assert {"beauty", "albedo", "normal", "depth", "direct"} <= set(layers)

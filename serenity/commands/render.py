@@ -37,6 +37,7 @@ def register(subparsers) -> None:
                    help="trace rays before the GL work instead of beside it (paper §10's comparison)")
     r.add_argument("--frames", type=int, default=2,
                    help="frames to render; timings are those of the last (default %(default)s)")
+    r.add_argument("--json", help="also write what it printed (scene, size, per-stage ms, frame ms) to this JSON file")
     r.set_defaults(func=run)
 
 
@@ -71,4 +72,14 @@ def run(args) -> int:
     print(format_timings(frame.timings, frame.wall_ms))
     print(f"wrote {png}")
     print(f"wrote {exr} (layers: {', '.join(layers)})")
+    if args.json:
+        from serenity.io.results import write_results
+
+        write_results(args.json, {
+            "arguments": {k: v for k, v in vars(args).items() if k != "func"}, "scene": scene.name,
+            "triangles": int(scene.triangle_count), "size": [width, height], "device": str(renderer.device),
+            "quality": args.quality, "frames": max(1, args.frames), "load_ms": load_ms,
+            "sun": {"elevation_deg": float(sun.elevation_deg), "azimuth_deg": float(sun.azimuth_deg)},
+            "stages_ms": {k: float(v) for k, v in frame.timings.items()}, "frame_ms": float(frame.wall_ms),
+            "png": png, "exr": exr, "layers": list(layers)})
     return 0
