@@ -109,7 +109,7 @@ def main(argv=None) -> int:
             return original(name, _seen)
         if name in _seen:
             return ""
-        return context._INCLUDE.sub(lambda m: shader_source(m.group(1), _seen | {name}), active[name])
+        return context.expand_includes(active[name], _seen | {name})
 
     context.shader_source = shader_source  # context.load_program (and the original's includes) look it up here
     base = load(args.scene)

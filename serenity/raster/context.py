@@ -104,12 +104,13 @@ def shader_source(name: str, _seen: frozenset = frozenset()) -> str:
     """Text of ``glsl/<name>`` with its ``#include``s expanded (once each)."""
     if name in _seen:
         return ""
-    text = resources.files("serenity.raster").joinpath("glsl", name).read_text()
+    return expand_includes(resources.files("serenity.raster").joinpath("glsl", name).read_text(), _seen | {name})
 
-    def sub(m):
-        return shader_source(m.group(1), _seen | {name})
 
-    return _INCLUDE.sub(sub, text)
+def expand_includes(text: str, _seen: frozenset = frozenset()) -> str:
+    """GLSL ``text`` with its ``#include "x.glsl"`` lines replaced by ``shader_source("x.glsl")`` (looked
+    up in this module when called, so a benchmark may substitute its own), files in ``_seen`` left out."""
+    return _INCLUDE.sub(lambda m: shader_source(m.group(1), _seen), text)
 
 
 def load_program(ctx, name: str, defines: dict | None = None, stages=("VERTEX_SHADER", "FRAGMENT_SHADER")):

@@ -11,7 +11,7 @@ import pytest
 from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
 from serenity.errors import ConfigError
 from serenity.frame import Renderer
-from serenity.raster.context import compile_program, shader_source
+from serenity.raster.context import compile_program, expand_includes
 from serenity.scene import load
 
 SIZE = (128, 72)
@@ -55,7 +55,7 @@ def test_octahedral_normal_round_trip(gl_ctx):
     n[0, :6] = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
     n[1, :4] = [[1, 1, -1e-7], [-1, 1, -1], [0.5, -0.5, -1e-3], [0, 0.7, -0.7]]
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    prog = compile_program(gl_ctx, _expand(OCT_PROGRAM), "oct test")
+    prog = compile_program(gl_ctx, expand_includes(OCT_PROGRAM), "oct test")
     src = gl_ctx.texture((64, 64), 4, np.concatenate([n, np.zeros((64, 64, 1))], -1).astype("f4").tobytes(),
                          dtype="f4")
     src.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -69,15 +69,6 @@ def test_octahedral_normal_round_trip(gl_ctx):
     vao.render(vertices=3)
     got = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(64, 64, 4)[..., :3]
     assert np.abs(got - n).max() < 1e-5
-
-
-def _expand(body: str) -> str:
-    """``body`` with its ``#include "x.glsl"`` lines replaced by the files (as load_program does)."""
-    lines = []
-    for line in body.splitlines():
-        s = line.strip()
-        lines.append(shader_source(s.split('"')[1]) if s.startswith("#include") else line)
-    return "\n".join(lines)
 
 
 @pytest.mark.gl

@@ -22,6 +22,15 @@ ivec2 representative_pixel_at(ivec2 low, ivec2 full_size, int scale) {
 }
 ivec2 representative_pixel(ivec2 low, ivec2 full_size) { return representative_pixel_at(low, full_size, u_scale); }
 
+// The 2x2 low-res texels whose representatives surround full-resolution pixel px (1/scale per axis):
+// the first one, i0, and px's bilinear fractions f between them; bilinear_weight: texel i0 + o's share.
+void lowres_footprint(ivec2 px, int scale, out ivec2 i0, out vec2 f) {
+    vec2 t = (vec2(px) - float(scale / 2)) / float(scale);  // integers at the representatives
+    i0 = ivec2(floor(t));
+    f = t - vec2(i0);
+}
+float bilinear_weight(ivec2 o, vec2 f) { return (o.x == 1 ? f.x : 1.0 - f.x) * (o.y == 1 ? f.y : 1.0 - f.y); }
+
 // Joint bilateral upsampling (upsample.glsl, visibility_upsample.glsl): how alike a low-res texel's
 // representative (normal gn, view depth gz; gz < 0: background) is to the pixel being filled (n, z):
 // exp(-|gz - z| / (0.05 z)) * max(0, gn . n)^8 — ~0 across a silhouette or a crease.

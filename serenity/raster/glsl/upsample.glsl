@@ -18,10 +18,9 @@ uniform sampler2D u_guide;   // per low-res texel: xyz = normal, w = view depth 
 // albedo * E + G at full-resolution pixel px (view depth z, G-buffer normal n)
 vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
     ivec2 low_max = textureSize(u_irr, 0) - 1;
-    // low-res coordinate whose integers are the texels' representatives
-    vec2 t = (vec2(px) - float(u_scale / 2)) / float(u_scale);
-    ivec2 i0 = ivec2(floor(t));
-    vec2 f = t - vec2(i0);
+    ivec2 i0;
+    vec2 f;
+    lowres_footprint(px, u_scale, i0, f);
     vec3 irr = vec3(0.0), gloss = vec3(0.0);
     float wsum = 0.0, best = -1.0;
     vec3 best_irr = vec3(0.0), best_gloss = vec3(0.0);
@@ -29,7 +28,7 @@ vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
         ivec2 o = ivec2(k & 1, k >> 1);
         ivec2 q = clamp(i0 + o, ivec2(0), low_max);
         vec4 g = texelFetch(u_guide, q, 0);
-        float bil = (o.x == 1 ? f.x : 1.0 - f.x) * (o.y == 1 ? f.y : 1.0 - f.y);
+        float bil = bilinear_weight(o, f);
         float sim = guide_similarity(g.xyz, g.w, n, z);
         float w = (bil + 1e-3) * sim;
         vec3 xi = texelFetch(u_irr, q, 0).rgb, xg = texelFetch(u_gloss, q, 0).rgb;

@@ -63,13 +63,13 @@ float upsampled_visibility(ivec2 px, float z, vec3 n) {
         if (sim > best) { best = sim; best_vis = g.w; }
     }
 #else
-    vec2 t = (vec2(px) - 1.0) / 2.0;  // half-resolution coordinate whose integers are the samples
-    ivec2 i0 = ivec2(floor(t));
-    vec2 f = t - vec2(i0);
+    ivec2 i0;
+    vec2 f;
+    lowres_footprint(px, 2, i0, f);
     for (int k = 0; k < 4; ++k) {
         ivec2 o = ivec2(k & 1, k >> 1);
         vec4 g = texelFetch(u_vis, clamp(i0 + o, ivec2(0), low_max), 0);
-        float bil = (o.x == 1 ? f.x : 1.0 - f.x) * (o.y == 1 ? f.y : 1.0 - f.y);
+        float bil = bilinear_weight(o, f);
         float sim = guide_similarity(oct_decode(g.xy), g.z, n, z);
         float w = (bil + 1e-3) * sim;
         vis += w * g.w;
