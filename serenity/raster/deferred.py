@@ -9,7 +9,9 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from serenity.config import ShadowConfig
 from serenity.raster.context import FullscreenPass, draw_fullscreen, fullscreen_vao, load_program, low_res_size
+from serenity.raster.shadow import disc_defines
 
 UPSAMPLE_UNIT = 16
 """First of the 3 texture units of the upsampled indirect light (units 0..15: G-buffer, shadows, sky)."""
@@ -90,7 +92,9 @@ class DeferredPass(FullscreenPass):
                        "UPSAMPLE": int(upsample), "SPLIT": int(split), "VIS_PASS": int(vis_pass),
                        "VIS_UPSAMPLE": int(vis_upsample), "VIS_STEP": int(vis_step)}
             if filt is not None:
-                defines.update(SHADOW_FILTER=filt[0], BLOCKER_SAMPLES=filt[1], FILTER_SAMPLES=filt[2])
+                defines["SHADOW_FILTER"] = filt[0]
+            taps = filt[1:] if filt is not None else (ShadowConfig.blocker_samples, ShadowConfig.filter_samples)
+            defines.update(disc_defines(*taps))
             program = load_program(self.ctx, self.SHADER, defines=defines)
             self._variants[key] = (program, fullscreen_vao(self.ctx, program))
         return self._variants[key]

@@ -42,6 +42,27 @@ MAX_CASCADES = 4
 STAGGER_PAD = 0.1
 
 
+def vogel_disc(n: int) -> np.ndarray:
+    """(n, 2) float64: the Vogel (golden-angle) points in the unit disc, i-th at radius
+    sqrt((i + 0.5) / n), angle i · 2.39996323 rad (the shadow filter's taps before each pixel's
+    rotation)."""
+    i = np.arange(n, dtype=np.float64)
+    r, a = np.sqrt((i + 0.5) / n), i * 2.39996323
+    return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+
+
+def disc_defines(blocker_samples: int, filter_samples: int) -> dict[str, str | int]:
+    """The ``#define``s that ``glsl/shadow_sampling.glsl`` compiles its taps from: the two tap counts
+    and their Vogel discs as GLSL ``vec2`` lists (``BLOCKER_DISC``, ``FILTER_DISC``). The points are
+    constants of the program and each pixel rotates them by its own angle: one cos/sin pair a pixel
+    instead of one per tap, which llvmpipe evaluates in software (~60 % of the ALU of a 32-tap filter
+    loop; the loops are too long to unroll into constants)."""
+    def glsl(n: int) -> str:
+        return ", ".join(f"vec2({x:.9g}, {y:.9g})" for x, y in vogel_disc(n))
+    return {"BLOCKER_SAMPLES": int(blocker_samples), "FILTER_SAMPLES": int(filter_samples),
+            "BLOCKER_DISC": glsl(blocker_samples), "FILTER_DISC": glsl(filter_samples)}
+
+
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     f = np.asarray(target, np.float64) - eye
     f = f / np.linalg.norm(f)

@@ -8,7 +8,7 @@ import pytest
 
 from serenity.config import LPVConfig, RenderConfig, ShadowConfig, SSAOConfig
 from serenity.frame import Renderer
-from serenity.raster.shadow import fit_shadow_cascades
+from serenity.raster.shadow import disc_defines, fit_shadow_cascades, vogel_disc
 from serenity.scene.model import Camera
 
 from .exact import ambient_occlusion, sun_visibility
@@ -103,6 +103,25 @@ def test_pcss_penumbra_matches_exact_disc_visibility(gl_ctx):
     assert 0.05 < width < 0.10
     assert err_pcss < 0.05, f"PCSS mean |visibility error| {err_pcss:.3f}"
     assert err_pcss < err_hard
+
+
+def test_vogel_disc_table_is_the_golden_angle_spiral():
+    pts = vogel_disc(32)
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    assert np.allclose(r, np.sqrt((np.arange(32) + 0.5) / 32))
+    # consecutive points turn by the golden angle
+    turn = np.angle((pts[1:, 0] + 1j * pts[1:, 1]) / (pts[:-1, 0] + 1j * pts[:-1, 1]))
+    assert np.allclose(np.mod(turn, 2 * np.pi), 2.39996323)
+    d = disc_defines(3, 5)
+    assert d["BLOCKER_SAMPLES"] == 3 and d["FILTER_SAMPLES"] == 5
+    assert d["FILTER_DISC"].count("vec2(") == 5 and d["BLOCKER_DISC"].count("vec2(") == 3
+
+
+@pytest.mark.parametrize("samples", [2, 256])
+def test_pcss_with_any_tap_count_compiles_and_stays_near_the_exact_penumbra(gl_ctx, samples):
+    # the constant disc tables for the extreme counts (1 blocker tap with 2 filter taps; 128 / 256)
+    rendered, exact, _ = _penumbra_profile("pcss", samples=samples)
+    assert float(np.mean(np.abs(rendered - exact))) < (0.03 if samples > 16 else 0.1)  # 0.015 / 0.084 measured
 
 
 def test_ssao_approximates_ray_traced_ao(gl_ctx):

@@ -27,33 +27,38 @@ uniform float u_pcss_max_blocker;     // metres: farthest blocker the search loo
 #ifndef SHADOW_FILTER
 #define SHADOW_FILTER SHADOW_PCSS
 #endif
-#ifndef BLOCKER_SAMPLES
-#define BLOCKER_SAMPLES 16
+// The taps' Vogel discs come in as constants (BLOCKER_DISC, FILTER_DISC: serenity.raster.shadow.
+// disc_defines, with BLOCKER_SAMPLES and FILTER_SAMPLES): each pixel turns them by its own angle, one
+// cos/sin pair instead of one per tap (llvmpipe evaluates them in software).
+#if !defined(BLOCKER_DISC) || !defined(FILTER_DISC)
+#error "shadow_sampling.glsl: compile with serenity.raster.shadow.disc_defines (BLOCKER_DISC, FILTER_DISC)"
 #endif
-#ifndef FILTER_SAMPLES
-#define FILTER_SAMPLES 32
-#endif
+const vec2 BLOCKER_POINTS[BLOCKER_SAMPLES] = vec2[BLOCKER_SAMPLES](BLOCKER_DISC);
+const vec2 FILTER_POINTS[FILTER_SAMPLES] = vec2[FILTER_SAMPLES](FILTER_DISC);
 uniform float u_cascade_blend;        // fraction of a cascade's depth blended into the next
 
 float interleaved_gradient_noise(vec2 pixel) {
     return fract(52.9829189 * fract(dot(pixel, vec2(0.06711056, 0.00583715))));
 }
 
-// Vogel (golden-angle) disc: i-th of n points in the unit disc, rotated by phi.
-vec2 vogel_disc(int i, int n, float phi) {
-    float r = sqrt((float(i) + 0.5) / float(n));
-    float a = float(i) * 2.39996323 + phi;
-    return r * vec2(cos(a), sin(a));
+// A disc point turned by the angle whose (cos, sin) is rot.
+vec2 rotated(vec2 p, vec2 rot) {
+    return vec2(p.x * rot.x - p.y * rot.y, p.x * rot.y + p.y * rot.x);
 }
 
-vec2 atlas_uv(int cascade, vec2 uv) {
+// One cascade's tile of the atlas: the tap at tile coordinates uv + o reads the atlas at
+// clamp(base + o * scale, lo, hi) (base: uv in the atlas), half a texel inside the tile at most.
+struct AtlasTile { vec2 base; float scale; vec2 lo; vec2 hi; };
+
+AtlasTile atlas_tile(int cascade, vec2 uv, vec2 texel) {
     vec2 tile = vec2(cascade % 2, cascade / 2);
-    return (tile + uv) / u_atlas_tiles;
+    float scale = 1.0 / u_atlas_tiles;
+    return AtlasTile((tile + uv) * scale, scale, (tile + 0.5 * texel) * scale, (tile + 1.0 - 0.5 * texel) * scale);
 }
 
-float atlas_depth(int cascade, vec2 uv, vec2 texel) {
-    uv = clamp(uv, 0.5 * texel, 1.0 - 0.5 * texel);  // stay inside this cascade's tile
-    return texture(u_shadow_map, atlas_uv(cascade, uv)).r;
+// o: the tap's offset already in atlas units (times scale)
+float atlas_depth(AtlasTile t, vec2 o) {
+    return texture(u_shadow_map, clamp(t.base + o, t.lo, t.hi)).r;
 }
 
 float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
@@ -66,6 +71,8 @@ float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
     if (any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0))) || s.z > 1.0) return 1.0;
     vec2 texel = vec2(1.0 / size);
     float phi = 6.2831853 * interleaved_gradient_noise(gl_FragCoord.xy);
+    vec2 rot = vec2(cos(phi), sin(phi));
+    AtlasTile tile = atlas_tile(c, s.xy, texel);
     float radius = 0.0;  // filter radius, texels
 #if SHADOW_FILTER == SHADOW_PCF
     radius = u_pcf_radius;
@@ -76,8 +83,9 @@ float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
         float sum = 0.0;
         int found = 0;
         float bias0 = (u_shadow_bias + search * 0.5) * texel_w / range;
+        vec2 spread = rot * (search * texel.x * tile.scale);   // texels are square
         for (int i = 0; i < BLOCKER_SAMPLES; ++i) {
-            float d = atlas_depth(c, s.xy + vogel_disc(i, BLOCKER_SAMPLES, phi) * search * texel, texel);
+            float d = atlas_depth(tile, rotated(BLOCKER_POINTS[i], spread));
             if (d < s.z - bias0) { sum += d; found++; }
         }
         if (found == 0) return 1.0;
@@ -89,12 +97,12 @@ float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
     // the farther a filter tap is, the more a sloped receiver rises above the lookup depth
     float bias = (u_shadow_bias + radius * slope) * texel_w / range;
 #if SHADOW_FILTER == SHADOW_HARD
-    return s.z - bias <= atlas_depth(c, s.xy, texel) ? 1.0 : 0.0;
+    return s.z - bias <= atlas_depth(tile, vec2(0.0)) ? 1.0 : 0.0;
 #else
     float lit = 0.0;
+    vec2 spread = rot * (radius * texel.x * tile.scale);
     for (int i = 0; i < FILTER_SAMPLES; ++i) {
-        vec2 o = vogel_disc(i, FILTER_SAMPLES, phi) * radius * texel;
-        lit += (s.z - bias <= atlas_depth(c, s.xy + o, texel)) ? 1.0 : 0.0;
+        lit += (s.z - bias <= atlas_depth(tile, rotated(FILTER_POINTS[i], spread))) ? 1.0 : 0.0;
     }
     return lit / float(FILTER_SAMPLES);
 #endif
