@@ -111,6 +111,8 @@ class Frame:
     cpu_ms: CPU time the frame took on every core, ms: this process's threads (the GL driver's, the
     Warp launches', Python's) plus the tracer process's work. ``cpu_ms / cores`` bounds the wall
     time from below whatever the schedule (``serenity bench`` reports it).
+    nonfinite_pixels: how many pixels of the HDR image are NaN or infinite, counted on the GL side
+    by the tone-mapping pass (known without reading the image back).
 
     With ``render(read_back=False)`` nothing leaves the GL context: hdr and ldr are None, aovs is
     empty, and the images stay in ``Renderer.outputs``.
@@ -125,6 +127,7 @@ class Frame:
     events: list[tuple[str, str, float, float]] = field(default_factory=list)
     rays: int = 0
     cpu_ms: float = 0.0
+    nonfinite_pixels: int = 0
 
     @property
     def total_ms(self) -> float:
@@ -293,7 +296,8 @@ class Renderer:
         frame"), one method per box. ``read_back`` says what comes back to the host: True =
         everything (hdr, ldr and the AOVs), False = nothing (for a caller that draws
         ``self.outputs`` itself, e.g. the viewer's window), or a subset of {"hdr", "ldr", "aovs"}
-        (``serenity bench`` reads only the HDR image: every read stalls the GL pipeline). ``jitter``:
+        (``serenity bench`` and the viewer read nothing: every read stalls the GL pipeline; a NaN or
+        infinite pixel still shows in ``Frame.nonfinite_pixels``). ``jitter``:
         sub-pixel offset (x right, y up; pixels) of the projection, for :meth:`render_accumulated`."""
         wanted = set(READ_BACK) if read_back is True else set(read_back or ())
         if not wanted <= set(READ_BACK):
@@ -351,7 +355,8 @@ class Renderer:
             acc = f.hdr.astype(np.float64) if acc is None else acc + f.hdr
         hdr = (acc / samples).astype(np.float32)
         return Frame(hdr=hdr, ldr=reinhard_srgb(hdr, f.exposure), aovs=first.aovs, timings=f.timings,
-                     exposure=f.exposure, wall_ms=wall, events=f.events, rays=f.rays)
+                     exposure=f.exposure, wall_ms=wall, events=f.events, rays=f.rays,
+                     nonfinite_pixels=int((~np.isfinite(hdr)).any(axis=-1).sum()))
 
     def _begin_frame(self) -> None:
         self._timings, self._events = {}, []
@@ -364,12 +369,14 @@ class Renderer:
             self._first = False
 
     def _end_frame(self, hdr, ldr, aovs, rcb) -> Frame:
+        nonfinite = self.tonemap_pass.nonfinite_pixels()  # 4 bytes, after the frame's finish()
         wall = (time.perf_counter() - self._t_frame) * 1e3 + self._timings.get("upload", 0.0)
         cpu = (time.process_time() - self._cpu_frame) * 1e3 + self._child_cpu_ms
         timings = {k: self._timings[k] for k in sorted(self._timings, key=STAGES.index)}  # pipeline order
         return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=timings, exposure=self.config.exposure,
                      wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
-                     rays=0 if rcb is None else rcb.count, cpu_ms=cpu)
+                     rays=0 if rcb is None else rcb.count, cpu_ms=cpu,
+                     nonfinite_pixels=nonfinite)
 
     def _start_ray_tracing(self, view_proj, gbuf):
         """The ray-casting buffer (which pixels reflect or refract, and their rays; drawn against the

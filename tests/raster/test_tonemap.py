@@ -29,3 +29,20 @@ def test_gl_tonemap_matches_numpy_twin(gl_ctx):
     diff = np.abs(tp.read().astype(int) - reinhard_srgb(hdr, 0.02).astype(int))
     assert diff.max() <= 1
     tex.release()
+
+
+def test_gl_tonemap_counts_nonfinite_pixels(gl_ctx):
+    hdr = np.ones((16, 24, 3), np.float32)
+    hdr[2, 3, 0] = np.nan
+    hdr[5, 7, 2] = np.inf
+    hdr[9, 1, :] = -np.inf
+    hdr[11, 20] = [np.nan, np.inf, 1.0]  # one pixel, counted once
+    tex = upload_texture(gl_ctx, hdr)
+    tp = TonemapPass(gl_ctx)
+    tp.resize(24, 16)
+    tp.render(tex, 0.02)
+    assert tp.nonfinite_pixels() == 4
+    tex.write(np.ones((16, 24, 3), np.float32).tobytes())  # the counter restarts with every pass
+    tp.render(tex, 0.02)
+    assert tp.nonfinite_pixels() == 0
+    tex.release()

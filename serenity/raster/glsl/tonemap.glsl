@@ -6,9 +6,15 @@
 #if defined FRAGMENT_SHADER
 uniform sampler2D u_hdr;
 uniform float u_exposure;
+// pixels whose radiance is NaN or infinite (the clamp below would hide them in the LDR image):
+// counted here, where every pixel is read anyway, so that a caller learns of them without
+// reading the image back (Frame.nonfinite_pixels)
+layout(std430, binding = 0) buffer NonFinite { uint nonfinite_pixels; };
 out vec4 o_ldr;
 void main() {
-    vec3 c = max(texture(u_hdr, v_uv).rgb, vec3(0.0)) * u_exposure;
+    vec3 h = texelFetch(u_hdr, ivec2(gl_FragCoord.xy), 0).rgb;  // the same size as the target
+    if (any(isnan(h)) || any(isinf(h))) atomicAdd(nonfinite_pixels, 1u);
+    vec3 c = max(h, vec3(0.0)) * u_exposure;
     float lw = luminance(c);
     vec3 mapped = lw > 0.0 ? c * (1.0 / (1.0 + lw)) : vec3(0.0);
     o_ldr = vec4(linear_to_srgb(mapped), 1.0);
