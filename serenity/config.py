@@ -75,9 +75,12 @@ class ShadowConfig:
     pcss_max_blocker: float = 20.0
     """Farthest blocker (m above the receiver) the PCSS blocker search is sized for."""
     bias: float = 1.0
-    """Constant depth bias, in shadow-map texels (converted to depth units in the shader)."""
-    normal_offset: float = 1.0
-    """Normal offset of the lookup point, in texels, scaled by the slope tan θ (clamped 1–4)."""
+    """Constant depth bias, in shadow-map texels (converted to depth units in the shader), below the
+    receiver's plane that each tap compares with (``serenity/raster/shadow.py``)."""
+    normal_offset: float = 0.0
+    """Normal offset of the lookup point, in texels, scaled by the slope tan θ (clamped 1–4); 0 since
+    the receiver-plane comparison (1 before: under a grazing sun it cut the eaves' shadows on walls
+    short, ~0.3 m in the courtyard at 320×180)."""
     stagger: bool = False
     """Redraw the cascades after the first in turn, one per frame, while each still covers its slice
     (tiles fitted 10 % larger to leave room), instead of every cascade whose light matrix moved: with

@@ -405,8 +405,9 @@ def exact_ground_visibility(scene, points, n: int = 256):
 
 def shadow_acne_case(elevation: float = 2.0, size=(160, 90)) -> Case:
     """Shadow acne on an open plane under a grazing sun (exact visibility 1 everywhere): fraction of
-    ground pixels darker than 0.99 of the unshadowed light, without depth bias and normal offset
-    vs the defaults. Images: visibility. The plane is raised over a hidden square (``shadow_scene``):
+    ground pixels darker than 0.99 of the unshadowed light, without the constant depth bias (and
+    normal offset) vs the defaults; both compare the map with the receiver's plane. Images:
+    visibility. The plane is raised over a hidden square (``shadow_scene``):
     as the scene's bottom plane it would be left out of the shadow maps and could not acne at all,
     while any surface above it can (a roof, a terrace, a table)."""
     scene = shadow_scene(elevation, raised=True)
@@ -415,7 +416,7 @@ def shadow_acne_case(elevation: float = 2.0, size=(160, 90)) -> Case:
     err = [float(np.mean(v[g] < 0.99)) for v, _, g, _ in (a, b)]
     ex = np.where(a[2], 1.0, np.nan)
     return Case(f"shadow acne (sun {elevation} deg, open plane)", "shadows", "fraction of lit ground shadowed",
-                "depth bias + slope-scaled normal offset", err[0], err[1], a[3], b[3], exact=0.0,
+                "constant depth bias on the receiver's plane", err[0], err[1], a[3], b[3], exact=0.0,
                 images={"exact": ex, "without": a[0], "with": b[0], "error": np.abs(b[0] - ex)})
 
 
@@ -441,7 +442,7 @@ def peter_panning_case(elevation: float = 10.0, size=(160, 90)) -> Case:
     a = peter_panning(elevation, ShadowConfig(bias=0.0, normal_offset=0.0), size)
     b = peter_panning(elevation, ShadowConfig(), size)
     return Case(f"peter-panning (sun {elevation} deg, cube contact)", "shadows",
-                "fraction of contact umbra rendered lit", "depth bias + normal offset (its cause)", a[0], b[0],
+                "fraction of contact umbra rendered lit", "constant depth bias (its cause)", a[0], b[0],
                 a[3], b[3], exact=0.0,
                 images={"exact": b[2], "without": a[1], "with": b[1], "error": np.abs(b[1] - b[2])})
 

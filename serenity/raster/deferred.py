@@ -256,9 +256,14 @@ class DeferredPass(FullscreenPass):
         cs = shadow.cascades
         n = len(cs)
         mats = np.zeros((4, 4, 4), np.float32)
+        planes = np.zeros((4, 3, 3), np.float32)
         for i, c in enumerate(cs):
             mats[i] = c.view_proj.T
+            # a normal's image under the linear part L is L^-T n; GL reads a mat3 column by column
+            planes[i] = np.linalg.inv(c.view_proj[:3, :3])  # (L^-T)^T, row-major = L^-T column-major
         p["u_cascade_vp"].write(mats.tobytes())
+        if "u_cascade_plane" in p:
+            p["u_cascade_plane"].write(planes.tobytes())
 
         def vec4(vals):
             return tuple(float(v) for v in list(vals) + [vals[-1]] * (4 - len(vals)))

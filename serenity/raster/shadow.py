@@ -12,9 +12,14 @@ whole scene's bounds so casters outside the slice still cast.
 
 Atlas. Cascade i occupies tile (i % 2, i // 2) of a (2S × 2S) depth texture (S = ``size``).
 
-Biases, applied where the map is read (``glsl/shadow_sampling.glsl``): a constant depth bias and a
-normal offset, both in units of one shadow-map texel of the cascade used, the normal offset scaled
-by the slope tan θ (clamped to [1, 4]) so grazing surfaces do not acne.
+Depth comparison (``glsl/shadow_sampling.glsl``): each tap compares the map's depth with the
+receiver's tangent plane at the centre of the texel it reads (receiver-plane depth bias; the plane's
+gradient in map coordinates from the G-buffer normal through the inverse transpose of the cascade's
+linear part), so a sloped receiver and a wide filter need no bias that grows with them; what remains
+is a constant depth bias (``ShadowConfig.bias``, in texels of the cascade used) for the depth
+buffer's quantisation. ``ShadowConfig.normal_offset`` (off by default) still moves the lookup point
+along the normal by that many texels times the slope tan θ (clamped to [1, 4]), the mitigation used
+before the receiver plane: under a grazing sun it shortened the shadows that eaves cast on walls.
 
 Filtering (``ShadowConfig.filter``): "hard" (one tap), "pcf" (fixed-radius Vogel-disc PCF), "pcss"
 (Fernando 2005: blocker search → penumbra from the sun's angular diameter → variable PCF).

@@ -15,12 +15,15 @@ pytestmark = pytest.mark.gl
 
 @pytest.mark.parametrize("elevation", [2.0, 5.0])
 def test_no_acne_down_to_2_degrees(gl_ctx, elevation):
-    """An open plane (exact visibility 1 everywhere) under a sun 2° and 5° high. Without bias and
-    normal offset 99 % of the ground is shadowed (acne); with the defaults none. Bound: ≤ 0.1 % of
-    the ground darker than 0.99 of the unshadowed light, and the unmitigated case is acne (> 50 %)."""
+    """An open plane (exact visibility 1 everywhere) under a sun 2° and 5° high. Each tap compares
+    the map with the receiver's plane at the texel's centre; without the constant depth bias that
+    still leaves 37 % / 76 % of the ground shadowed (the map's depth quantisation), and before the
+    receiver plane (slope-scaled bias and normal offset instead) 99 %. With the defaults none.
+    Bound: ≤ 0.1 % of the ground darker than 0.99 of the unshadowed light, and the unmitigated case
+    is acne (> 20 %)."""
     case = S.shadow_acne_case(elevation, size=(96, 54))
     assert case.error_with <= 0.001, f"{case.error_with:.4f} of the lit ground shadowed"
-    assert case.error_without > 0.5
+    assert case.error_without > 0.2
 
 
 @pytest.mark.parametrize("elevation", [2.0, 10.0, 30.0])

@@ -12,6 +12,8 @@ uniform sampler2D u_shadow_map;       // depth atlas, cascade i at tile (i % 2, 
 uniform int u_cascade_count;
 uniform float u_atlas_tiles;          // tiles per side (1 or 2)
 uniform mat4 u_cascade_vp[4];         // world -> light clip
+uniform mat3 u_cascade_plane[4];      // inverse transpose of each cascade's linear part: a world
+                                      // normal -> the normal of that plane in the map's coordinates
 uniform vec4 u_cascade_far;           // view depth (m) where each cascade ends
 uniform vec4 u_cascade_texel;         // one texel, metres
 uniform vec4 u_cascade_depth_range;   // light depth extent, metres
@@ -36,6 +38,7 @@ uniform float u_pcss_max_blocker;     // metres: farthest blocker the search loo
 const vec2 BLOCKER_POINTS[BLOCKER_SAMPLES] = vec2[BLOCKER_SAMPLES](BLOCKER_DISC);
 const vec2 FILTER_POINTS[FILTER_SAMPLES] = vec2[FILTER_SAMPLES](FILTER_DISC);
 uniform float u_cascade_blend;        // fraction of a cascade's depth blended into the next
+const float MAX_PLANE_SLOPE = 32.0;
 
 float interleaved_gradient_noise(vec2 pixel) {
     return fract(52.9829189 * fract(dot(pixel, vec2(0.06711056, 0.00583715))));
@@ -46,21 +49,32 @@ vec2 rotated(vec2 p, vec2 rot) {
     return vec2(p.x * rot.x - p.y * rot.y, p.x * rot.y + p.y * rot.x);
 }
 
-// One cascade's tile of the atlas: the tap at tile coordinates uv + o reads the atlas at
-// clamp(base + o * scale, lo, hi) (base: uv in the atlas), half a texel inside the tile at most.
-struct AtlasTile { vec2 base; float scale; vec2 lo; vec2 hi; };
+// One cascade's tile of the atlas, and the receiver's plane in it. The tap at tile coordinates
+// uv + o reads the atlas texel at base + o * scale (kept half a texel inside the tile), and the
+// receiver's depth there is its tangent plane's at that texel's centre (receiver-plane depth bias):
+// a plane meets its own depth at the centre of every texel it drew, so a tap compares the map with
+// the receiver at the same point, and neither a sloped receiver nor a wide filter needs a bias that
+// grows with them (which detached and shortened the shadows of eaves on walls under a grazing sun).
+struct AtlasTile { vec2 base; float scale; vec2 lo; vec2 hi; float texels; vec2 grad; float z; };
 
-AtlasTile atlas_tile(int cascade, vec2 uv, vec2 texel) {
+// s: the receiver in the cascade's [0,1]^3 map coordinates; m: its normal there (u_cascade_plane);
+// bias: depth units subtracted from the receiver
+AtlasTile atlas_tile(int cascade, vec3 s, vec3 m, vec2 texel, float max_grad, float bias) {
     vec2 tile = vec2(cascade % 2, cascade / 2);
     float scale = 1.0 / u_atlas_tiles;
-    return AtlasTile((tile + uv) * scale, scale, (tile + 0.5 * texel) * scale, (tile + 1.0 - 0.5 * texel) * scale);
+    // depth per unit of tile coordinates along the plane, no steeper than max_grad
+    vec2 grad = clamp(-m.xy / (abs(m.z) > 1e-6 ? m.z : 1e-6), -max_grad, max_grad);
+    return AtlasTile((tile + s.xy) * scale, scale, (tile + 0.5 * texel) * scale, (tile + 1.0 - 0.5 * texel) * scale,
+                     u_atlas_tiles / texel.x, grad / scale, s.z - bias);
 }
 
-// o: the tap's offset already in atlas units (times scale)
-float atlas_depth(AtlasTile t, vec2 o) {
-    return texture(u_shadow_map, clamp(t.base + o, t.lo, t.hi)).r;
+// the tap at o (offset in atlas units, i.e. times scale): the centre of the texel it reads
+vec2 tap_centre(AtlasTile t, vec2 o) {
+    return (floor(clamp(t.base + o, t.lo, t.hi) * t.texels) + 0.5) / t.texels;
 }
-
+// the receiver's plane depth at atlas point a; no farther than the map's far plane, which an empty
+// texel holds (a plane steep in the map would otherwise pass behind it within a wide filter)
+float plane_depth(AtlasTile t, vec2 a) { return min(t.z + dot(t.grad, a - t.base), 1.0); }
 float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
     float texel_w = u_cascade_texel[c];
     float range = u_cascade_depth_range[c];
@@ -72,37 +86,37 @@ float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
     vec2 texel = vec2(1.0 / size);
     float phi = 6.2831853 * interleaved_gradient_noise(gl_FragCoord.xy);
     vec2 rot = vec2(cos(phi), sin(phi));
-    AtlasTile tile = atlas_tile(c, s.xy, texel);
+    // at most MAX_PLANE_SLOPE metres of depth per metre across the map (a plane ~88 deg from the sun)
+    float max_grad = MAX_PLANE_SLOPE * size * texel_w / range;
+    AtlasTile tile = atlas_tile(c, s, u_cascade_plane[c] * n, texel, max_grad, u_shadow_bias * texel_w / range);
     float radius = 0.0;  // filter radius, texels
 #if SHADOW_FILTER == SHADOW_PCF
     radius = u_pcf_radius;
 #elif SHADOW_FILTER == SHADOW_PCSS
     {
-        float recv_m = s.z * range;
         float search = clamp(u_pcss_max_blocker * 2.0 * u_sun_tan_half / texel_w, 1.0, 16.0);
-        float sum = 0.0;
+        float gap = 0.0;  // the blockers' mean depth above the receiver's plane, map depth units
         int found = 0;
-        float bias0 = (u_shadow_bias + search * 0.5) * texel_w / range;
         vec2 spread = rot * (search * texel.x * tile.scale);   // texels are square
         for (int i = 0; i < BLOCKER_SAMPLES; ++i) {
-            float d = atlas_depth(tile, rotated(BLOCKER_POINTS[i], spread));
-            if (d < s.z - bias0) { sum += d; found++; }
+            vec2 a = tap_centre(tile, rotated(BLOCKER_POINTS[i], spread));
+            float above = plane_depth(tile, a) - texture(u_shadow_map, a).r;
+            if (above > 0.0) { gap += above; found++; }
         }
         if (found == 0) return 1.0;
-        float blocker_m = sum / float(found) * range;
-        float penumbra_m = max(recv_m - blocker_m, 0.0) * 2.0 * u_sun_tan_half;  // full width
+        float penumbra_m = gap / float(found) * range * 2.0 * u_sun_tan_half;  // full width
         radius = clamp(0.5 * penumbra_m / texel_w, 0.5, 24.0);
     }
 #endif
-    // the farther a filter tap is, the more a sloped receiver rises above the lookup depth
-    float bias = (u_shadow_bias + radius * slope) * texel_w / range;
 #if SHADOW_FILTER == SHADOW_HARD
-    return s.z - bias <= atlas_depth(tile, vec2(0.0)) ? 1.0 : 0.0;
+    vec2 a = tap_centre(tile, vec2(0.0));
+    return plane_depth(tile, a) <= texture(u_shadow_map, a).r ? 1.0 : 0.0;
 #else
     float lit = 0.0;
     vec2 spread = rot * (radius * texel.x * tile.scale);
     for (int i = 0; i < FILTER_SAMPLES; ++i) {
-        lit += (s.z - bias <= atlas_depth(tile, rotated(FILTER_POINTS[i], spread))) ? 1.0 : 0.0;
+        vec2 a = tap_centre(tile, rotated(FILTER_POINTS[i], spread));
+        lit += plane_depth(tile, a) <= texture(u_shadow_map, a).r ? 1.0 : 0.0;
     }
     return lit / float(FILTER_SAMPLES);
 #endif
