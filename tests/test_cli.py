@@ -29,7 +29,8 @@ def test_render_writes_png_and_multilayer_exr(tmp_path, capsys):
     assert code == 0, err
     rec = json.loads(js.read_text())  # what it printed, as data
     assert rec["size"] == [48, 32] and rec["scene"] == "plane" and rec["frame_ms"] > 0
-    assert "g-buffer" in rec["stages_ms"] and "beauty" in rec["layers"]
+    assert "g-buffer" in rec["stages_ms"] and "beauty" in rec["layers"] and rec["nonfinite_pixels"] == 0
+    assert "warning" not in err
     assert Image.open(png).size == (48, 32)
     layers = read_exr(str(png.with_suffix(".exr")))
     assert {"beauty", "albedo", "normal", "depth", "direct"} <= set(layers)
@@ -37,6 +38,26 @@ def test_render_writes_png_and_multilayer_exr(tmp_path, capsys):
     assert np.all(np.isfinite(layers["beauty"]))
     for stage in ("g-buffer", "direct lighting", "total"):
         assert stage in out
+
+
+def test_render_warns_of_nonfinite_pixels(tmp_path, capsys, monkeypatch):
+    # a frame whose HDR image holds NaN (the tone map counts them on the GL side): the command says
+    # so on stderr instead of writing a silently wrong image
+    from serenity.frame import Renderer
+
+    real = Renderer.render
+
+    def render(self, *a, **k):
+        frame = real(self, *a, **k)
+        frame.hdr[0, 0] = np.nan
+        frame.nonfinite_pixels = 1
+        return frame
+
+    monkeypatch.setattr(Renderer, "render", render)
+    png = tmp_path / "p.png"
+    code, _, err = _run(["render", "plane", "--size", "24x16", "-o", str(png), "--frames", "1"], capsys)
+    assert code == 0
+    assert "warning: 1 of 384 pixels are NaN or infinite" in err
 
 
 def _one_line_error(code, err, *words):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 from serenity.commands.common import (
@@ -72,6 +73,9 @@ def run(args) -> int:
     print(format_timings(frame.timings, frame.wall_ms))
     print(f"wrote {png}")
     print(f"wrote {exr} (layers: {', '.join(layers)})")
+    if frame.nonfinite_pixels:  # counted by the tone-mapping pass (Frame.nonfinite_pixels)
+        print(f"serenity: warning: {frame.nonfinite_pixels} of {width * height} pixels are NaN or infinite "
+              f"(the EXR keeps them as they are)", file=sys.stderr)
     if args.json:
         from serenity.io.results import write_results
 
@@ -81,5 +85,5 @@ def run(args) -> int:
             "quality": args.quality, "frames": max(1, args.frames), "load_ms": load_ms,
             "sun": {"elevation_deg": float(sun.elevation_deg), "azimuth_deg": float(sun.azimuth_deg)},
             "stages_ms": {k: float(v) for k, v in frame.timings.items()}, "frame_ms": float(frame.wall_ms),
-            "png": png, "exr": exr, "layers": list(layers)})
+            "nonfinite_pixels": int(frame.nonfinite_pixels), "png": png, "exr": exr, "layers": list(layers)})
     return 0

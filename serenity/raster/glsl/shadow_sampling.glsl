@@ -75,6 +75,7 @@ vec2 tap_centre(AtlasTile t, vec2 o) {
 // the receiver's plane depth at atlas point a; no farther than the map's far plane, which an empty
 // texel holds (a plane steep in the map would otherwise pass behind it within a wide filter)
 float plane_depth(AtlasTile t, vec2 a) { return min(t.z + dot(t.grad, a - t.base), 1.0); }
+
 float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
     float texel_w = u_cascade_texel[c];
     float range = u_cascade_depth_range[c];
