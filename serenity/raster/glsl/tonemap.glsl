@@ -13,7 +13,9 @@ layout(std430, binding = 0) buffer NonFinite { uint nonfinite_pixels; };
 out vec4 o_ldr;
 void main() {
     vec3 h = texelFetch(u_hdr, ivec2(gl_FragCoord.xy), 0).rgb;  // the same size as the target
-    if (any(isnan(h)) || any(isinf(h))) atomicAdd(nonfinite_pixels, 1u);
+    // NaN or ±inf: all exponent bits set (a bit test, which no compiler's fast-math folds away as it
+    // may isnan/isinf)
+    if (any(equal(floatBitsToUint(h) & 0x7f800000u, uvec3(0x7f800000u)))) atomicAdd(nonfinite_pixels, 1u);
     vec3 c = max(h, vec3(0.0)) * u_exposure;
     float lw = luminance(c);
     vec3 mapped = lw > 0.0 ? c * (1.0 / (1.0 + lw)) : vec3(0.0);
