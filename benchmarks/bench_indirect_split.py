@@ -54,14 +54,17 @@ def fmt(x: float | None, spec: str = ".3f") -> str:
 
 
 def mitsuba(scene, w: int, h: int, spp: int, max_depth: int, sun: bool, sky: bool) -> np.ndarray:
-    """Mitsuba render of ``scene`` with only the emitters asked for (sun sphere, sky map)."""
+    """Mitsuba render of ``scene`` with only the emitters asked for (sun sphere, sky map): the
+    references' own export (``load_mitsuba_scene``, sun calibrated), without the sun sphere when
+    ``sun`` is False."""
     mi = R.mitsuba()
-    d = R.mitsuba_scene_dict(scene, w, h, max_depth, R.sky_map(scene) if sky else None)
-    if not sun:
-        d.pop("sun", None)
-    ms = mi.load_dict(d)
+    sky_map = R.sky_map(scene) if sky else None
     if sun:
-        R.calibrate_sun(ms, scene)
+        ms = R.load_mitsuba_scene(scene, w, h, max_depth, sky=sky_map)
+    else:
+        d = R.mitsuba_scene_dict(scene, w, h, max_depth, sky_map)
+        d.pop("sun", None)
+        ms = mi.load_dict(d)
     return np.array(mi.render(ms, spp=spp, seed=0))[..., :3]
 
 

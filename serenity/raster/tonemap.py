@@ -13,9 +13,6 @@ import numpy as np
 from serenity.raster.context import FullscreenPass
 from serenity.raster.interop import read_texture
 
-NONFINITE_BINDING = 0
-"""Shader-storage binding of the pass's counter of non-finite HDR pixels (glsl/tonemap.glsl)."""
-
 
 class TonemapPass(FullscreenPass):
     SHADER = "tonemap.glsl"
@@ -30,7 +27,7 @@ class TonemapPass(FullscreenPass):
             self.fbo.use()
             hdr_texture.use(location=0)
             self.counter.write(b"\0\0\0\0")
-            self.counter.bind_to_storage_buffer(NONFINITE_BINDING)
+            self.counter.bind_to_storage_buffer(self.program["NonFinite"].binding)  # as the shader declares it
             self.program["u_hdr"].value = 0
             self.program["u_exposure"].value = float(exposure)
             self.vao.render(vertices=3)
