@@ -70,12 +70,9 @@ def make_config(preset: str, overrides: dict):
     from serenity.config import RenderConfig
 
     cfg = RenderConfig.preset(preset)
-    for k, v in overrides.items():
-        if isinstance(v, dict):
-            cfg = dataclasses.replace(cfg, **{k: dataclasses.replace(getattr(cfg, k), **v)})
-        else:
-            cfg = dataclasses.replace(cfg, **{k: v})
-    return cfg
+    # in one replace: a pair of overrides may only be valid together (sky.method=gather, lpv.diffuse=false)
+    return dataclasses.replace(cfg, **{k: dataclasses.replace(getattr(cfg, k), **v) if isinstance(v, dict) else v
+                                       for k, v in overrides.items()})
 
 
 def main(argv=None) -> int:

@@ -18,7 +18,7 @@ from serenity.errors import ConfigError, SerenityError
 SH_WINDOWS = ("none", "hanning", "lanczos", "nonneg")
 #: per-probe direction sequences of the sky volume
 SKY_SEQUENCES = ("hammersley", "sobol-owen")
-SKY_METHODS = ("transfer", "layers")
+SKY_METHODS = ("transfer", "layers", "gather")
 SKY_TRANSFER_MAX_BANDS = 5
 """SH bands the sky transfer can project the sky on (``kernels/skytransfer.eval_sh25``: bands 0–4)."""
 #: texels per side of the paraboloid sky map (``serenity.kernels.atmosphere``)
@@ -204,7 +204,16 @@ class SkyConfig:
     """How probes follow the sky: "layers" (the paper) re-integrates ``RenderConfig.sky_layers_per_frame``
     layers per frame by ray casting against the sky map, in a continuous cycle; "transfer" integrates
     each probe's visibility once into a transfer matrix (``skytransfer``) and re-lights every probe
-    from a new sky in one cheap pass."""
+    from a new sky in one cheap pass; "gather" (beyond the paper) traces ``gather_rays`` rays per
+    probe through the kd-tree once and lights the probes with the sky *and* the light the scene's
+    surfaces bounce (sun and sky, ``gather_bounces`` bounces; ``probegather``) — the indirect light
+    the LPV would add, so it wants ``LPVConfig.diffuse`` off."""
+    gather_rays: int = 64
+    """"gather": rays per probe (traced once per scene)."""
+    gather_bounces: int = 4
+    """"gather": passes over the volume after a change of the sun (each adds one bounce)."""
+    gather_surfel_size: float | None = None
+    """"gather": edge of the cubes the rays' hit points are merged into surfels (m); None = 0.4 cell."""
     transfer_bands: int = 5
     """SH bands of the sky projection the transfer uses (B² functions, 1–5; more: sharper sky —
     the sun's glow needs the most; ``tests/kernels/test_skytransfer.py`` measures each)."""
@@ -248,6 +257,12 @@ class SkyConfig:
             raise ConfigError(f"SkyConfig.normal_offset must be >= 0, got {self.normal_offset}")
         if self.target_probes < 8:
             raise ConfigError(f"SkyConfig.target_probes must be >= 8, got {self.target_probes}")
+        if not 1 <= self.gather_rays <= 4096:
+            raise ConfigError(f"SkyConfig.gather_rays must be in 1..4096, got {self.gather_rays}")
+        if not 1 <= self.gather_bounces <= 64:
+            raise ConfigError(f"SkyConfig.gather_bounces must be in 1..64, got {self.gather_bounces}")
+        if self.gather_surfel_size is not None and not self.gather_surfel_size > 0:
+            raise ConfigError(f"SkyConfig.gather_surfel_size must be positive, got {self.gather_surfel_size}")
 
 
 @dataclass(frozen=True)
@@ -486,6 +501,10 @@ class RenderConfig:
             if not isinstance(value, kind):
                 hint = f" (e.g. {name}={kind.__name__}(enabled=False) to turn it off)" if name != "shadow" else ""
                 raise ConfigError(f"RenderConfig.{name} must be a {kind.__name__}, got {value!r}{hint}")
+        if self.sky.enabled and self.sky.method == "gather" and self.lpv.enabled and self.lpv.diffuse:
+            raise ConfigError("RenderConfig: sky.method='gather' already lights the probes with the bounced "
+                              "light; turn the LPV's diffuse light off (lpv.diffuse=False or lpv.enabled=False) "
+                              "or it counts twice")
 
 
     @classmethod
@@ -572,16 +591,21 @@ PRESETS: dict[str, dict] = {
                "sky": {"sky_map_size": 96, "sky_steps": 12, "transfer_layers": 1},
                "lpv": {"glossy_steps": 4, "stagger": True},
                "rsm_size": 128, "sky_vpl_stride": 8},
-    # the cheapest: indirect light at quarter resolution, 3 cascades, a 6³ LPV (8³ until round 9: 6³ was
-    # better on FLIP and relMSE in both scenes at both frontier sizes, benchmarks/results/
-    # pass_ab_low_lpv6_*.json — though 7³ lost both scenes and 5³ one: the LPV is sensitive to how its
-    # cells fall on the walls), coarse sky
+    # the cheapest, and since round 11 beyond the paper: indirect light at quarter resolution, 3 shadow
+    # cascades, a coarse sky map, and no LPV: the sky volume's probes are lit by gathering ("gather",
+    # ``kernels/probegather``) — rays traced once per probe through the kd-tree carry the sky and every
+    # bounce of sun and sky light through the real geometry, instead of occlusion quads + a 6³ LPV
+    # (round 10's low). Against the 1024-spp references it lowered FLIP and relMSE in both scenes
+    # (``benchmarks/results/pass_ab_gather_*.json``). 100 000 probes: 1.3 m cells over the courtyard's
+    # 123 m of ground (the default 15 000 gave FLIP 0.0945 against 0.088); 128 rays (64 left the
+    # Cornell box's FLIP at 0.115 against 0.090). The other presets keep the paper's LPV.
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4, "filter_samples": 8,
                        "stagger": True},
             "ssao": {"directions": 6, "steps": 2, "blur_radius": 4},
-            "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_bands": 4, "transfer_layers": 1},
-            "lpv": {"resolution": 6, "iterations": 16, "stagger": True},
+            "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_layers": 1, "method": "gather",
+                    "target_probes": 100_000, "gather_rays": 128},
+            "lpv": {"enabled": False},
             "rsm_size": 128, "sky_vpl_stride": 8},
 }
 """Quality presets: field → value, or for a sub-config (shadow, ssao, sky, lpv) its field → value.

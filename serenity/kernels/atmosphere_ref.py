@@ -263,15 +263,17 @@ def angle_between_deg(a, b) -> float:
     return math.degrees(math.atan2(float(np.linalg.norm(np.cross(a, b))), float(np.dot(a, b))))
 
 
-def scene_sun_irradiance(scene) -> np.ndarray:
+def scene_sun_irradiance(scene, direction=None) -> np.ndarray:
     """(3,) W·m⁻² the sun delivers in ``scene``: the atmosphere's transmitted irradiance
     (:func:`sun_irradiance`, the sun's colour by time of day, paper §6) when ``scene.sky.model`` is
     "atmosphere" (fading as the disc sets, zero once all of it is below the horizon), else the
     scene's own ``Sun.irradiance``, zero with the sun's centre below the horizon. The renderer and
-    the Mitsuba reference both take the sun from here, so they agree."""
+    the Mitsuba reference both take the sun from here, so they agree. ``direction``: the sun's
+    direction instead of ``scene.sun.direction``."""
     sun = scene.sun
+    d = np.asarray(sun.direction if direction is None else direction, np.float64)
     if getattr(scene.sky, "model", "constant") == "atmosphere":
-        return sun_irradiance(sun.direction, sun.angular_diameter_deg)
-    if not sun.is_up:
+        return sun_irradiance(d, sun.angular_diameter_deg)
+    if not d[1] > 0.0:
         return np.zeros(3)
     return np.asarray(sun.irradiance, np.float64)

@@ -63,10 +63,13 @@ from serenity.kernels.atmosphere import (
     horizontal_irradiance,
     sample_sky_map,
 )
+from serenity.kernels.atmosphere_ref import angle_between_deg, scene_sun_irradiance
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
+from serenity.kernels.probegather import ProbeGather
 from serenity.kernels.quadfit import fit_occlusion_quads
+from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.sampling import cp_rotation, hammersley_np, hash_u32, sample_probe_direction
 from serenity.kernels.sh import eval_sh9, irradiance_scale, sh_basis, vec9
 from serenity.kernels.skytransfer import SkyTransfer, project_sky
@@ -286,7 +289,7 @@ class SkyVolume:
         self.normal_offset_m = float(cfg.normal_offset * float(np.min(self.cell_size)))
         quads = list(scene.occlusion_quads)
         self.quad_fit = None
-        if not quads and cfg.auto_quads:
+        if not quads and cfg.auto_quads and cfg.method != "gather":  # "gather" traces the real geometry
             self.quad_fit = fit_occlusion_quads(scene)
             quads = self.quad_fit.quads
         self.quads = quads
@@ -314,6 +317,13 @@ class SkyVolume:
         self._host: np.ndarray | None = None
         self._transfer = None
         self._projected: tuple[int, np.ndarray] | None = None  # (sky version, project_sky's result)
+        self._gather = None  # "gather": ProbeGather, made on the first update (it traces the probes' rays)
+        self._gather_version = -1  # sky version the gather's miss radiance and sun visibility follow
+        self._gather_sun = None  # ... and the sun direction
+        #: "gather": passes over the volume still to run for the current sky (each adds a bounce)
+        self.gather_passes_left = 0
+        self._gather_layers_done = 0
+        self.tracer = None
         if cfg.method == "transfer":
             self._transfer = SkyTransfer(self._quads_wp, len(quads), self._base, n, SEQUENCES.index(cfg.sequence),
                                          cfg.seed, cfg.transfer_bands, dev)
@@ -376,6 +386,8 @@ class SkyVolume:
         ``sun_direction`` defaults to ``scene.sun.direction``."""
         sky_map, changed = self._current_sky_map(self._sun(sun_direction))
         self.updated_layers = []
+        if self.config.method == "gather":
+            return self._update_gather(self._sun(sun_direction), full=False)
         if self._transfer is not None:
             if not self.pending_layers:
                 return False
@@ -392,6 +404,64 @@ class SkyVolume:
             self._integrate(sky_map, start, n)
             self.layer_versions[start:start + n] = self.sky_version
             self.updated_layers.append((start, n))
+        return True
+
+    # -- "gather" (probegather)
+
+    def _ensure_gather(self):
+        if self._gather is None:
+            cfg = self.config
+            if self.tracer is None:
+                self.tracer = RayTracer(self.scene, device=self.device)
+            size = cfg.gather_surfel_size or 0.4 * float(np.min(self.cell_size))
+            self._gather = ProbeGather(self.scene, self.tracer, self.probe_positions(), self.cell_size,
+                                       cfg.gather_rays, size, self.device)
+        return self._gather
+
+    def _gather_pass_start(self, sun) -> None:
+        """The surfels' radiance from the volume as it is (the start of a pass: one more bounce)."""
+        self._gather.update_surfels(self._coeffs, (self.grid_origin, self.cell_size, self.resolution,
+                                                   self.normal_offset_m), sun, scene_sun_irradiance(self.scene, sun))
+
+    def _update_gather(self, sun, full: bool) -> bool:
+        """"gather": follow a new sky (miss radiance, surfel shadow rays), then run passes over the
+        volume — all ``gather_bounces`` of them when the volume was never lit or ``full``, else
+        ``transfer_layers`` y-layers per call (0 = a whole pass) until the passes are done."""
+        g = self._ensure_gather()
+        cfg = self.config
+        y = self.resolution[1]
+        moved = self._gather_sun is None or angle_between_deg(self._gather_sun, sun) > cfg.rebuild_angle_deg
+        if self._gather_version != self.sky_version or moved:  # a new sky, or the sun moved (constant skies)
+            g.set_sky(self.sky_map(), self.ground_radiance)
+            g.update_visibility(sun)
+            self._gather_version = self.sky_version
+            self._gather_sun = np.array(sun, np.float64)
+            self.gather_passes_left = cfg.gather_bounces
+        if full or np.any(self.layer_versions < 0):
+            while self.gather_passes_left > 0:
+                self._gather_pass_start(sun)
+                g.gather(self._coeffs, self._scale, self.resolution, 0, y)
+                self.gather_passes_left -= 1
+            self._next_layer = 0
+            self._gather_layers_done = 0
+            self._host = None
+            self.layer_versions[:] = self.sky_version
+            self.updated_layers = [(0, y)]
+            return True
+        if self.gather_passes_left <= 0:
+            return False
+        per_update = cfg.transfer_layers if cfg.transfer_layers > 0 else y
+        if self._gather_layers_done == 0:
+            self._gather_pass_start(sun)
+        for start, n in self._next_slabs(min(per_update, y - self._gather_layers_done)):
+            g.gather(self._coeffs, self._scale, self.resolution, start, n)
+            self.layer_versions[start:start + n] = self.sky_version
+            self.updated_layers.append((start, n))
+            self._gather_layers_done += n
+        if self._gather_layers_done >= y:
+            self._gather_layers_done = 0
+            self.gather_passes_left -= 1
+        self._host = None
         return True
 
     def _next_slabs(self, count: int) -> list[tuple[int, int]]:
@@ -421,6 +491,11 @@ class SkyVolume:
         """Bring every layer up to date now (rebakes the sky map only if the sun moved)."""
         sky_map, _ = self._current_sky_map(self._sun(sun_direction))
         self.updated_layers = []
+        if self.config.method == "gather":
+            if self.gather_passes_left <= 0:
+                self.gather_passes_left = self.config.gather_bounces
+            self._update_gather(self._sun(sun_direction), full=True)
+            return
         if self._transfer is not None:
             self._apply_transfer()
             return

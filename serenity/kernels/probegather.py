@@ -1,0 +1,324 @@
+"""Ray-traced irradiance probes: the sky volume's probes lit by the sky *and* by the light the scene
+bounces, through the real geometry (``SkyConfig.method = "gather"``; beyond the paper, §7–§8).
+
+Why: the paper lights its probes with the sky through occlusion quads and leaves all bounced light
+to the light propagation volumes. Measured against path-traced references, the LPV is where the
+error sits — it over-lights surfaces next to a bright patch, a lit plane lights itself, light
+leaks through thin walls, and it carries one bounce where a courtyard of pale walls or a closed room
+gets a third of its indirect light from later ones. Here the probes instead *gather*: each casts
+``gather_rays`` rays through the scene's kd-tree once (the geometry is static), and each frame a
+probe's radiance along a ray is
+
+    a miss:  the sky map (ω.y ≥ 0) or the ground below the horizon (``SkyVolume.ground_radiance``);
+    a hit:   the Lambertian radiance leaving the surface element ("surfel") the ray hit,
+             B_s = ρ_s/π · (E_sun · max(0, n_s·l) · V_s + E_volume(p_s, n_s)),
+
+projected onto L2 SH and convolved with the clamped cosine as the sky volume's own probes are
+(E_k = Â_l·w_l·4π/R·Σ_i L(ω_i)·Y_k(ω_i)). E_volume is the probe volume itself at the surfel, so
+each pass over the volume adds one more bounce of sky and sun light (radiosity by gathering: after
+k passes the volume holds k bounces; ``gather_bounces`` passes follow every change of the sun).
+
+Surfels: the rays' hit points quantised to cubes of ``gather_surfel_size`` metres and the dominant
+axis of their normal (so the two faces of a thin wall are two surfels), each with the mean position,
+normal and albedo (the tracer's ray-cone-filtered texture × material albedo) of its hits. V_s is
+one shadow ray from the surfel towards the sun's centre through the kd-tree, re-traced when the sky
+map is rebaked (the sun moved). Rays that hit a back face (the probe sits inside or under geometry)
+mark the probe: a probe with more than ``BACKFACE_LIMIT`` of its rays on back faces is moved by up
+to half a cell to a free spot (DDGI's probe relocation, Majercik et al. 2019); its texel stays on
+the grid. Directions: ``DIRECTION_SETS`` spherical Fibonacci sets of R directions, each turned by its
+own random rotation; probe p uses set p mod ``DIRECTION_SETS`` (neighbouring probes sample
+different directions, so the quantisation of one set does not line up across the volume).
+
+Costs (``benchmarks/``): the rays are traced once per scene (``ProbeGather.build``); a pass is one
+surfel update (a volume lookup per surfel) and one gather of R loads per probe.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import warp as wp
+
+from serenity.kernels.atmosphere_ref import sample_sky_map_np
+from serenity.kernels.launch import launch
+from serenity.kernels.sh import eval_sh9, sh_basis, vec9
+
+wp.set_module_options({"enable_backward": False})
+
+#: rotated direction sets the probes cycle through (probe index mod this)
+DIRECTION_SETS = 8
+#: a probe with more than this fraction of its rays on back faces sits inside geometry
+BACKFACE_LIMIT = 0.1
+#: relocation offsets tried for such a probe, in cells (first the one up: probes under a floor)
+RELOCATIONS = ((0.0, 0.45, 0.0), (0.45, 0.0, 0.0), (-0.45, 0.0, 0.0), (0.0, 0.0, 0.45), (0.0, 0.0, -0.45),
+               (0.0, -0.45, 0.0), (0.3, 0.3, 0.3), (-0.3, 0.3, -0.3))
+
+_INV_PI = wp.constant(1.0 / math.pi)
+
+
+@wp.func
+def volume_irradiance(coeffs: wp.array2d(dtype=float), origin: wp.vec3, cell: wp.vec3, res_x: int, res_y: int,
+                      res_z: int, normal_offset: float, p: wp.vec3, n: wp.vec3) -> wp.vec3:
+    """Irradiance of the volume at a surface point (sky.glsl's arithmetic): trilinear coefficients
+    at p + offset·n, evaluated at n, clamped at 0."""
+    g = wp.cw_div(p + n * normal_offset - origin, cell)
+    g = wp.vec3(wp.clamp(g[0], 0.0, float(res_x - 1)), wp.clamp(g[1], 0.0, float(res_y - 1)),
+                wp.clamp(g[2], 0.0, float(res_z - 1)))
+    x0 = int(wp.floor(g[0]))
+    y0 = int(wp.floor(g[1]))
+    z0 = int(wp.floor(g[2]))
+    ax = g[0] - float(x0)
+    ay = g[1] - float(y0)
+    az = g[2] - float(z0)
+    y = eval_sh9(n)
+    e = wp.vec3()
+    for corner in range(8):
+        dx = corner & 1
+        dy = (corner >> 1) & 1
+        dz = corner >> 2
+        xi = wp.min(x0 + dx, res_x - 1)
+        yi = wp.min(y0 + dy, res_y - 1)
+        zi = wp.min(z0 + dz, res_z - 1)
+        w = wp.where(dx == 1, ax, 1.0 - ax) * wp.where(dy == 1, ay, 1.0 - ay) * wp.where(dz == 1, az, 1.0 - az)
+        probe = (zi * res_y + yi) * res_x + xi
+        for k in range(9):
+            wk = w * y[k]
+            e += wp.vec3(coeffs[probe, 3 * k], coeffs[probe, 3 * k + 1], coeffs[probe, 3 * k + 2]) * wk
+    return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
+
+
+@wp.kernel
+def surfel_radiance(
+    # inputs
+    positions: wp.array(dtype=wp.vec3),
+    normals: wp.array(dtype=wp.vec3),
+    albedo: wp.array(dtype=wp.vec3),
+    sun_visible: wp.array(dtype=float),
+    sun_dir: wp.vec3,
+    sun_irradiance: wp.vec3,
+    coeffs: wp.array2d(dtype=float),
+    origin: wp.vec3,
+    cell: wp.vec3,
+    res_x: int,
+    res_y: int,
+    res_z: int,
+    normal_offset: float,
+    # outputs
+    radiance: wp.array(dtype=wp.vec3),
+    offset: int,
+):
+    """B_s = ρ_s/π·(E_sun·max(0, n·l)·V_s + E_volume(p_s, n_s)) (module docstring)."""
+    i = wp.tid() + offset
+    n = normals[i]
+    e = volume_irradiance(coeffs, origin, cell, res_x, res_y, res_z, normal_offset, positions[i], n)
+    e += sun_irradiance * (wp.max(wp.dot(n, sun_dir), 0.0) * sun_visible[i])
+    radiance[i] = wp.cw_mul(albedo[i], e) * _INV_PI
+
+
+@wp.kernel
+def gather_probes(
+    # inputs
+    res_x: int,
+    res_y: int,
+    first_layer: int,
+    rays: int,
+    surfel: wp.array2d(dtype=wp.int32),
+    surfel_radiance: wp.array(dtype=wp.vec3),
+    miss_radiance: wp.array2d(dtype=wp.vec3),
+    basis: wp.array2d(dtype=vec9),
+    scale: vec9,
+    # outputs
+    coeffs: wp.array2d(dtype=float),
+    offset: int,
+):
+    """The i-th probe of the y-layers from ``first_layer`` on (x fastest, then z; stored (z, y, x)):
+    E_k = scale_k·4π/R·Σ_r L_r·Y_k(ω_r), L_r the radiance of the surfel ray r hit (surfel[p, r] ≥ 0),
+    the miss radiance of the probe's direction set (−1), or 0 (−2: a back face)."""
+    t = wp.tid() + offset
+    res_z = surfel.shape[0] // (res_x * res_y)
+    slab = res_x * res_z
+    y = first_layer + t // slab
+    rem = t - (t // slab) * slab
+    z = rem // res_x
+    x = rem - z * res_x
+    probe = (z * res_y + y) * res_x + x
+    s = probe % basis.shape[0]
+    acc_r = vec9()
+    acc_g = vec9()
+    acc_b = vec9()
+    for r in range(rays):
+        j = surfel[probe, r]
+        radiance = wp.vec3()
+        if j >= 0:
+            radiance = surfel_radiance[j]
+        elif j == -1:
+            radiance = miss_radiance[s, r]
+        b = basis[s, r]
+        acc_r += b * radiance[0]
+        acc_g += b * radiance[1]
+        acc_b += b * radiance[2]
+    w = 4.0 * wp.pi / float(rays)
+    for k in range(9):
+        sk = scale[k] * w
+        coeffs[probe, 3 * k + 0] = acc_r[k] * sk
+        coeffs[probe, 3 * k + 1] = acc_g[k] * sk
+        coeffs[probe, 3 * k + 2] = acc_b[k] * sk
+
+
+def direction_sets(rays: int, sets: int = DIRECTION_SETS, seed: int = 0) -> np.ndarray:
+    """(sets, rays, 3) float64 unit directions: a spherical Fibonacci set of ``rays`` points, turned
+    by one random rotation per set."""
+    i = np.arange(rays) + 0.5
+    z = 1.0 - 2.0 * i / rays
+    phi = math.pi * (1.0 + math.sqrt(5.0)) * i
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    base = np.stack([r * np.cos(phi), z, r * np.sin(phi)], axis=1)
+    rng = np.random.default_rng(seed)
+    out = np.empty((sets, rays, 3))
+    for k in range(sets):
+        q, rr = np.linalg.qr(rng.normal(size=(3, 3)))
+        q *= np.sign(np.diag(rr))  # a uniformly random rotation (det may be -1: a reflection is as good)
+        out[k] = base @ q.T
+    return out
+
+
+class ProbeGather:
+    """The traced rays of one probe grid and the surfels they hit (module docstring).
+
+    ``build`` traces; ``update_visibility(sun)`` re-traces the surfels' shadow rays; ``bounce``
+    runs a surfel update and gathers probes ``first .. first + count - 1`` into ``coeffs``."""
+
+    def __init__(self, scene, tracer, positions: np.ndarray, cell: np.ndarray, rays: int, surfel_size: float,
+                 device):
+        t0 = time.perf_counter()
+        self.device = device
+        self.rays = int(rays)
+        self.tracer = tracer
+        mp, _, _, mf, _ = scene.merged()
+        fv = np.asarray(mp, np.float64)[np.asarray(mf, np.int64)]
+        self._face_normals = np.cross(fv[:, 1] - fv[:, 0], fv[:, 2] - fv[:, 0]).astype(np.float32)
+        self.dirs = direction_sets(self.rays)
+        n_probes = len(positions)
+        s = np.arange(n_probes) % DIRECTION_SETS
+        cell = np.asarray(cell, np.float64)
+        origins = np.asarray(positions, np.float64).copy()
+        hits = self._trace(origins, s)
+        bad = hits["backface_fraction"] > BACKFACE_LIMIT
+        self.relocated = 0
+        for off in RELOCATIONS:  # probes inside geometry: try a free spot nearby
+            if not bad.any():
+                break
+            idx = np.nonzero(bad)[0]
+            cand = origins[idx] + np.asarray(off) * cell
+            h2 = self._trace(cand, s[idx])
+            ok = h2["backface_fraction"] <= BACKFACE_LIMIT
+            take = idx[ok]
+            origins[take] = cand[ok]
+            for k in ("hit", "back", "position", "normal", "albedo"):
+                hits[k].reshape(n_probes, self.rays, -1)[take] = h2[k].reshape(len(idx), self.rays, -1)[ok]
+            self.relocated += int(ok.sum())
+            bad[take] = False
+        self.inside = int(bad.sum())  # no free spot found: kept, their back-face hits count as misses
+        self.probe_origins = origins
+        self._make_surfels(hits, surfel_size)
+        dev = device
+        self._basis = wp.array(np.stack([sh_basis(d) for d in self.dirs]).astype(np.float32), dtype=vec9, device=dev)
+        self._miss = wp.zeros((DIRECTION_SETS, self.rays), dtype=wp.vec3, device=dev)
+        self._radiance = wp.zeros(self.surfel_count, dtype=wp.vec3, device=dev)
+        self._visible = wp.zeros(self.surfel_count, dtype=float, device=dev)
+        self.build_seconds = time.perf_counter() - t0
+
+    def _trace(self, origins: np.ndarray, sets: np.ndarray) -> dict:
+        """Rays of the given probes (their direction sets): hit mask, back-face mask, position,
+        shading normal (facing the ray) and albedo per ray, flattened (probe-major)."""
+        n = len(origins)
+        o = np.repeat(origins, self.rays, axis=0).astype(np.float32)
+        d = self.dirs[sets].reshape(-1, 3).astype(np.float32)
+        tree = self.tracer.tree
+        h = tree.intersect(o, d, tmin=self.tracer.ray_epsilon)
+        g = self.tracer.trace(o, d, 0.0, 0.0)
+        hit = h.prim >= 0
+        idx = np.nonzero(hit)[0]
+        back = np.zeros(len(hit), bool)
+        back[idx] = np.einsum("ij,ij->i", self._face_normals[h.prim[idx]], d[idx]) > 0
+        return {"hit": hit & ~back, "back": back,
+                "backface_fraction": back.reshape(n, self.rays).mean(axis=1),
+                "position": g["position"][:, :3], "normal": g["normal"][:, :3], "albedo": g["albedo"][:, :3]}
+
+    def _make_surfels(self, hits: dict, size: float) -> None:
+        hit = hits["hit"]
+        idx = np.nonzero(hit)[0]
+        pos, nrm = hits["position"][idx].astype(np.float64), hits["normal"][idx].astype(np.float64)
+        axis = np.argmax(np.abs(nrm), axis=1)
+        side = nrm[np.arange(len(idx)), axis] > 0
+        q = np.floor((pos - pos.min(axis=0)) / size).astype(np.int64) if len(idx) else np.zeros((0, 3), np.int64)
+        key = ((q[:, 0] * 1_000_003 + q[:, 1]) * 1_000_033 + q[:, 2]) * 6 + axis * 2 + side
+        uniq, inv = np.unique(key, return_inverse=True)
+        m = len(uniq)
+        cnt = np.bincount(inv, minlength=m).astype(np.float64)[:, None]
+
+        def mean(a):
+            return np.stack([np.bincount(inv, a[:, c], m) for c in range(3)], axis=1) / np.maximum(cnt, 1)
+
+        sp, sn, sa = mean(pos), mean(nrm), mean(hits["albedo"][idx].astype(np.float64))
+        sn /= np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12)
+        surfel = np.full(len(hit), -1, np.int32)
+        surfel[idx] = inv.astype(np.int32)
+        back = hits["back"]
+        surfel[back] = -2  # a back face: no light (a probe kept inside geometry)
+        self.surfel_count = m
+        self.surfel_positions, self.surfel_normals, self.surfel_albedo = sp, sn, sa
+        dev = self.device
+        self._surfel = wp.array(surfel.reshape(-1, self.rays), dtype=wp.int32, device=dev)
+        self._sp = wp.array(sp.astype(np.float32), dtype=wp.vec3, device=dev)
+        self._sn = wp.array(sn.astype(np.float32), dtype=wp.vec3, device=dev)
+        self._sa = wp.array(sa.astype(np.float32), dtype=wp.vec3, device=dev)
+        self.back_rays = back.reshape(-1, self.rays)
+
+    def update_visibility(self, sun_direction) -> None:
+        """V_s: one shadow ray per surfel towards the sun (from just off the surfel)."""
+        sun = np.asarray(sun_direction, np.float64)
+        sun = sun / max(np.linalg.norm(sun), 1e-12)
+        if self.surfel_count == 0:
+            return
+        eps = self.tracer.ray_epsilon
+        o = (self.surfel_positions + self.surfel_normals * (4 * eps)).astype(np.float32)
+        d = np.broadcast_to(sun.astype(np.float32), o.shape)
+        occ = self.tracer.tree.occluded(o, d, tmin=eps)
+        lit = (~occ).astype(np.float32) * (self.surfel_normals @ sun > 0)
+        self._visible.assign(lit)
+
+    def set_sky(self, sky_map: np.ndarray, ground: np.ndarray) -> None:
+        """The miss radiance of every direction: the sky map above the horizon, the ground below."""
+        d = self.dirs.reshape(-1, 3)
+        out = np.empty((len(d), 3))
+        up = d[:, 1] >= 0
+        out[up] = sample_sky_map_np(sky_map, d[up])
+        out[~up] = np.asarray(ground, np.float64)
+        self._miss.assign(out.reshape(DIRECTION_SETS, self.rays, 3).astype(np.float32))
+
+    def update_surfels(self, coeffs, grid, sun_direction, sun_irradiance) -> None:
+        """B_s of every surfel from the volume as it is now (one more bounce)."""
+        origin, cell, res, offset = grid
+        if self.surfel_count == 0:
+            return
+        sun = np.asarray(sun_direction, np.float64)
+        sun = sun / max(np.linalg.norm(sun), 1e-12)
+        launch(surfel_radiance, self.surfel_count,
+               [self._sp, self._sn, self._sa, self._visible, wp.vec3(*sun.astype(np.float32)),
+                wp.vec3(*np.asarray(sun_irradiance, np.float32)), coeffs, wp.vec3(*origin.astype(np.float32)),
+                wp.vec3(*cell.astype(np.float32)), int(res[0]), int(res[1]), int(res[2]), float(offset),
+                self._radiance], device=self.device)
+
+    def gather(self, coeffs, scale, resolution, first_layer: int, layers: int) -> None:
+        """The probes of y-layers ``first_layer .. first_layer + layers - 1`` gathered into ``coeffs``."""
+        x, y, z = resolution
+        launch(gather_probes, layers * x * z,
+               [int(x), int(y), int(first_layer), self.rays, self._surfel, self._radiance, self._miss, self._basis,
+                scale, coeffs], device=self.device)
+
+    def surfel_radiance(self) -> np.ndarray:
+        """(S, 3) the surfels' current outgoing radiance (W·m⁻²·sr⁻¹)."""
+        return self._radiance.numpy()

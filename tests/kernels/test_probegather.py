@@ -1,0 +1,109 @@
+"""Ray-traced irradiance probes (SkyConfig.method = "gather"): exact answers over a lit plane — the
+bounce it sends up, no light of its own back onto itself, a white furnace — probe relocation out of
+geometry, and the pass schedule after a change of the sun."""
+
+import math
+
+import numpy as np
+import pytest
+
+from serenity.config import LPVConfig, RenderConfig, SkyConfig
+from serenity.errors import ConfigError
+from serenity.kernels.atmosphere_ref import scene_sun_irradiance
+from serenity.kernels.sampling import fibonacci_sphere
+from serenity.kernels.skyvolume import SkyVolume
+from serenity.scene.model import Sky
+from serenity.scene.procedural import plane_scene
+
+SKY = 1.0  # constant sky radiance, W·m⁻²·sr⁻¹
+
+
+def _volume(device, scene, origin, cell=2.0, **kw):
+    """One probe at ``origin`` (a 1³ grid), lit by gathering."""
+    kw.setdefault("gather_rays", 512)
+    cfg = SkyConfig(method="gather", resolution=(1, 1, 1), normal_offset=0.0, ground_albedo=0.0, **kw)
+    vol = SkyVolume(scene, cfg, device=device)
+    vol.grid_origin = np.asarray(origin, np.float64)
+    vol.cell_size = np.full(3, cell)
+    vol.rebuild()
+    return vol
+
+
+def _plane(albedo=0.5, irradiance=1000.0, elevation=60.0):
+    s = plane_scene(elevation_deg=elevation, albedo=albedo, irradiance=irradiance)
+    s.sky = Sky(radiance=(SKY,) * 3, model="constant")
+    return s
+
+
+def _exitance(scene, albedo):
+    """The plane's Lambertian radiance: ρ/π·(E_sun·cos θ + π·L_sky) — it sees only the sky."""
+    e_sun = scene_sun_irradiance(scene)[0] * scene.sun.direction[1]
+    return albedo / math.pi * (e_sun + math.pi * SKY)
+
+
+def test_plane_bounce_up_and_no_self_illumination(device):
+    # a probe 1 m over the middle of a 40 m plane: below it the lit plane (radiance B), above the sky
+    scene, albedo = _plane(), 0.5
+    vol = _volume(device, scene, (0.0, 1.0, 0.0))
+    b = _exitance(scene, albedo)
+    p = vol.probe_positions()[:1]
+    down = vol.irradiance(p, np.array([[0.0, -1.0, 0.0]]))[0, 0]
+    up = vol.irradiance(p, np.array([[0.0, 1.0, 0.0]]))[0, 0]
+    # the plane fills all but ~3° of the lower hemisphere (a form factor of 0.997)
+    assert down == pytest.approx(math.pi * b, rel=0.03)
+    # the plane must not light itself: what faces up sees the sky and nothing of the plane
+    assert abs(up - math.pi * SKY) <= 0.1 * math.pi * b
+
+
+def test_white_furnace(device):
+    # albedo 1, no sun, a sky of L and a ground of L: every normal sees radiance L, E = π·L
+    scene = _plane(albedo=1.0, irradiance=0.0)
+    cfg_ground = 1.0
+    vol = SkyVolume(scene, SkyConfig(method="gather", resolution=(1, 1, 1), normal_offset=0.0,
+                                     ground_albedo=cfg_ground, gather_rays=512), device=device)
+    vol.grid_origin = np.array([0.0, 1.0, 0.0])
+    vol.cell_size = np.full(3, 2.0)
+    vol.rebuild()
+    n = fibonacci_sphere(64)
+    e = vol.irradiance(np.repeat(vol.probe_positions()[:1], len(n), axis=0), n)
+    assert np.allclose(e, math.pi * SKY, rtol=0.03)
+
+
+def test_probe_under_the_plane_is_moved_out(device):
+    # 1 cm under the plane half its rays hit the plane's back: it is moved up by 0.45 cell (0.9 m)
+    # and sees what a probe over the plane sees
+    scene = _plane()
+    under = _volume(device, scene, (0.0, -0.01, 0.0))
+    over = _volume(device, scene, (0.0, 0.89, 0.0))
+    assert under._gather.relocated == 1 and under._gather.inside == 0
+    n = np.array([[0.0, -1.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+    a = under.irradiance(np.repeat(under.probe_positions()[:1], 3, axis=0), n)
+    b = over.irradiance(np.repeat(over.probe_positions()[:1], 3, axis=0), n)
+    assert np.allclose(a, b, rtol=1e-4)
+
+
+def test_passes_follow_a_sun_change_layer_by_layer(device):
+    scene = _plane()
+    cfg = SkyConfig(method="gather", resolution=(2, 3, 2), gather_rays=32, gather_bounces=2, transfer_layers=1)
+    vol = SkyVolume(scene, cfg, device=device)
+    vol.grid_origin, vol.cell_size = np.array([-5.0, 0.5, -5.0]), np.full(3, 2.0)  # over the plane
+    assert vol.update() is True  # never lit: every bounce at once
+    assert vol.updated_layers == [(0, 3)] and vol.gather_passes_left == 0
+    assert vol.update() is False  # nothing changed: no work
+    before = vol.coefficients().copy()
+    scene.sun.direction = np.array([0.3, 0.9, 0.1]) / np.linalg.norm([0.3, 0.9, 0.1])
+    seen = []
+    for _ in range(2 * 3):  # 2 passes of 3 layers, one layer per update
+        assert vol.update() is True
+        seen += vol.updated_layers
+    assert seen == [(0, 1), (1, 1), (2, 1)] * 2
+    assert vol.update() is False
+    assert not np.allclose(vol.coefficients(), before)  # the bounce follows the sun (under a constant sky)
+
+
+def test_gather_with_the_lpv_diffuse_is_refused():
+    gather = SkyConfig(method="gather")
+    with pytest.raises(ConfigError, match="counts twice"):
+        RenderConfig(sky=gather)
+    RenderConfig(sky=gather, lpv=LPVConfig(diffuse=False))
+    RenderConfig(sky=gather, lpv=LPVConfig(enabled=False))
