@@ -67,7 +67,7 @@ from serenity.kernels.atmosphere_ref import angle_between_deg, scene_sun_irradia
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
-from serenity.kernels.probegather import ProbeGather
+from serenity.kernels.probegather import ProbeGather, volume_irradiance
 from serenity.kernels.quadfit import fit_occlusion_quads
 from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.sampling import cp_rotation, hammersley_np, hash_u32, sample_probe_direction
@@ -177,31 +177,7 @@ def lookup_sky_irradiance(
     """The volume's irradiance at surface points (``eval_volume_irradiance`` and sky.glsl's
     arithmetic): trilinear coefficients at p + offset·n, evaluated at n, clamped at 0."""
     i = wp.tid() + offset
-    n = normals[i]
-    g = wp.cw_div(points[i] + n * normal_offset - origin, cell)
-    g = wp.vec3(wp.clamp(g[0], 0.0, float(res_x - 1)), wp.clamp(g[1], 0.0, float(res_y - 1)),
-                wp.clamp(g[2], 0.0, float(res_z - 1)))
-    x0 = int(wp.floor(g[0]))
-    y0 = int(wp.floor(g[1]))
-    z0 = int(wp.floor(g[2]))
-    ax = g[0] - float(x0)
-    ay = g[1] - float(y0)
-    az = g[2] - float(z0)
-    y = eval_sh9(n)
-    e = wp.vec3()
-    for corner in range(8):
-        dx = corner & 1
-        dy = (corner >> 1) & 1
-        dz = corner >> 2
-        xi = wp.min(x0 + dx, res_x - 1)
-        yi = wp.min(y0 + dy, res_y - 1)
-        zi = wp.min(z0 + dz, res_z - 1)
-        w = wp.where(dx == 1, ax, 1.0 - ax) * wp.where(dy == 1, ay, 1.0 - ay) * wp.where(dz == 1, az, 1.0 - az)
-        probe = (zi * res_y + yi) * res_x + xi
-        for k in range(9):
-            wk = w * y[k]
-            e += wp.vec3(coeffs[probe, 3 * k], coeffs[probe, 3 * k + 1], coeffs[probe, 3 * k + 2]) * wk
-    irradiance[i] = wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
+    irradiance[i] = volume_irradiance(coeffs, origin, cell, res_x, res_y, res_z, normal_offset, points[i], normals[i])
 
 
 # ---------------------------------------------------------------------------------------------
