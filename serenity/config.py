@@ -221,7 +221,8 @@ class SkyConfig:
     """"transfer": y-layers of probes re-lit per update once the volume exists, in a continuous cycle
     like the paper's sweep (each against the newest sky, so with the sun moving every frame no layer
     is older than ceil(Y / transfer_layers) frames), and only those layers are uploaded; 0 = every
-    probe in each update (the whole volume current every frame)."""
+    probe in each update (the whole volume current every frame). "gather": the same, for each of its
+    passes (a pass never runs past the volume's last layer)."""
     sky_steps: int = 24
     """View-ray march steps of each sky-map texel's bake (``atmosphere``; error vs steps in bench_sky)."""
     sky_view_table: int | None = None
@@ -596,9 +597,9 @@ PRESETS: dict[str, dict] = {
     # ``kernels/probegather``) — rays traced once per probe through the kd-tree carry the sky and every
     # bounce of sun and sky light through the real geometry, instead of occlusion quads + a 6³ LPV
     # (round 10's low). Against the 1024-spp references it lowered FLIP and relMSE in both scenes
-    # (``benchmarks/results/pass_ab_gather_*.json``). 100 000 probes: 1.3 m cells over the courtyard's
-    # 123 m of ground (the default 15 000 gave FLIP 0.0945 against 0.088); 128 rays (64 left the
-    # Cornell box's FLIP at 0.115 against 0.090). The other presets keep the paper's LPV.
+    # (``benchmarks/results/pass_ab_gather_*.json``). A budget of 100 000 probes: ~1.2 m cells over the
+    # courtyard's 123 m of ground (the default budget of 15 000 gives 2.5 m cells, too coarse for the
+    # bounce between its walls); 128 rays per probe. The other presets keep the paper's LPV.
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4, "filter_samples": 8,
                        "stagger": True},

@@ -36,7 +36,6 @@ surfel update (a volume lookup per surfel) and one gather of R loads per probe.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import warp as wp
@@ -187,18 +186,15 @@ def direction_sets(rays: int, sets: int = DIRECTION_SETS, seed: int = 0) -> np.n
 class ProbeGather:
     """The traced rays of one probe grid and the surfels they hit (module docstring).
 
-    ``build`` traces; ``update_visibility(sun)`` re-traces the surfels' shadow rays; ``bounce``
-    runs a surfel update and gathers probes ``first .. first + count - 1`` into ``coeffs``."""
+    The constructor traces (and relocates probes inside geometry); ``set_sky`` and
+    ``update_visibility`` follow a new sky and sun; a pass over the volume is ``update_surfels``
+    (one more bounce) then ``gather`` of its y-layers into the volume's coefficients."""
 
-    def __init__(self, scene, tracer, positions: np.ndarray, cell: np.ndarray, rays: int, surfel_size: float,
+    def __init__(self, tracer, positions: np.ndarray, cell: np.ndarray, rays: int, surfel_size: float,
                  device):
-        t0 = time.perf_counter()
         self.device = device
         self.rays = int(rays)
         self.tracer = tracer
-        mp, _, _, mf, _ = scene.merged()
-        fv = np.asarray(mp, np.float64)[np.asarray(mf, np.int64)]
-        self._face_normals = np.cross(fv[:, 1] - fv[:, 0], fv[:, 2] - fv[:, 0]).astype(np.float32)
         self.dirs = direction_sets(self.rays)
         n_probes = len(positions)
         s = np.arange(n_probes) % DIRECTION_SETS
@@ -221,29 +217,22 @@ class ProbeGather:
             self.relocated += int(ok.sum())
             bad[take] = False
         self.inside = int(bad.sum())  # no free spot found: kept, their back-face hits count as misses
-        self.probe_origins = origins
         self._make_surfels(hits, surfel_size)
         dev = device
         self._basis = wp.array(np.stack([sh_basis(d) for d in self.dirs]).astype(np.float32), dtype=vec9, device=dev)
         self._miss = wp.zeros((DIRECTION_SETS, self.rays), dtype=wp.vec3, device=dev)
         self._radiance = wp.zeros(self.surfel_count, dtype=wp.vec3, device=dev)
         self._visible = wp.zeros(self.surfel_count, dtype=float, device=dev)
-        self.build_seconds = time.perf_counter() - t0
 
     def _trace(self, origins: np.ndarray, sets: np.ndarray) -> dict:
-        """Rays of the given probes (their direction sets): hit mask, back-face mask, position,
-        shading normal (facing the ray) and albedo per ray, flattened (probe-major)."""
+        """Rays of the given probes (their direction sets): hit mask (front faces), back-face mask,
+        position, shading normal (facing the ray) and albedo per ray, flattened (probe-major)."""
         n = len(origins)
         o = np.repeat(origins, self.rays, axis=0).astype(np.float32)
         d = self.dirs[sets].reshape(-1, 3).astype(np.float32)
-        tree = self.tracer.tree
-        h = tree.intersect(o, d, tmin=self.tracer.ray_epsilon)
-        g = self.tracer.trace(o, d, 0.0, 0.0)
-        hit = h.prim >= 0
-        idx = np.nonzero(hit)[0]
-        back = np.zeros(len(hit), bool)
-        back[idx] = np.einsum("ij,ij->i", self._face_normals[h.prim[idx]], d[idx]) > 0
-        return {"hit": hit & ~back, "back": back,
+        g = self.tracer.trace(o, d, 0.0, 0.0, backfaces=True)
+        back = g["backface"]
+        return {"hit": (g["position"][:, 3] > 0) & ~back, "back": back,
                 "backface_fraction": back.reshape(n, self.rays).mean(axis=1),
                 "position": g["position"][:, :3], "normal": g["normal"][:, :3], "albedo": g["albedo"][:, :3]}
 
@@ -275,7 +264,6 @@ class ProbeGather:
         self._sp = wp.array(sp.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sn = wp.array(sn.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sa = wp.array(sa.astype(np.float32), dtype=wp.vec3, device=dev)
-        self.back_rays = back.reshape(-1, self.rays)
 
     def update_visibility(self, sun_direction) -> None:
         """V_s: one shadow ray per surfel towards the sun (from just off the surfel)."""
@@ -318,7 +306,3 @@ class ProbeGather:
         launch(gather_probes, layers * x * z,
                [int(x), int(y), int(first_layer), self.rays, self._surfel, self._radiance, self._miss, self._basis,
                 scale, coeffs], device=self.device)
-
-    def surfel_radiance(self) -> np.ndarray:
-        """(S, 3) the surfels' current outgoing radiance (W·m⁻²·sr⁻¹)."""
-        return self._radiance.numpy()

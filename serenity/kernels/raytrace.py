@@ -223,6 +223,7 @@ def trace_gbuffer(
     out_material: wp.array(dtype=wp.vec4),
     out_ray: wp.array(dtype=wp.vec4),
     out_eye: wp.array(dtype=wp.vec4),
+    out_back: wp.array(dtype=wp.int32),  # empty, or 1 where the hit is a triangle's back face
     offset: int,
 ):
     i = wp.tid() + offset  # the ray's index in the traced order (inputs)
@@ -236,6 +237,9 @@ def trace_gbuffer(
     out_material[j] = zero
     out_ray[j] = zero
     out_eye[j] = zero
+    report_back = out_back.shape[0] > 0
+    if report_back:
+        out_back[j] = 0
     d = directions[i]
     len_d = wp.length(d)
     if not (finite(len_d) and len_d > 0.0):
@@ -272,6 +276,8 @@ def trace_gbuffer(
             continue
         t_all = travelled + t
         out_ray[j] = wp.vec4(dn[0], dn[1], dn[2], t_all)
+        if report_back and wp.dot(ng, dn) > 0.0:
+            out_back[j] = 1
         if wp.dot(n, dn) > 0.0:  # two-sided: face the viewer of this ray, as the G-buffer pass does
             n = -n
         albedo = scene.mat_albedo[m]
@@ -384,7 +390,7 @@ class RayTracer:
 
     def trace(self, origins, directions, cone_width=0.0, cone_spread=0.0, *, tmin: float | None = None,
               tmax: float = np.inf, threads: int | None = None, transmissions: int = 0,
-              sort: bool | None = None, sun_direction=None) -> dict[str, np.ndarray]:
+              sort: bool | None = None, sun_direction=None, backfaces: bool = False) -> dict[str, np.ndarray]:
         """Trace N rays; returns the G-buffer as a dict of (N,4) float32 arrays (``RT_GBUFFER_KEYS``).
 
         ``tmin`` (m) defaults to ``ray_epsilon`` (hits closer than that are ignored: rays start on
@@ -393,7 +399,8 @@ class RayTracer:
         ``sort``: ray reordering (:func:`serenity.kernels.kdtree.ray_order`; None = big incoherent
         batches only); the results are the same either way, in the caller's order.
         ``sun_direction``: (3,) towards the sun; when given, ``eye[:, 3]`` is the sun's visibility at
-        each hit (one shadow ray; module doc)."""
+        each hit (one shadow ray; module doc). ``backfaces``: also ``"backface"``, (N,) bool, True
+        where the ray hit a triangle from behind its geometric normal (wound v0, v1, v2)."""
         dev = self.device
         o = np.ascontiguousarray(np.asarray(origins, np.float32).reshape(-1, 3))
         d = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
@@ -403,6 +410,7 @@ class RayTracer:
         cw = np.ascontiguousarray(np.broadcast_to(np.asarray(cone_width, np.float32), (n,)))
         cs = np.ascontiguousarray(np.broadcast_to(np.asarray(cone_spread, np.float32), (n,)))
         outs = [wp.empty(n, dtype=wp.vec4, device=dev) for _ in RT_GBUFFER_KEYS]
+        back = wp.empty(n if backfaces else 0, dtype=wp.int32, device=dev)
         sun = np.zeros(3, np.float32)
         if sun_direction is not None:
             sun = np.asarray(sun_direction, np.float64).reshape(-1)
@@ -419,9 +427,12 @@ class RayTracer:
                 rays = gather_in_order(order, rays, dev, threads)
             args = [self.data, *rays, float(self.ray_epsilon if tmin is None else tmin), float(tmax),
                     int(max(0, transmissions)), order, wp.vec3(*(float(x) for x in sun)),
-                    int(sun_direction is not None), *outs]
+                    int(sun_direction is not None), *outs, back]
             launch(trace_gbuffer, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
-        return {k: a.numpy().reshape(n, 4) for k, a in zip(RT_GBUFFER_KEYS, outs, strict=True)}
+        out = {k: a.numpy().reshape(n, 4) for k, a in zip(RT_GBUFFER_KEYS, outs, strict=True)}
+        if backfaces:
+            out["backface"] = back.numpy().astype(bool)
+        return out
 
     def trace_casting_buffer(self, buffer, threads: int | None = None, transmissions: int = 0,
                              sun_direction=None) -> dict[str, dict[str, np.ndarray]]:

@@ -298,7 +298,6 @@ class SkyVolume:
         self._gather_sun = None  # ... and the sun direction
         #: "gather": passes over the volume still to run for the current sky (each adds a bounce)
         self.gather_passes_left = 0
-        self._gather_layers_done = 0
         self.tracer = None
         if cfg.method == "transfer":
             self._transfer = SkyTransfer(self._quads_wp, len(quads), self._base, n, SEQUENCES.index(cfg.sequence),
@@ -360,10 +359,11 @@ class SkyVolume:
         integrated against the newest sky map, so with the sun moving every frame each layer is at
         most ceil(Y / layers) updates old; once every layer has seen the current sky, nothing is done.
         ``sun_direction`` defaults to ``scene.sun.direction``."""
-        sky_map, changed = self._current_sky_map(self._sun(sun_direction))
+        sun = self._sun(sun_direction)
+        sky_map, changed = self._current_sky_map(sun)
         self.updated_layers = []
         if self.config.method == "gather":
-            return self._update_gather(self._sun(sun_direction), full=False)
+            return self._update_gather(sun, full=False)
         if self._transfer is not None:
             if not self.pending_layers:
                 return False
@@ -390,7 +390,7 @@ class SkyVolume:
             if self.tracer is None:
                 self.tracer = RayTracer(self.scene, device=self.device)
             size = cfg.gather_surfel_size or 0.4 * float(np.min(self.cell_size))
-            self._gather = ProbeGather(self.scene, self.tracer, self.probe_positions(), self.cell_size,
+            self._gather = ProbeGather(self.tracer, self.probe_positions(), self.cell_size,
                                        cfg.gather_rays, size, self.device)
         return self._gather
 
@@ -418,8 +418,7 @@ class SkyVolume:
                 self._gather_pass_start(sun)
                 g.gather(self._coeffs, self._scale, self.resolution, 0, y)
                 self.gather_passes_left -= 1
-            self._next_layer = 0
-            self._gather_layers_done = 0
+            self._next_layer = 0  # a pass starts at layer 0 (``_next_layer`` is where the current one is)
             self._host = None
             self.layer_versions[:] = self.sky_version
             self.updated_layers = [(0, y)]
@@ -427,15 +426,13 @@ class SkyVolume:
         if self.gather_passes_left <= 0:
             return False
         per_update = cfg.transfer_layers if cfg.transfer_layers > 0 else y
-        if self._gather_layers_done == 0:
+        if self._next_layer == 0:
             self._gather_pass_start(sun)
-        for start, n in self._next_slabs(min(per_update, y - self._gather_layers_done)):
+        for start, n in self._next_slabs(min(per_update, y - self._next_layer)):  # never past the pass's end
             g.gather(self._coeffs, self._scale, self.resolution, start, n)
             self.layer_versions[start:start + n] = self.sky_version
             self.updated_layers.append((start, n))
-            self._gather_layers_done += n
-        if self._gather_layers_done >= y:
-            self._gather_layers_done = 0
+        if self._next_layer == 0:  # the pass is complete
             self.gather_passes_left -= 1
         self._host = None
         return True
