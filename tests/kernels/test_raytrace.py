@@ -144,6 +144,10 @@ def test_hit_attributes_misses_and_untraced_rays(device):
     # 2, 3: zero and NaN directions are "not traced": all zeros
     for k in RT_GBUFFER_KEYS:
         assert np.all(g[k][2:4] == 0)
+    # backfaces=True: the same G-buffer, and which hits met the plane from behind (only ray 1)
+    gb = rt.trace(o, d, 0.0, 0.0, backfaces=True)
+    assert all(np.array_equal(gb[k], g[k]) for k in RT_GBUFFER_KEYS)
+    assert gb["backface"].tolist() == [False, True, False, False, False]
 
 
 def test_tmin_skips_the_starting_surface(device):
