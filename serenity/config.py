@@ -19,6 +19,7 @@ SH_WINDOWS = ("none", "hanning", "lanczos", "nonneg")
 #: per-probe direction sequences of the sky volume
 SKY_SEQUENCES = ("hammersley", "sobol-owen")
 SKY_METHODS = ("transfer", "layers", "gather")
+SKY_FITS = ("scene", "content")
 SKY_TRANSFER_MAX_BANDS = 5
 """SH bands the sky transfer can project the sky on (``kernels/skytransfer.eval_sh25``: bands 0–4)."""
 #: texels per side of the paraboloid sky map (``serenity.kernels.atmosphere``)
@@ -180,8 +181,18 @@ class SkyConfig:
     """(X, Y, Z) probes fitted exactly to the bounds (overrides ``cell_size``), e.g. (32, 16, 23)."""
     target_probes: int = 32 * 16 * 23
     """Probe budget the automatic cell size aims at (the paper's volume)."""
+    fit: str = "scene"
+    """What the grid covers: "scene", the scene's bounds; "content", what stands on the ground
+    (``Scene.content_bounds``: a ground plane reaching far beyond the buildings is left out, so the
+    budget's probes go where the geometry is). Beyond the grid's sides and top the lookup fades to the
+    open sky (``SkyVolume.open_coefficients``)."""
     normal_offset: float = 0.5
     """Lookup offset along the surface normal, in cells (of the smallest cell edge)."""
+    glossy: bool = True
+    """Also the glossy reflection of the volume's light (k_s × its radiance around the mirror
+    direction, filtered by the Phong lobe, from the same L2 SH coefficients: ``sky.glsl``), beside its
+    diffuse irradiance. The reference's Phong materials reflect k_s of their light that way; without
+    it a material with k_s > 0 sees only its diffuse part of the sky and of the gathered bounce light."""
     window: str = "none"
     """SH window against ringing: one of ``SH_WINDOWS`` (``sh.window_weights``)."""
     window_size: float = 4.0
@@ -210,8 +221,13 @@ class SkyConfig:
     the LPV would add, so it wants ``LPVConfig.diffuse`` off."""
     gather_rays: int = 64
     """"gather": rays per probe (traced once per scene)."""
-    gather_bounces: int = 4
-    """"gather": passes over the volume after a change of the sun (each adds one bounce)."""
+    gather_bounces: int = 12
+    """"gather": passes over the volume after a change of the sun (each adds one bounce). 12: the
+    courtyard's pale walls and the Cornell box pass light on for many bounces; at 4 the courtyard's
+    FLIP read 0.0925, at 8 0.0852, at 12, 16 and 24 0.0849 (320×180, round 11's low)."""
+    gather_transmissions: int = 4
+    """"gather": transparent interfaces (glass) a probe's ray is bent through before the hit that lights
+    it (the tracer's ``transmissions``); 0 = glass stops the rays like an opaque diffuse wall."""
     gather_surfel_size: float | None = None
     """"gather": edge of the cubes the rays' hit points are merged into surfels (m); None = 0.4 cell."""
     transfer_bands: int = 5
@@ -233,9 +249,13 @@ class SkyConfig:
     def __post_init__(self):
         if self.method not in SKY_METHODS:
             raise ConfigError(f"SkyConfig.method must be one of {SKY_METHODS}, got {self.method!r}")
+        if self.fit not in SKY_FITS:
+            raise ConfigError(f"SkyConfig.fit must be one of {SKY_FITS}, got {self.fit!r}")
         if not 1 <= self.transfer_bands <= SKY_TRANSFER_MAX_BANDS:
             raise ConfigError(f"SkyConfig.transfer_bands must be in 1..{SKY_TRANSFER_MAX_BANDS}, "
                               f"got {self.transfer_bands}")
+        if not 0 <= self.gather_transmissions <= 16:
+            raise ConfigError(f"SkyConfig.gather_transmissions must be in 0..16, got {self.gather_transmissions}")
         if not self.transfer_layers >= 0:
             raise ConfigError(f"SkyConfig.transfer_layers must be >= 0, got {self.transfer_layers}")
         if not 1 <= self.sky_steps <= 1024:
@@ -596,16 +616,19 @@ PRESETS: dict[str, dict] = {
     # cascades, a coarse sky map, and no LPV: the sky volume's probes are lit by gathering ("gather",
     # ``kernels/probegather``) — rays traced once per probe through the kd-tree carry the sky and every
     # bounce of sun and sky light through the real geometry, instead of occlusion quads + a 6³ LPV
-    # (round 10's low). Against the 1024-spp references it lowered FLIP and relMSE in both scenes
-    # (``benchmarks/results/pass_ab_gather_*.json``). A budget of 100 000 probes: ~1.2 m cells over the
-    # courtyard's 123 m of ground (the default budget of 15 000 gives 2.5 m cells, too coarse for the
-    # bounce between its walls); 128 rays per probe. The other presets keep the paper's LPV.
+    # (round 10's low). Since round 12 the grid covers what stands on the ground (``fit="content"``:
+    # the courtyard's 120 m ground plane left out, ~1.2 m cells from 24 000 probes instead of 100 000),
+    # each probe traces 512 rays (128 left the Cornell box's probes blotchy: its light comes from a
+    # small sunlit patch), 12 passes converge the bounces, and no SSAO: the probes, traced against the
+    # real geometry, already hold the occlusion the SSAO multiplied in a second time (FLIP better in
+    # both scenes without it; benchmarks/results/pass_ab_low_round12_*.json). The other presets keep
+    # the paper's LPV.
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4, "filter_samples": 8,
                        "stagger": True},
-            "ssao": {"directions": 6, "steps": 2, "blur_radius": 4},
+            "ssao": {"enabled": False},
             "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_layers": 1, "method": "gather",
-                    "target_probes": 100_000, "gather_rays": 128},
+                    "fit": "content", "target_probes": 24_000, "gather_rays": 512},
             "lpv": {"enabled": False},
             "rsm_size": 128, "sky_vpl_stride": 8},
 }

@@ -264,8 +264,9 @@ class Renderer:
         if cfg.sky.enabled:
             self.sky_volume = SkyVolume(self.scene, cfg.sky, self.device)
             self.sky_gl = SkyTexturesGL(ctx)
-            self.sky_pass = IndirectPass(ctx, "sky")
-            self.sky_pass_lo = IndirectPass(ctx, "sky", lowres=True) if self.lowres else None
+            sky_defines = {"SKY_GLOSSY": int(cfg.sky.glossy)}
+            self.sky_pass = IndirectPass(ctx, "sky", defines=sky_defines)
+            self.sky_pass_lo = IndirectPass(ctx, "sky", lowres=True, defines=sky_defines) if self.lowres else None
             self._sky_built = False
             self._sky_map_version = -1
         self.lpv = None
@@ -530,6 +531,7 @@ class Renderer:
                 if sv.sky.version != self._sky_map_version:
                     self.sky_gl.upload_sky_map(sv.sky_map())
                     self._sky_map_version = sv.sky.version
+                self.sky_gl.set_open_sky(sv.open_coefficients())
                 slabs = sv.updated_layers  # the first update always re-lights the whole volume
                 if slabs == [(0, sv.resolution[1])]:
                     self.sky_gl.upload_volume(sv.textures(), sv.grid_origin, sv.cell_size, sv.resolution,

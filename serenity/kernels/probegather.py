@@ -18,6 +18,13 @@ projected onto L2 SH and convolved with the clamped cosine as the sky volume's o
 each pass over the volume adds one more bounce of sky and sun light (radiosity by gathering: after
 k passes the volume holds k bounces; ``gather_bounces`` passes follow every change of the sun).
 
+The surfels' albedo is the diffuse albedo plus the energy of the material's Phong lobe k_s
+(``glossy_energy``, materials that are neither mirrors nor transparent): a lobe as broad as the
+built-in scenes' (exponents 8–24) sends its k_s of the light around as a diffuse surface would, and
+the reference reflects it. Rays are bent through up to ``transmissions`` transparent interfaces
+(``SkyConfig.gather_transmissions``; the window panes: the tracer's ``transmissions``) instead of
+stopping on the glass as if it were an opaque diffuse wall.
+
 Surfels: the rays' hit points quantised to cubes of ``gather_surfel_size`` metres and the dominant
 axis of their normal (so the two faces of a thin wall are two surfels), each with the mean position,
 normal and albedo (the tracer's ray-cone-filtered texture × material albedo) of its hits. V_s is
@@ -39,6 +46,7 @@ import math
 
 import numpy as np
 import warp as wp
+from tqdm import tqdm
 
 from serenity.kernels.atmosphere_ref import sample_sky_map_np
 from serenity.kernels.launch import launch
@@ -50,6 +58,8 @@ wp.set_module_options({"enable_backward": False})
 DIRECTION_SETS = 8
 #: a probe with more than this fraction of its rays on back faces sits inside geometry
 BACKFACE_LIMIT = 0.1
+#: a relocation spot is judged on every this-many-th ray of the probe's set before it is traced in full
+RELOCATION_STRIDE = 8
 #: relocation offsets tried for such a probe, in cells (first the one up: probes under a floor)
 RELOCATIONS = ((0.0, 0.45, 0.0), (0.45, 0.0, 0.0), (-0.45, 0.0, 0.0), (0.0, 0.0, 0.45), (0.0, 0.0, -0.45),
                (0.0, -0.45, 0.0), (0.3, 0.3, 0.3), (-0.3, 0.3, -0.3))
@@ -57,14 +67,28 @@ RELOCATIONS = ((0.0, 0.45, 0.0), (0.45, 0.0, 0.0), (-0.45, 0.0, 0.0), (0.0, 0.0,
 _INV_PI = wp.constant(1.0 / math.pi)
 
 
+#: rays the probes' trace hands the tracer per call (its G-buffer for those rays is the memory peak)
+TRACE_CHUNK_RAYS = 1 << 20
+#: a trace of at least this many rays shows a progress bar
+PROGRESS_RAYS = 4_000_000
+
+#: beyond the grid's sides and top, the lookup fades to the open sky's coefficients over this many cells
+OPEN_FADE_CELLS = 2.0
+
+
 @wp.func
-def volume_irradiance(coeffs: wp.array2d(dtype=float), origin: wp.vec3, cell: wp.vec3, res_x: int, res_y: int,
-                      res_z: int, normal_offset: float, p: wp.vec3, n: wp.vec3) -> wp.vec3:
+def volume_irradiance(coeffs: wp.array2d(dtype=float), open_sky: wp.array(dtype=float), origin: wp.vec3,
+                      cell: wp.vec3, res_x: int, res_y: int, res_z: int, normal_offset: float, p: wp.vec3,
+                      n: wp.vec3) -> wp.vec3:
     """Irradiance of the volume at a surface point (sky.glsl's arithmetic): trilinear coefficients
-    at p + offset·n, evaluated at n, clamped at 0."""
-    g = wp.cw_div(p + n * normal_offset - origin, cell)
-    g = wp.vec3(wp.clamp(g[0], 0.0, float(res_x - 1)), wp.clamp(g[1], 0.0, float(res_y - 1)),
-                wp.clamp(g[2], 0.0, float(res_z - 1)))
+    at p + offset·n, faded to ``open_sky`` (27, the open sky's) beyond the grid's sides and top,
+    evaluated at n, clamped at 0."""
+    gr = wp.cw_div(p + n * normal_offset - origin, cell)
+    beyond = wp.max(wp.max(wp.max(-gr[0], gr[0] - float(res_x - 1)), wp.max(-gr[2], gr[2] - float(res_z - 1))),
+                    gr[1] - float(res_y - 1))
+    w_open = wp.clamp(beyond / OPEN_FADE_CELLS, 0.0, 1.0)
+    g = wp.vec3(wp.clamp(gr[0], 0.0, float(res_x - 1)), wp.clamp(gr[1], 0.0, float(res_y - 1)),
+                wp.clamp(gr[2], 0.0, float(res_z - 1)))
     x0 = int(wp.floor(g[0]))
     y0 = int(wp.floor(g[1]))
     z0 = int(wp.floor(g[2]))
@@ -85,6 +109,10 @@ def volume_irradiance(coeffs: wp.array2d(dtype=float), origin: wp.vec3, cell: wp
         for k in range(9):
             wk = w * y[k]
             e += wp.vec3(coeffs[probe, 3 * k], coeffs[probe, 3 * k + 1], coeffs[probe, 3 * k + 2]) * wk
+    e_open = wp.vec3()
+    for k in range(9):
+        e_open += wp.vec3(open_sky[3 * k], open_sky[3 * k + 1], open_sky[3 * k + 2]) * y[k]
+    e = e * (1.0 - w_open) + e_open * w_open
     return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
 
 
@@ -98,6 +126,7 @@ def surfel_radiance(
     sun_dir: wp.vec3,
     sun_irradiance: wp.vec3,
     coeffs: wp.array2d(dtype=float),
+    open_sky: wp.array(dtype=float),
     origin: wp.vec3,
     cell: wp.vec3,
     res_x: int,
@@ -111,7 +140,7 @@ def surfel_radiance(
     """B_s = ρ_s/π·(E_sun·max(0, n·l)·V_s + E_volume(p_s, n_s)) (module docstring)."""
     i = wp.tid() + offset
     n = normals[i]
-    e = volume_irradiance(coeffs, origin, cell, res_x, res_y, res_z, normal_offset, positions[i], n)
+    e = volume_irradiance(coeffs, open_sky, origin, cell, res_x, res_y, res_z, normal_offset, positions[i], n)
     e += sun_irradiance * (wp.max(wp.dot(n, sun_dir), 0.0) * sun_visible[i])
     radiance[i] = wp.cw_mul(albedo[i], e) * _INV_PI
 
@@ -191,16 +220,21 @@ class ProbeGather:
     (one more bounce) then ``gather`` of its y-layers into the volume's coefficients."""
 
     def __init__(self, tracer, positions: np.ndarray, cell: np.ndarray, rays: int, surfel_size: float,
-                 device):
+                 device, glossy_energy=None, transmissions: int = 0):
+        """``glossy_energy``: per material of the tracer's scene, the albedo its surfels gain from
+        its Phong lobe (module docstring), None: none; ``transmissions``: transparent interfaces a
+        ray is bent through before the hit it lights the probe with."""
         self.device = device
         self.rays = int(rays)
         self.tracer = tracer
+        self.glossy_energy = None if glossy_energy is None else np.asarray(glossy_energy, np.float32)
+        self.transmissions = int(transmissions)
         self.dirs = direction_sets(self.rays)
         n_probes = len(positions)
         s = np.arange(n_probes) % DIRECTION_SETS
         cell = np.asarray(cell, np.float64)
         origins = np.asarray(positions, np.float64).copy()
-        hits = self._trace(origins, s)
+        hits = self._trace(origins, s, progress=True)
         bad = hits["backface_fraction"] > BACKFACE_LIMIT
         self.relocated = 0
         for off in RELOCATIONS:  # probes inside geometry: try a free spot nearby
@@ -208,13 +242,19 @@ class ProbeGather:
                 break
             idx = np.nonzero(bad)[0]
             cand = origins[idx] + np.asarray(off) * cell
+            # judged on every RELOCATION_STRIDE-th ray of the set (a spread subset of the spherical
+            # Fibonacci points), then traced in full only where the spot is free
+            ok = self._backface_fraction(cand, s[idx]) <= BACKFACE_LIMIT
+            if not ok.any():
+                continue
+            idx, cand = idx[ok], cand[ok]
             h2 = self._trace(cand, s[idx])
-            ok = h2["backface_fraction"] <= BACKFACE_LIMIT
-            take = idx[ok]
-            origins[take] = cand[ok]
+            keep = h2["backface_fraction"] <= BACKFACE_LIMIT
+            take = idx[keep]
+            origins[take] = cand[keep]
             for k in ("hit", "back", "position", "normal", "albedo"):
-                hits[k].reshape(n_probes, self.rays, -1)[take] = h2[k].reshape(len(idx), self.rays, -1)[ok]
-            self.relocated += int(ok.sum())
+                hits[k].reshape(n_probes, self.rays, -1)[take] = h2[k].reshape(len(idx), self.rays, -1)[keep]
+            self.relocated += int(keep.sum())
             bad[take] = False
         self.inside = int(bad.sum())  # no free spot found: kept, their back-face hits count as misses
         self._make_surfels(hits, surfel_size)
@@ -224,39 +264,73 @@ class ProbeGather:
         self._radiance = wp.zeros(self.surfel_count, dtype=wp.vec3, device=dev)
         self._visible = wp.zeros(self.surfel_count, dtype=float, device=dev)
 
-    def _trace(self, origins: np.ndarray, sets: np.ndarray) -> dict:
+    def _trace(self, origins: np.ndarray, sets: np.ndarray, progress: bool = False) -> dict:
         """Rays of the given probes (their direction sets): hit mask (front faces), back-face mask,
-        position, shading normal (facing the ray) and albedo per ray, flattened (probe-major)."""
-        n = len(origins)
-        o = np.repeat(origins, self.rays, axis=0).astype(np.float32)
-        d = self.dirs[sets].reshape(-1, 3).astype(np.float32)
-        g = self.tracer.trace(o, d, 0.0, 0.0, backfaces=True)
-        back = g["backface"]
-        return {"hit": (g["position"][:, 3] > 0) & ~back, "back": back,
-                "backface_fraction": back.reshape(n, self.rays).mean(axis=1),
-                "position": g["position"][:, :3], "normal": g["normal"][:, :3], "albedo": g["albedo"][:, :3]}
+        position, shading normal (facing the ray) and albedo (+ the Phong lobe's energy) per ray,
+        flattened (probe-major), float32. Traced in chunks of about ``TRACE_CHUNK_RAYS`` so that the
+        tracer's full G-buffer never exists for all the rays at once (a tqdm bar for big jobs)."""
+        n, r = len(origins), self.rays
+        total = n * r
+        out = {"hit": np.zeros(total, bool), "back": np.zeros(total, bool),
+               "position": np.empty((total, 3), np.float32), "normal": np.empty((total, 3), np.float32),
+               "albedo": np.empty((total, 3), np.float32)}
+        per = max(1, TRACE_CHUNK_RAYS // r)
+        bar = tqdm(total=total, desc=f"probe rays ({n:,} probes x {r})", unit="ray", unit_scale=True,
+                   leave=False, disable=not (progress and total >= PROGRESS_RAYS))
+        for a in range(0, n, per):
+            b = min(n, a + per)
+            o = np.repeat(origins[a:b], r, axis=0).astype(np.float32)
+            d = self.dirs[sets[a:b]].reshape(-1, 3).astype(np.float32)
+            g = self.tracer.trace(o, d, 0.0, 0.0, backfaces=True, transmissions=self.transmissions)
+            rows = slice(a * r, b * r)
+            back = g["backface"]
+            out["back"][rows] = back
+            out["hit"][rows] = (g["position"][:, 3] > 0) & ~back
+            out["position"][rows] = g["position"][:, :3]
+            out["normal"][rows] = g["normal"][:, :3]
+            albedo = g["albedo"][:, :3]
+            if self.glossy_energy is not None and len(self.glossy_energy):
+                material = np.clip(np.rint(g["albedo"][:, 3]).astype(np.int64), 0, len(self.glossy_energy) - 1)
+                albedo = albedo + self.glossy_energy[material][:, None]
+            out["albedo"][rows] = albedo
+            bar.update(len(o))
+        bar.close()
+        out["backface_fraction"] = out["back"].reshape(n, r).mean(axis=1)
+        return out
+
+    def _backface_fraction(self, origins: np.ndarray, sets: np.ndarray) -> np.ndarray:
+        """(N,) fraction of back-face hits over every ``RELOCATION_STRIDE``-th ray of each probe's set."""
+        sub = self.dirs[:, ::RELOCATION_STRIDE]
+        r = sub.shape[1]
+        o = np.repeat(origins, r, axis=0).astype(np.float32)
+        d = sub[sets].reshape(-1, 3).astype(np.float32)
+        g = self.tracer.trace(o, d, 0.0, 0.0, backfaces=True, transmissions=self.transmissions)
+        return g["backface"].reshape(len(origins), r).mean(axis=1)
 
     def _make_surfels(self, hits: dict, size: float) -> None:
         hit = hits["hit"]
-        idx = np.nonzero(hit)[0]
-        pos, nrm = hits["position"][idx].astype(np.float64), hits["normal"][idx].astype(np.float64)
+        idx = np.flatnonzero(hit)
+        pos, nrm = hits["position"][idx], hits["normal"][idx]
         axis = np.argmax(np.abs(nrm), axis=1)
         side = nrm[np.arange(len(idx)), axis] > 0
-        q = np.floor((pos - pos.min(axis=0)) / size).astype(np.int64) if len(idx) else np.zeros((0, 3), np.int64)
-        key = ((q[:, 0] * 1_000_003 + q[:, 1]) * 1_000_033 + q[:, 2]) * 6 + axis * 2 + side
+        key = axis * 2 + side  # the cube's index and the normal's dominant axis and sign, one int64
+        if len(idx):
+            base = pos.min(axis=0)
+            for c, prime in ((2, 1), (1, 1_000_033), (0, 1_000_033 * 1_000_003)):
+                key = key + np.floor((pos[:, c] - base[c]) / size).astype(np.int64) * (6 * prime)
         uniq, inv = np.unique(key, return_inverse=True)
+        del key
         m = len(uniq)
-        cnt = np.bincount(inv, minlength=m).astype(np.float64)[:, None]
+        cnt = np.maximum(np.bincount(inv, minlength=m), 1).astype(np.float64)[:, None]
 
         def mean(a):
-            return np.stack([np.bincount(inv, a[:, c], m) for c in range(3)], axis=1) / np.maximum(cnt, 1)
+            return np.stack([np.bincount(inv, a[:, c], m) for c in range(3)], axis=1) / cnt
 
-        sp, sn, sa = mean(pos), mean(nrm), mean(hits["albedo"][idx].astype(np.float64))
+        sp, sn, sa = mean(pos), mean(nrm), mean(hits["albedo"][idx])
         sn /= np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12)
         surfel = np.full(len(hit), -1, np.int32)
         surfel[idx] = inv.astype(np.int32)
-        back = hits["back"]
-        surfel[back] = -2  # a back face: no light (a probe kept inside geometry)
+        surfel[hits["back"]] = -2  # a back face: no light (a probe kept inside geometry)
         self.surfel_count = m
         self.surfel_positions, self.surfel_normals, self.surfel_albedo = sp, sn, sa
         dev = self.device
@@ -287,8 +361,9 @@ class ProbeGather:
         out[~up] = np.asarray(ground, np.float64)
         self._miss.assign(out.reshape(DIRECTION_SETS, self.rays, 3).astype(np.float32))
 
-    def update_surfels(self, coeffs, grid, sun_direction, sun_irradiance) -> None:
-        """B_s of every surfel from the volume as it is now (one more bounce)."""
+    def update_surfels(self, coeffs, open_sky, grid, sun_direction, sun_irradiance) -> None:
+        """B_s of every surfel from the volume as it is now (one more bounce); ``open_sky``: the (27,)
+        Warp array of the open sky's coefficients beyond the grid."""
         origin, cell, res, offset = grid
         if self.surfel_count == 0:
             return
@@ -296,7 +371,7 @@ class ProbeGather:
         sun = sun / max(np.linalg.norm(sun), 1e-12)
         launch(surfel_radiance, self.surfel_count,
                [self._sp, self._sn, self._sa, self._visible, wp.vec3(*sun.astype(np.float32)),
-                wp.vec3(*np.asarray(sun_irradiance, np.float32)), coeffs, wp.vec3(*origin.astype(np.float32)),
+                wp.vec3(*np.asarray(sun_irradiance, np.float32)), coeffs, open_sky, wp.vec3(*origin.astype(np.float32)),
                 wp.vec3(*cell.astype(np.float32)), int(res[0]), int(res[1]), int(res[2]), float(offset),
                 self._radiance], device=self.device)
 

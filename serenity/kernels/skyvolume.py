@@ -63,21 +63,24 @@ from serenity.kernels.atmosphere import (
     horizontal_irradiance,
     sample_sky_map,
 )
-from serenity.kernels.atmosphere_ref import angle_between_deg, scene_sun_irradiance
+from serenity.kernels.atmosphere_ref import angle_between_deg, sample_sky_map_np, scene_sun_irradiance
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
-from serenity.kernels.probegather import ProbeGather, volume_irradiance
+from serenity.kernels.probegather import OPEN_FADE_CELLS, ProbeGather, direction_sets, volume_irradiance
 from serenity.kernels.quadfit import fit_occlusion_quads
 from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.sampling import cp_rotation, hammersley_np, hash_u32, sample_probe_direction
-from serenity.kernels.sh import eval_sh9, irradiance_scale, sh_basis, vec9
+from serenity.kernels.sh import A_HAT, BAND, eval_sh9, irradiance_scale, sh_basis, vec9
 from serenity.kernels.skytransfer import SkyTransfer, project_sky
 
 wp.set_module_options({"enable_backward": False})
 
 # ---------------------------------------------------------------------------------------------
 # constants
+
+#: directions (a spherical Fibonacci set) the open sky's coefficients are projected from
+OPEN_SKY_DIRECTIONS = 4096
 
 PAPER_RESOLUTION = (32, 16, 23)
 SEQUENCES = SKY_SEQUENCES
@@ -162,6 +165,7 @@ def integrate_sky_layer_kernel(sequence: str):
 def lookup_sky_irradiance(
     # inputs
     coeffs: wp.array2d(dtype=float),
+    open_sky: wp.array(dtype=float),
     origin: wp.vec3,
     cell: wp.vec3,
     res_x: int,
@@ -177,7 +181,8 @@ def lookup_sky_irradiance(
     """The volume's irradiance at surface points (``eval_volume_irradiance`` and sky.glsl's
     arithmetic): trilinear coefficients at p + offset·n, evaluated at n, clamped at 0."""
     i = wp.tid() + offset
-    irradiance[i] = volume_irradiance(coeffs, origin, cell, res_x, res_y, res_z, normal_offset, points[i], normals[i])
+    irradiance[i] = volume_irradiance(coeffs, open_sky, origin, cell, res_x, res_y, res_z, normal_offset, points[i],
+                                      normals[i])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -217,14 +222,19 @@ def unpack_sh_textures(textures: list[np.ndarray]) -> np.ndarray:
     return np.concatenate([np.asarray(t, np.float32) for t in textures], axis=-1)
 
 
-def eval_volume_irradiance(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_offset_m: float,
-                           points, normals) -> np.ndarray:
-    """(N,3) float64 irradiance from (Z, Y, X, 27) coefficients — the shader's arithmetic, on the host."""
+def interpolate_volume(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_offset_m: float, points, normals,
+                       open_coeffs=None) -> np.ndarray:
+    """(N, 9, 3) float64 coefficients the lookup evaluates at each surface point — the shader's
+    arithmetic on the host: trilinear at p + offset·n (clamped to the grid), faded to ``open_coeffs``
+    ((9, 3), the open sky; None = zeros) beyond the grid's sides and top over ``OPEN_FADE_CELLS``."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     res = np.asarray(resolution, np.float64)
-    g = (p + normal_offset_m * n - np.asarray(origin, np.float64)) / np.asarray(cell, np.float64)
-    g = np.clip(g, 0.0, res - 1.0)
+    gr = (p + normal_offset_m * n - np.asarray(origin, np.float64)) / np.asarray(cell, np.float64)
+    beyond = np.maximum.reduce([-gr[:, 0], gr[:, 0] - (res[0] - 1), -gr[:, 2], gr[:, 2] - (res[2] - 1),
+                                gr[:, 1] - (res[1] - 1)])
+    w_open = np.clip(beyond / OPEN_FADE_CELLS, 0.0, 1.0)
+    g = np.clip(gr, 0.0, res - 1.0)
     i0 = np.floor(g).astype(np.int64)
     a = g - i0
     ri = np.asarray(resolution, np.int64)
@@ -243,10 +253,43 @@ def eval_volume_irradiance(coeffs_zyx: np.ndarray, origin, cell, resolution, nor
                 idx[:, k] = (zi * ri[1] + yi) * ri[0] + xi
                 wts[:, k] = wx * wy * wz
                 k += 1
-    out = np.einsum("nk,nkc->nc", wts, c[idx], dtype=np.float64)
-    y = sh_basis(n)
-    e = np.einsum("nk,nkc->nc", y, out.reshape(-1, 9, 3))
-    return np.maximum(e, 0.0)
+    out = np.einsum("nk,nkc->nc", wts, c[idx], dtype=np.float64).reshape(-1, 9, 3)
+    if open_coeffs is not None:
+        out = out * (1.0 - w_open)[:, None, None] + np.asarray(open_coeffs, np.float64).reshape(1, 9, 3) * \
+            w_open[:, None, None]
+    else:
+        out = out * (1.0 - w_open)[:, None, None]
+    return out
+
+
+def eval_volume_irradiance(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_offset_m: float,
+                           points, normals, open_coeffs=None) -> np.ndarray:
+    """(N,3) float64 irradiance from (Z, Y, X, 27) coefficients — the shader's arithmetic, on the host."""
+    c = interpolate_volume(coeffs_zyx, origin, cell, resolution, normal_offset_m, points, normals, open_coeffs)
+    y = sh_basis(np.asarray(normals, np.float64).reshape(-1, 3))
+    return np.maximum(np.einsum("nk,nkc->nc", y, c), 0.0)
+
+
+def glossy_band_factors(shininess) -> np.ndarray:
+    """(N, 9) weights that turn irradiance coefficients E_lm = Â_l·L_lm into the radiance filtered by
+    the normalised Phong lobe of exponent m, (m + 1)/(2π)·cos^m: its SH factors are 1, (m + 1)/(m + 2)
+    and m/(m + 3) for bands 0, 1, 2 (∫ P_l(x)·(m + 1)·x^m dx over [0, 1]), over Â_l = π, 2π/3, π/4."""
+    m = np.asarray(shininess, np.float64).reshape(-1)
+    band = np.stack([np.full_like(m, 1.0), (m + 1.0) / (m + 2.0), m / (m + 3.0)], axis=1)
+    band /= np.array([A_HAT])
+    return band[:, np.asarray(BAND)]
+
+
+def eval_volume_glossy(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_offset_m: float, points, normals,
+                       directions, shininess, open_coeffs=None) -> np.ndarray:
+    """(N,3) float64 radiance around ``directions`` filtered by the Phong lobe of exponent ``shininess``
+    (scalar or (N,)), from the coefficients looked up at the points and normals — sky.glsl's glossy
+    term (``sky_volume_lookup``), on the host."""
+    c = interpolate_volume(coeffs_zyx, origin, cell, resolution, normal_offset_m, points, normals, open_coeffs)
+    d = np.asarray(directions, np.float64).reshape(-1, 3)
+    m = np.broadcast_to(np.asarray(shininess, np.float64), (len(d),))
+    y = sh_basis(d) * glossy_band_factors(m)
+    return np.maximum(np.einsum("nk,nkc->nc", y, c), 0.0)
 
 
 class SkyVolume:
@@ -261,7 +304,8 @@ class SkyVolume:
         self.scene = scene
         self.config = cfg = config or SkyConfig()
         self.device = resolve_device(device)
-        self.grid_origin, self.cell_size, self.resolution = fit_grid(scene.bounds, cfg)
+        bounds = scene.content_bounds() if cfg.fit == "content" else scene.bounds
+        self.grid_origin, self.cell_size, self.resolution = fit_grid(bounds, cfg)
         self.normal_offset_m = float(cfg.normal_offset * float(np.min(self.cell_size)))
         quads = list(scene.occlusion_quads)
         self.quad_fit = None
@@ -280,6 +324,11 @@ class SkyVolume:
         x, y, z = self.resolution
         self.probe_count = x * y * z
         self._coeffs = wp.zeros((self.probe_count, COEFFS), dtype=float, device=dev)
+        #: the open sky's coefficients (the lookup fades to them beyond the grid's sides and top)
+        self._open = wp.zeros(COEFFS, dtype=float, device=dev)
+        self._open_host = np.zeros((9, 3))
+        self._open_version = -1
+        self._open_dirs = direction_sets(OPEN_SKY_DIRECTIONS, 1)[0]
         self._constant_sky = getattr(scene.sky, "model", "atmosphere") == "constant"
         self.sky = SkyMapCache(cfg.sky_map_size, cfg.rebuild_angle_deg, device=dev, steps=cfg.sky_steps,
                               table=cfg.sky_view_table)
@@ -324,6 +373,25 @@ class SkyVolume:
         if rebaked:
             self.ground_radiance = cfg.ground_albedo / math.pi * horizontal_irradiance(self.sky.sky_map)
         return m, rebaked
+
+    def open_coefficients(self) -> np.ndarray:
+        """(9, 3) float64 irradiance coefficients of a probe under the open sky (nothing occludes it:
+        the sky map above the horizon, the ground radiance below, as a probe's misses), for the sky
+        the volume was last lit by. The lookup fades to them beyond the grid's sides and top
+        (``OPEN_FADE_CELLS``), where only open sky is left (``SkyConfig.fit = "content"``)."""
+        if not self._constant_sky and self.sky.sky_map is None:  # no sky baked yet: nothing lit either
+            return self._open_host
+        if self._open_version != self.sky_version:
+            d = self._open_dirs
+            radiance = np.empty((len(d), 3))
+            up = d[:, 1] >= 0
+            radiance[up] = sample_sky_map_np(self.sky_map(), d[up])
+            radiance[~up] = self.ground_radiance
+            scale = irradiance_scale(self.config.window, self.config.window_size)
+            self._open_host = scale[:, None] * (4.0 * math.pi / len(d)) * (sh_basis(d).T @ radiance)
+            self._open.assign(self._open_host.reshape(-1).astype(np.float32))
+            self._open_version = self.sky_version
+        return self._open_host
 
     def sky_map(self) -> np.ndarray:
         """(S, S, 3) float32 the sky map the probes sample (constant sky: a 2×2 map)."""
@@ -390,13 +458,16 @@ class SkyVolume:
             if self.tracer is None:
                 self.tracer = RayTracer(self.scene, device=self.device)
             size = cfg.gather_surfel_size or 0.4 * float(np.min(self.cell_size))
+            glossy = ([m.specular if m.reflectivity == 0 and m.transparency == 0 else 0.0
+                       for m in self.scene.materials] if cfg.glossy else None)
             self._gather = ProbeGather(self.tracer, self.probe_positions(), self.cell_size,
-                                       cfg.gather_rays, size, self.device)
+                                       cfg.gather_rays, size, self.device, glossy_energy=glossy,
+                                       transmissions=cfg.gather_transmissions)
         return self._gather
 
     def _gather_pass_start(self, sun) -> None:
         """The surfels' radiance from the volume as it is (the start of a pass: one more bounce)."""
-        self._gather.update_surfels(self._coeffs, (self.grid_origin, self.cell_size, self.resolution,
+        self._gather.update_surfels(self._coeffs, self._open_sky(), (self.grid_origin, self.cell_size, self.resolution,
                                                    self.normal_offset_m), sun, scene_sun_irradiance(self.scene, sun))
 
     def _update_gather(self, sun, full: bool) -> bool:
@@ -518,7 +589,7 @@ class SkyVolume:
         x, y, z = self.resolution
         dev = self.device
         launch(lookup_sky_irradiance, len(p),
-               [self._coeffs, wp.vec3(*self.grid_origin.astype(np.float32)),
+               [self._coeffs, self._open_sky(), wp.vec3(*self.grid_origin.astype(np.float32)),
                 wp.vec3(*self.cell_size.astype(np.float32)), x, y, z, float(self.normal_offset_m),
                 wp.array(p, dtype=wp.vec3, device=dev), wp.array(n, dtype=wp.vec3, device=dev), out], device=dev)
         return out.numpy()
@@ -527,4 +598,17 @@ class SkyVolume:
         """(N, 3) float64 W·m⁻² at surface points with unit normals, as the shader evaluates it."""
         c = self.coefficients().reshape(*self.resolution[::-1], COEFFS)
         return eval_volume_irradiance(c, self.grid_origin, self.cell_size, self.resolution, self.normal_offset_m,
-                                      points, normals)
+                                      points, normals, self.open_coefficients())
+
+    def glossy(self, points, normals, directions, shininess) -> np.ndarray:
+        """(N, 3) float64 W·m⁻²·sr⁻¹: the volume's radiance around ``directions`` filtered by the Phong
+        lobe of exponent ``shininess`` (scalar or (N,)), looked up at the surface points and normals,
+        as the shader evaluates it (``SkyConfig.glossy``)."""
+        c = self.coefficients().reshape(*self.resolution[::-1], COEFFS)
+        return eval_volume_glossy(c, self.grid_origin, self.cell_size, self.resolution, self.normal_offset_m,
+                                  points, normals, directions, shininess, self.open_coefficients())
+
+    def _open_sky(self):
+        """The (27,) Warp array of :meth:`open_coefficients`, current."""
+        self.open_coefficients()
+        return self._open

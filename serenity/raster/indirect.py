@@ -54,8 +54,8 @@ class IndirectPass:
                glossy: bool = True) -> None:
         """Add this technique's light onto ``target``: the lit HDR texture of the same size, or for a
         ``lowres`` pass the :class:`LowResIndirect` whose targets (and the guide's class depth) it
-        draws into. ``diffuse`` / ``glossy``: which of the LPV's two terms to add (the sky's light is
-        diffuse only and ignores them)."""
+        draws into. ``diffuse`` / ``glossy``: which of the LPV's two terms to add (the sky pass
+        ignores them: its glossy term is compiled in or out by ``SKY_GLOSSY``, ``SkyConfig.glossy``)."""
         ctx = self.ctx
         wanted = (1 if diffuse else 0) | (2 if glossy else 0) if self.technique == "lpv" else 3
         draws = [d for d in self._draws if d[2] & wanted]

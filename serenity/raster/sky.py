@@ -8,12 +8,12 @@ the uniforms of ``glsl/sky.glsl`` that the program uses:
 
     sampler2D u_sky_map;  sampler3D u_sky_volume[7];
     vec3 u_sky_origin (m);  vec3 u_sky_cell (m);  vec3 u_sky_res (X, Y, Z probes);
-    float u_sky_normal_offset (m)
+    float u_sky_normal_offset (m);  vec3 u_sky_open[9] (the open sky's coefficients, ``set_open_sky``)
 
 A shader ``#include "sky.glsl"`` and calls ``sky_map_radiance(u_sky_map, dir)`` (the dome) and
-``sky_irradiance(p, n)`` (= ``sky_volume_irradiance(u_sky_volume, p, n, u_sky_origin, u_sky_cell,
-u_sky_res, u_sky_normal_offset)``; adds albedo/π × it). Before any upload the textures are 1×1 black,
-so binding is always valid.
+``sky_irradiance(p, n)`` (adds albedo/π × it), or ``sky_irradiance_glossy(p, n, r, m, glossy)``
+(also the radiance around r filtered by the Phong lobe of exponent m). Before any upload the
+textures are 1×1 black, so binding is always valid.
 
 Uploads do not flip rows: sky-map array row i is texture row i (the mapping in sky.glsl and
 ``atmosphere.direction_to_paraboloid`` use that), volume arrays (Z, Y, X, C) are indexed as stored.
@@ -49,6 +49,7 @@ class SkyTexturesGL:
         self.cell = np.ones(3)
         self.res = np.ones(3)
         self.normal_offset = 0.0
+        self.open_sky = np.zeros((9, 3))
         self._eval = None
         self._target = None
 
@@ -82,6 +83,11 @@ class SkyTexturesGL:
         self.res = np.asarray(res, np.float64).reshape(3)
         self.normal_offset = float(normal_offset)
 
+    def set_open_sky(self, coefficients) -> None:
+        """(9, 3) irradiance coefficients of the open sky (``SkyVolume.open_coefficients``): what the
+        lookup fades to beyond the grid's sides and top."""
+        self.open_sky = np.asarray(coefficients, np.float64).reshape(9, 3).copy()
+
     def upload_volume_layers(self, textures: list[np.ndarray], first_layer: int) -> None:
         """Overwrite y-layers ``first_layer`` .. of the uploaded volume with the 7 slab arrays of
         ``SkyVolume.textures(layers=...)`` ((Z, n, X, ·); the grid is unchanged)."""
@@ -108,6 +114,7 @@ class SkyTexturesGL:
             "u_sky_cell": tuple(float(x) for x in self.cell),
             "u_sky_res": tuple(float(x) for x in self.res),
             "u_sky_normal_offset": self.normal_offset,
+            "u_sky_open": tuple(tuple(float(x) for x in row) for row in self.open_sky),
         }
         for name, value in values.items():
             if name in program:
@@ -116,7 +123,8 @@ class SkyTexturesGL:
 
     # -- evaluation on the GPU (tests, debugging)
 
-    def _run(self, mode: int, a: np.ndarray, b: np.ndarray | None) -> np.ndarray:
+    def _run(self, mode: int, a: np.ndarray, b: np.ndarray | None, c: np.ndarray | None = None,
+             shininess: float = 0.0) -> np.ndarray:
         ctx = self.ctx
         if self._eval is None:
             prog = load_program(ctx, "sky_eval.glsl")
@@ -136,6 +144,7 @@ class SkyTexturesGL:
 
         ta = tex_of(a)
         tb = tex_of(np.asarray(b, np.float32).reshape(-1, 3) if b is not None else a)
+        tc = tex_of(np.asarray(c, np.float32).reshape(-1, 3) if c is not None else a)
         # the target is kept (released only when the size changes, while another FBO is bound):
         # deleting the bound framebuffer makes moderngl rebind a dead id on the next FBO creation
         if self._target is None or self._target[0] != (w, h):
@@ -154,15 +163,20 @@ class SkyTexturesGL:
                 unit = self.bind(prog, 0)
                 ta.use(location=unit)
                 tb.use(location=unit + 1)
+                tc.use(location=unit + 2)
                 prog["u_in_a"].value = unit
-                if "u_in_b" in prog:
-                    prog["u_in_b"].value = unit + 1
+                for name, u in (("u_in_b", unit + 1), ("u_in_c", unit + 2)):
+                    if name in prog:
+                        prog[name].value = u
+                if "u_shininess" in prog:
+                    prog["u_shininess"].value = float(shininess)
                 prog["u_mode"].value = mode
                 vao.render(vertices=3)
             res = np.frombuffer(out.read(), np.float32).reshape(w * h, 4)[:n, :3].copy()
         finally:
             ta.release()
             tb.release()
+            tc.release()
         return res
 
     def evaluate_sky_map(self, directions) -> np.ndarray:
@@ -172,3 +186,8 @@ class SkyTexturesGL:
     def evaluate_volume(self, points, normals) -> np.ndarray:
         """(N,3) ``sky_irradiance`` evaluated by GL at (N,3) points and normals."""
         return self._run(1, points, normals)
+
+    def evaluate_volume_glossy(self, points, normals, directions, shininess: float) -> np.ndarray:
+        """(N,3) the glossy radiance of ``sky_irradiance_glossy`` evaluated by GL at (N,3) points,
+        normals and directions, for one Phong exponent."""
+        return self._run(2, points, normals, directions, shininess)

@@ -107,3 +107,73 @@ def test_gather_with_the_lpv_diffuse_is_refused():
         RenderConfig(sky=gather)
     RenderConfig(sky=gather, lpv=LPVConfig(diffuse=False))
     RenderConfig(sky=gather, lpv=LPVConfig(enabled=False))
+
+
+def _with_pane(scene, transparency: float, height: float = 2.0, half: float = 3.0, thickness: float = 0.02):
+    """``scene`` plus a horizontal pane, a 2·half m square slab ``thickness`` thick at ``height``, of a
+    glass-like material (transparency > 0) or an opaque grey one."""
+    from serenity.scene.model import Material, Mesh
+
+    scene.materials.append(Material(name="pane", albedo=np.full(3, 0.5), transparency=transparency, ior=1.5))
+    lo = np.array([-half, height, -half])
+    hi = np.array([half, height + thickness, half])
+    pos, nrm, faces = [], [], []
+    for axis in range(3):
+        for side, normal_sign in ((lo, -1.0), (hi, 1.0)):
+            u, v = [a for a in range(3) if a != axis]
+            corners = []
+            for cu, cv in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                c = np.empty(3)
+                c[axis] = side[axis]
+                c[u] = (lo, hi)[cu][u]
+                c[v] = (lo, hi)[cv][v]
+                corners.append(c)
+            n = np.zeros(3)
+            n[axis] = normal_sign
+            base = len(pos)
+            pos += corners
+            nrm += [n] * 4
+            tri = [[0, 1, 2], [0, 2, 3]]
+            e = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+            if np.dot(e, n) < 0:
+                tri = [[0, 2, 1], [0, 3, 2]]
+            faces += [[base + i for i in t] for t in tri]
+    mat = len(scene.materials) - 1
+    scene.meshes.append(Mesh("pane", np.array(pos), np.array(nrm), None, np.array(faces), np.full(len(faces), mat)))
+    return scene
+
+
+def test_rays_pass_through_glass_and_stop_on_an_opaque_pane(device):
+    # no sun, a plane under the constant sky, a probe 1 m over it and a 6 m pane 1 m above the probe:
+    # through glass (its rays bent in and out of the 2 cm slab) the probe sees the sky as without
+    # the pane, E_up = π·L; an opaque grey pane hides most of it (its underside sees only the plane)
+    up = np.array([[0.0, 1.0, 0.0]])
+
+    def e_up(transparency=None):
+        scene = _plane(irradiance=0.0)
+        if transparency is not None:
+            scene = _with_pane(scene, transparency)
+        vol = _volume(device, scene, (0.0, 1.0, 0.0))
+        return vol.irradiance(vol.probe_positions()[:1], up)[0, 0]
+
+    none, clear, opaque = e_up(), e_up(0.9), e_up(0.0)
+    assert none == pytest.approx(math.pi * SKY, rel=0.03)
+    assert clear == pytest.approx(none, rel=0.03)
+    assert opaque < 0.5 * math.pi * SKY
+
+
+def test_surfels_carry_the_phong_lobes_energy(device):
+    # k_s = 0.2 on a plane of albedo 0.5: what it sends up is (ρ + k_s)/π·E with SkyConfig.glossy
+    # (the reference's Phong lobe reflects its k_s too), ρ/π·E without, and a mirror's k_s not at all
+    down = np.array([[0.0, -1.0, 0.0]])
+    results = {}
+    for label, glossy, reflectivity in (("glossy", True, 0.0), ("diffuse", False, 0.0), ("mirror", True, 0.5)):
+        scene = _plane()
+        scene.materials[0].specular = 0.2
+        scene.materials[0].reflectivity = reflectivity
+        vol = _volume(device, scene, (0.0, 1.0, 0.0), glossy=glossy)
+        results[label] = vol.irradiance(vol.probe_positions()[:1], down)[0, 0]
+    b = _exitance(_plane(), 0.5)
+    assert results["glossy"] == pytest.approx(math.pi * b * 0.7 / 0.5, rel=0.03)
+    assert results["diffuse"] == pytest.approx(math.pi * b, rel=0.03)
+    assert results["mirror"] == pytest.approx(results["diffuse"], rel=1e-6)

@@ -269,3 +269,65 @@ def test_warp_lookup_matches_host_lookup(device, courtyard):
     p = rng.uniform(lo - 2.0, hi + 2.0, size=(500, 3))  # outside the grid too (clamped)
     n = fibonacci_sphere(500)
     assert np.allclose(vol.irradiance_wp(p, n), vol.irradiance(p, n), rtol=1e-4, atol=1e-3)
+
+
+@pytest.mark.parametrize("shininess", [1.0, 8.0, 50.0])
+def test_glossy_band_factors_filter_like_the_phong_lobe(shininess):
+    """The glossy term's SH weights (1, (m+1)/(m+2), m/(m+3) over the clamped cosine's Â_l): for an
+    environment of L2 SH radiance they give exactly the radiance filtered by the normalised Phong
+    lobe (m+1)/(2π)·cos^m around r, here against the lobe integrated by quadrature."""
+    from serenity.kernels.skyvolume import glossy_band_factors
+
+    rng = np.random.default_rng(4)
+    radiance_sh = rng.normal(size=9)
+    d = fibonacci_sphere(200_000)
+    env = S.sh_basis(d) @ radiance_sh
+    r = fibonacci_sphere(40)
+    lobe = (shininess + 1) / (2 * math.pi) * np.maximum(r @ d.T, 0.0) ** shininess
+    brute = lobe @ env * (4 * math.pi / len(d))
+    e_lm = np.array([S.A_HAT[b] for b in S.BAND]) * radiance_sh  # the volume's irradiance coefficients
+    formula = (S.sh_basis(r) * glossy_band_factors(np.full(len(r), shininess))) @ e_lm
+    assert np.allclose(formula, brute, atol=2e-3 * np.abs(env).max())
+
+
+@METHODS
+def test_glossy_under_a_constant_sky_is_the_sky(device, method):
+    # the white furnace: radiance L from every direction, so any lobe around any direction sees L
+    cfg = SkyConfig(rays_per_probe=512, resolution=(2, 2, 2), ground_albedo=1.0, auto_quads=False,
+                    normal_offset=0.0, method=method)
+    vol = SkyVolume(_constant_scene(), cfg, device=device)
+    vol.rebuild()
+    r = fibonacci_sphere(32)
+    p = np.repeat(vol.probe_positions()[:1], len(r), axis=0)
+    for m in (2.0, 16.0, 500.0):
+        g = vol.glossy(p, np.tile([0.0, 1.0, 0.0], (len(r), 1)), r, m)
+        assert np.allclose(g, [1.0, 2.0, 3.0], rtol=0.01)
+
+
+def test_content_fit_covers_the_buildings_and_the_open_ground_sees_the_open_sky(device, courtyard):
+    """``fit="content"``: the grid spans the courtyard's buildings (not its 120 m ground plane), and
+    beyond the grid the lookup fades to the open sky: far out on the ground the irradiance facing up
+    is the sky map's horizontal irradiance; just inside the grid it is the grid's own."""
+    cfg = SkyConfig(rays_per_probe=64, target_probes=4000, fit="content")
+    vol = SkyVolume(courtyard, cfg, device=device)
+    lo, hi = courtyard.content_bounds()
+    top = vol.grid_origin + (np.asarray(vol.resolution) - 1) * vol.cell_size
+    assert np.all(vol.grid_origin[[0, 2]] >= lo[[0, 2]] - vol.cell_size[0])
+    assert np.all(top[[0, 2]] <= hi[[0, 2]] + vol.cell_size[0])
+    assert hi[0] < 0.5 * courtyard.bounds[1, 0]  # the ground plane reaches twice as far
+    wide = SkyVolume(courtyard, SkyConfig(rays_per_probe=64, target_probes=4000), device=device)
+    assert vol.cell_size[0] < 0.7 * wide.cell_size[0]  # the same budget, finer cells
+    vol.rebuild()
+    up = np.array([[0.0, 1.0, 0.0]])
+    far = vol.irradiance(np.array([[55.0, 0.0, 55.0]]), up)[0]
+    sky = A.horizontal_irradiance(vol.sky_map())
+    assert np.allclose(far, sky, rtol=0.03)
+    assert np.allclose(vol.irradiance_wp(np.array([[55.0, 0.0, 55.0]]), up)[0], far, rtol=1e-4)
+    # at the grid's edge (the lookup point p + offset·n on the last probe) nothing of the open sky
+    edge = np.array([[top[0], 0.0, 0.0]]) - np.array([[0.0, vol.normal_offset_m, 0.0]])
+    coeffs = vol.coefficients()
+    inside_only = vol.irradiance(edge, up)
+    vol._open_host = np.zeros((9, 3))  # the open sky does not enter the lookup there
+    vol._open_version = vol.sky_version
+    assert np.allclose(vol.irradiance(edge, up), inside_only)
+    assert coeffs.shape[:3] == tuple(vol.resolution[::-1])

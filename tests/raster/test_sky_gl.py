@@ -1,4 +1,5 @@
-"""sky.glsl against the kernels: the sky map lookup and the sky volume irradiance, pixel by pixel."""
+"""sky.glsl against the kernels: the sky map lookup, the sky volume irradiance and its glossy term,
+pixel by pixel (inside the grid and beyond it, where both fade to the open sky)."""
 
 import numpy as np
 import pytest
@@ -28,6 +29,7 @@ def sky_gl(request, monkeypatch, gl_ctx, volume):
     g.upload_sky_map(volume.sky.sky_map)
     g.upload_volume(volume.textures(), volume.grid_origin, volume.cell_size, volume.resolution,
                     volume.normal_offset_m)
+    g.set_open_sky(volume.open_coefficients())
     return g
 
 
@@ -59,6 +61,23 @@ def test_sky_volume_irradiance_matches_kernels(gl_ctx, sky_gl, volume):
     scale = np.maximum(np.abs(ref).max(axis=1, keepdims=True), 1e-3)
     err = np.abs(gl - ref) / scale
     print(f"volume: mean {err.mean():.2e} worst {err.max():.2e} (relative to the pixel's largest channel)")
+    assert err.max() <= 1e-3
+
+
+@pytest.mark.parametrize("shininess", [0.0, 8.0, 200.0])
+def test_sky_volume_glossy_matches_kernels(gl_ctx, sky_gl, volume, shininess):
+    rng = np.random.default_rng(2)
+    lo, hi = build_scene("courtyard").bounds
+    p = rng.uniform(lo - 5, hi + 5, size=(3000, 3))
+    n = rng.normal(size=(3000, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    r = rng.normal(size=(3000, 3))
+    r /= np.linalg.norm(r, axis=1, keepdims=True)
+    ref = volume.glossy(p, n, r, shininess)
+    gl = sky_gl.evaluate_volume_glossy(p, n, r, shininess)
+    scale = np.maximum(np.abs(ref).max(axis=1, keepdims=True), 1e-3)
+    err = np.abs(gl - ref) / scale
+    print(f"glossy m={shininess}: mean {err.mean():.2e} worst {err.max():.2e}")
     assert err.max() <= 1e-3
 
 

@@ -1,6 +1,8 @@
 // Indirect lighting of a G-buffer, one technique per program, added onto the lit image with
 // additive blending (so each technique has its own cost, as in the paper's Table 1):
 //   TECHNIQUE == 1  sky lighting (paper §7):   L += albedo/pi * E_sky(p, n)       (sky volume, L2 SH)
+//                   SKY_GLOSSY (SkyConfig.glossy): + k_s * L_sky(p, r, m), the volume's radiance around the
+//                   mirror direction r filtered by the Phong lobe (sky.glsl, sky_irradiance_glossy)
 //   TECHNIQUE == 2  LPV (paper §8, Fig. 10):   L += albedo/pi * E_lpv(p, n) + k_s * L_glossy(p, r, m)
 // u_diffuse / u_glossy (LPVConfig.diffuse / .glossy) switch the two LPV terms: a switched-off term
 // is not looked up. Main view: multiplied by SSAO (indirect light only, paper §3). Ray-traced views (u_rt_view): the
@@ -14,6 +16,9 @@
 // (lowres.glsl), since only a few pixels need its march.
 #ifndef LPV_TERMS
 #define LPV_TERMS 3
+#endif
+#ifndef SKY_GLOSSY
+#define SKY_GLOSSY 0
 #endif
 #include "lowres.glsl"
 #include "fullscreen.glsl"
@@ -66,7 +71,13 @@ void main() {
     if (dot(n, v) < 0.0) n = -n;                          // lit from the viewer's side
     vec3 diffuse = vec3(0.0), glossy = vec3(0.0);
 #if TECHNIQUE == 1
+#if SKY_GLOSSY
+    vec3 sky_gloss;
+    diffuse = albedo / PI * sky_irradiance_glossy(p, n, reflect(-v, n), GBUF(g_material).x, sky_gloss);
+    glossy = nrm.w * sky_gloss;
+#else
     diffuse = albedo / PI * sky_irradiance(p, n);
+#endif
 #else
     float shininess = GBUF(g_material).x;
 #if LPV_TERMS & 1

@@ -13,9 +13,11 @@
 //   E  = max(0, sum_k c_k Y_k(n))                                       (W m^-2 per channel)
 // Y_k: real L2 SH of Ramamoorthi & Hanrahan 2001 in world x, y, z (serenity/kernels/sh.py).
 //
+//   beyond the grid's sides and top the coefficients fade to the open sky's (u_sky_open: the 9 RGB
+//   coefficients of an unoccluded probe) over SKY_OPEN_FADE_CELLS cells (the kernels' OPEN_FADE_CELLS)
 // Uniforms set by serenity/raster/sky.py SkyTexturesGL.bind(program, first_unit):
 //   sampler2D u_sky_map; sampler3D u_sky_volume[7]; vec3 u_sky_origin; vec3 u_sky_cell;
-//   vec3 u_sky_res; float u_sky_normal_offset;   (sky_irradiance(p, n) uses them)
+//   vec3 u_sky_res; float u_sky_normal_offset; vec3 u_sky_open[9]   (sky_irradiance(p, n) uses them)
 #ifndef SERENITY_SKY_GLSL
 #define SERENITY_SKY_GLSL
 #include "common.glsl"
@@ -52,9 +54,20 @@ void sky_sh9(vec3 d, out float y[9]) {
 #define SKY_TAP(t) texture(t, tc)
 #endif
 
-vec3 sky_volume_irradiance(sampler3D tex[7], vec3 p, vec3 n, vec3 origin, vec3 cell, vec3 res,
-                           float normal_offset) {
-    vec3 g = clamp((p + normal_offset * n - origin) / cell, vec3(0.0), res - 1.0);
+// The volume at surface point p with unit normal n: returns the irradiance E(p, n) (W m^-2) and
+// writes to `glossy` the radiance around direction r filtered by the normalised Phong lobe of
+// exponent m (W m^-2 sr^-1), both from the same 27 interpolated coefficients. The coefficients hold
+// E_lm = A_l L_lm (A_l = pi, 2 pi / 3, pi / 4: the clamped cosine, times SkyConfig.window's factors);
+// the Phong lobe's are 1, (m + 1) / (m + 2), m / (m + 3), so the glossy term weighs band l by
+// lobe_l / A_l (serenity/kernels/skyvolume.py, glossy_band_factors). Both clamped at 0.
+const float SKY_OPEN_FADE_CELLS = 2.0;
+
+vec3 sky_volume_lookup(sampler3D tex[7], vec3 open_sky[9], vec3 p, vec3 n, vec3 r, float m, vec3 origin, vec3 cell,
+                       vec3 res, float normal_offset, out vec3 glossy) {
+    vec3 gr = (p + normal_offset * n - origin) / cell;
+    vec3 beyond = max(-gr, gr - (res - 1.0));
+    float w_open = clamp(max(max(beyond.x, beyond.z), gr.y - (res.y - 1.0)) / SKY_OPEN_FADE_CELLS, 0.0, 1.0);
+    vec3 g = clamp(gr, vec3(0.0), res - 1.0);
     vec3 tc = (g + 0.5) / res;
 #ifdef EXACT_FILTER
     ivec3 gi0 = ivec3(floor(g));
@@ -67,11 +80,24 @@ vec3 sky_volume_irradiance(sampler3D tex[7], vec3 p, vec3 n, vec3 origin, vec3 c
     }
     vec3 last = SKY_TAP(tex[6]).rgb;
     f[24] = last.x; f[25] = last.y; f[26] = last.z; f[27] = 0.0;
-    float y[9];
+    float y[9], yr[9];
     sky_sh9(n, y);
-    vec3 e = vec3(0.0);
-    for (int k = 0; k < 9; ++k) e += y[k] * vec3(f[3 * k], f[3 * k + 1], f[3 * k + 2]);
+    sky_sh9(r, yr);
+    vec3 band = vec3(1.0 / PI, 1.5 * (m + 1.0) / ((m + 2.0) * PI), 4.0 * m / ((m + 3.0) * PI));
+    vec3 e = vec3(0.0), l = vec3(0.0);
+    for (int k = 0; k < 9; ++k) {
+        vec3 c = mix(vec3(f[3 * k], f[3 * k + 1], f[3 * k + 2]), open_sky[k], w_open);
+        e += y[k] * c;
+        l += yr[k] * (k == 0 ? band.x : (k < 4 ? band.y : band.z)) * c;
+    }
+    glossy = max(l, vec3(0.0));
     return max(e, vec3(0.0));
+}
+
+vec3 sky_volume_irradiance(sampler3D tex[7], vec3 open_sky[9], vec3 p, vec3 n, vec3 origin, vec3 cell, vec3 res,
+                           float normal_offset) {
+    vec3 unused;
+    return sky_volume_lookup(tex, open_sky, p, n, n, 0.0, origin, cell, res, normal_offset, unused);
 }
 
 uniform sampler2D u_sky_map;
@@ -80,10 +106,18 @@ uniform vec3 u_sky_origin;
 uniform vec3 u_sky_cell;
 uniform vec3 u_sky_res;
 uniform float u_sky_normal_offset;
+uniform vec3 u_sky_open[9];
 
 // The volume's irradiance at surface point p with unit normal n, using the uniforms above.
 vec3 sky_irradiance(vec3 p, vec3 n) {
-    return sky_volume_irradiance(u_sky_volume, p, n, u_sky_origin, u_sky_cell, u_sky_res, u_sky_normal_offset);
+    return sky_volume_irradiance(u_sky_volume, u_sky_open, p, n, u_sky_origin, u_sky_cell, u_sky_res,
+                                 u_sky_normal_offset);
+}
+
+// The same, and the glossy radiance around r for Phong exponent m (sky_volume_lookup).
+vec3 sky_irradiance_glossy(vec3 p, vec3 n, vec3 r, float m, out vec3 glossy) {
+    return sky_volume_lookup(u_sky_volume, u_sky_open, p, n, r, m, u_sky_origin, u_sky_cell, u_sky_res,
+                             u_sky_normal_offset, glossy);
 }
 
 #endif
