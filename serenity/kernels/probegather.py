@@ -263,6 +263,9 @@ class ProbeGather:
         self._miss = wp.zeros((DIRECTION_SETS, self.rays), dtype=wp.vec3, device=dev)
         self._radiance = wp.zeros(self.surfel_count, dtype=wp.vec3, device=dev)
         self._visible = wp.zeros(self.surfel_count, dtype=float, device=dev)
+        self._visible_host = np.zeros(self.surfel_count, np.float32)
+        self._vis_sun = np.array([0.0, 1.0, 0.0])
+        self._vis_parts, self._vis_left, self._vis_next = 1, 0, 0
 
     def _trace(self, origins: np.ndarray, sets: np.ndarray, progress: bool = False) -> dict:
         """Rays of the given probes (their direction sets): hit mask (front faces), back-face mask,
@@ -339,18 +342,37 @@ class ProbeGather:
         self._sn = wp.array(sn.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sa = wp.array(sa.astype(np.float32), dtype=wp.vec3, device=dev)
 
-    def update_visibility(self, sun_direction) -> None:
-        """V_s: one shadow ray per surfel towards the sun (from just off the surfel)."""
+    def update_visibility(self, sun_direction, parts: int = 1) -> None:
+        """V_s towards a new sun: one shadow ray per surfel (from just off the surfel), all of them
+        now (``parts`` = 1) or in ``parts`` slices, the first now and one per :meth:`refresh_visibility`
+        (the slices continue the cycle where it stood: under a sun that moves every frame each surfel
+        is re-traced once every ``parts`` frames, against the newest sun)."""
         sun = np.asarray(sun_direction, np.float64)
-        sun = sun / max(np.linalg.norm(sun), 1e-12)
-        if self.surfel_count == 0:
-            return
+        self._vis_sun = sun / max(np.linalg.norm(sun), 1e-12)
+        self._vis_parts = max(1, int(parts))
+        self._vis_left = self._vis_parts
+        self.refresh_visibility()
+
+    def refresh_visibility(self) -> bool:
+        """Re-trace the next slice of surfels against the sun of the last :meth:`update_visibility`,
+        if any are still to do; returns whether it traced."""
+        m = self.surfel_count
+        if self._vis_left <= 0 or m == 0:
+            self._vis_left = 0
+            return False
+        n = -(-m // self._vis_parts)
+        a = self._vis_next if self._vis_parts > 1 else 0
+        b = min(m, a + n)
+        sun = self._vis_sun
         eps = self.tracer.ray_epsilon
-        o = (self.surfel_positions + self.surfel_normals * (4 * eps)).astype(np.float32)
+        o = (self.surfel_positions[a:b] + self.surfel_normals[a:b] * (4 * eps)).astype(np.float32)
         d = np.broadcast_to(sun.astype(np.float32), o.shape)
         occ = self.tracer.tree.occluded(o, d, tmin=eps)
-        lit = (~occ).astype(np.float32) * (self.surfel_normals @ sun > 0)
-        self._visible.assign(lit)
+        self._visible_host[a:b] = (~occ).astype(np.float32) * (self.surfel_normals[a:b] @ sun > 0)
+        self._visible.assign(self._visible_host)
+        self._vis_next = b % m
+        self._vis_left -= 1
+        return True
 
     def set_sky(self, sky_map: np.ndarray, ground: np.ndarray) -> None:
         """The miss radiance of every direction: the sky map above the horizon, the ground below."""

@@ -478,13 +478,20 @@ class SkyVolume:
         cfg = self.config
         y = self.resolution[1]
         moved = self._gather_sun is None or angle_between_deg(self._gather_sun, sun) > cfg.rebuild_angle_deg
+        whole = full or np.any(self.layer_versions < 0) or cfg.transfer_layers <= 0
         if self._gather_version != self.sky_version or moved:  # a new sky, or the sun moved (constant skies)
             g.set_sky(self.sky_map(), self.ground_radiance)
-            g.update_visibility(sun)
+            # the surfels' shadow rays: all now for a whole pass, else a slice per update, so that each
+            # pass of y updates (one y-layer each) re-traces every surfel once against the newest sun
+            g.update_visibility(sun, parts=1 if whole else y)
             self._gather_version = self.sky_version
             self._gather_sun = np.array(sun, np.float64)
             self.gather_passes_left = cfg.gather_bounces
+        elif not whole:
+            g.refresh_visibility()  # the slices left after the last move of the sun
         if full or np.any(self.layer_versions < 0):
+            while g.refresh_visibility():  # a whole pass needs every surfel's visibility current
+                pass
             while self.gather_passes_left > 0:
                 self._gather_pass_start(sun)
                 g.gather(self._coeffs, self._scale, self.resolution, 0, y)

@@ -177,3 +177,28 @@ def test_surfels_carry_the_phong_lobes_energy(device):
     assert results["glossy"] == pytest.approx(math.pi * b * 0.7 / 0.5, rel=0.03)
     assert results["diffuse"] == pytest.approx(math.pi * b, rel=0.03)
     assert results["mirror"] == pytest.approx(results["diffuse"], rel=1e-6)
+
+
+def test_sun_moving_every_update_then_stopping_converges_to_the_rebuild(device):
+    # one y-layer per update: each move of the sun re-traces one slice of the surfels' shadow rays
+    # (every surfel once per pass of y updates); once the sun stops the passes run out and the
+    # volume is what a rebuild at the last sun gives (the first pass's stale slices decay away)
+    scene = _plane()
+    cfg = SkyConfig(method="gather", resolution=(3, 4, 3), gather_rays=64, transfer_layers=1)
+    vol = SkyVolume(scene, cfg, device=device)
+    vol.grid_origin, vol.cell_size = np.array([-4.0, 0.5, -4.0]), np.full(3, 2.0)
+    vol.update()
+    g = vol._gather
+    for k in range(7):  # the sun swings 7 times, one update each
+        a = math.radians(60.0 - 4.0 * k)
+        vol.update(sun_direction=np.array([0.0, math.sin(a), -math.cos(a)]))
+        assert g._vis_parts == 4 and g._vis_left == 3  # one slice traced now, three to go
+    steps = 0
+    while vol.update(sun_direction=np.array([0.0, math.sin(a), -math.cos(a)])):
+        steps += 1
+    assert (cfg.gather_bounces - 1) * 4 <= steps <= cfg.gather_bounces * 4 and g._vis_left == 0
+    fresh = SkyVolume(scene, cfg, device=device)
+    fresh.grid_origin, fresh.cell_size = vol.grid_origin, vol.cell_size
+    fresh.rebuild(sun_direction=np.array([0.0, math.sin(a), -math.cos(a)]))
+    c, f = vol.coefficients(), fresh.coefficients()
+    assert np.abs(c - f).max() <= 0.01 * np.abs(f).max()
