@@ -42,13 +42,17 @@ surfel update (a volume lookup per surfel) and one gather of R loads per probe.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 import warp as wp
 from tqdm import tqdm
 
 from serenity.kernels.atmosphere_ref import sample_sky_map_np
+from serenity.kernels.kdtree_build import cache_dir
 from serenity.kernels.launch import launch
 from serenity.kernels.sh import eval_sh9, sh_basis, vec9
 
@@ -67,6 +71,10 @@ RELOCATIONS = ((0.0, 0.45, 0.0), (0.45, 0.0, 0.0), (-0.45, 0.0, 0.0), (0.0, 0.0,
 _INV_PI = wp.constant(1.0 / math.pi)
 
 
+#: bump when the traced data or its cached layout changes
+FORMAT_VERSION = 1
+#: traces of at least this many rays are cached on disk (``cache_dir()/probegather-<key>.npz``)
+CACHE_MIN_RAYS = 1_000_000
 #: rays the probes' trace hands the tracer per call (its G-buffer for those rays is the memory peak)
 TRACE_CHUNK_RAYS = 1 << 20
 #: a trace of at least this many rays shows a progress bar
@@ -195,6 +203,20 @@ def gather_probes(
         coeffs[probe, 3 * k + 2] = acc_b[k] * sk
 
 
+def scene_key(scene) -> str:
+    """Digest of what a probe's traced rays depend on in ``scene``: its merged geometry and its
+    materials (albedo, textures, Phong and glass parameters)."""
+    h = hashlib.blake2b(digest_size=20)
+    for a in scene.merged():
+        h.update(np.ascontiguousarray(a).tobytes())
+    for m in scene.materials:
+        h.update(f"{m.name}|{m.specular}|{m.shininess}|{m.reflectivity}|{m.transparency}|{m.ior}".encode())
+        h.update(np.ascontiguousarray(m.albedo, np.float64).tobytes())
+        if m.albedo_texture is not None:
+            h.update(np.ascontiguousarray(m.albedo_texture.mips[0]).tobytes())
+    return h.hexdigest()
+
+
 def direction_sets(rays: int, sets: int = DIRECTION_SETS, seed: int = 0) -> np.ndarray:
     """(sets, rays, 3) float64 unit directions: a spherical Fibonacci set of ``rays`` points, turned
     by one random rotation per set."""
@@ -220,44 +242,28 @@ class ProbeGather:
     (one more bounce) then ``gather`` of its y-layers into the volume's coefficients."""
 
     def __init__(self, tracer, positions: np.ndarray, cell: np.ndarray, rays: int, surfel_size: float,
-                 device, glossy_energy=None, transmissions: int = 0):
+                 device, glossy_energy=None, transmissions: int = 0, cache_key: str | None = None):
         """``glossy_energy``: per material of the tracer's scene, the albedo its surfels gain from
         its Phong lobe (module docstring), None: none; ``transmissions``: transparent interfaces a
-        ray is bent through before the hit it lights the probe with."""
+        ray is bent through before the hit it lights the probe with; ``cache_key``: a digest of the
+        tracer's scene (geometry and materials), with which a big trace is cached on disk (like the
+        kd-tree: ``$SERENITY_CACHE`` or ``~/.cache/serenity``) and read back by the next renderer of
+        the same scene and grid; None: no cache."""
         self.device = device
         self.rays = int(rays)
         self.tracer = tracer
         self.glossy_energy = None if glossy_energy is None else np.asarray(glossy_energy, np.float32)
         self.transmissions = int(transmissions)
         self.dirs = direction_sets(self.rays)
-        n_probes = len(positions)
-        s = np.arange(n_probes) % DIRECTION_SETS
-        cell = np.asarray(cell, np.float64)
-        origins = np.asarray(positions, np.float64).copy()
-        hits = self._trace(origins, s, progress=True)
-        bad = hits["backface_fraction"] > BACKFACE_LIMIT
-        self.relocated = 0
-        for off in RELOCATIONS:  # probes inside geometry: try a free spot nearby
-            if not bad.any():
-                break
-            idx = np.nonzero(bad)[0]
-            cand = origins[idx] + np.asarray(off) * cell
-            # judged on every RELOCATION_STRIDE-th ray of the set (a spread subset of the spherical
-            # Fibonacci points), then traced in full only where the spot is free
-            ok = self._backface_fraction(cand, s[idx]) <= BACKFACE_LIMIT
-            if not ok.any():
-                continue
-            idx, cand = idx[ok], cand[ok]
-            h2 = self._trace(cand, s[idx])
-            keep = h2["backface_fraction"] <= BACKFACE_LIMIT
-            take = idx[keep]
-            origins[take] = cand[keep]
-            for k in ("hit", "back", "position", "normal", "albedo"):
-                hits[k].reshape(n_probes, self.rays, -1)[take] = h2[k].reshape(len(idx), self.rays, -1)[keep]
-            self.relocated += int(keep.sum())
-            bad[take] = False
-        self.inside = int(bad.sum())  # no free spot found: kept, their back-face hits count as misses
-        self._make_surfels(hits, surfel_size)
+        self.from_cache = False
+        path = None
+        if cache_key is not None and len(positions) * self.rays >= CACHE_MIN_RAYS:
+            path = cache_dir() / f"probegather-{self._key(cache_key, positions, cell, surfel_size)}.npz"
+            self.from_cache = self._load(path, len(positions))
+        if not self.from_cache:
+            self._build(positions, cell, surfel_size)
+            if path is not None:
+                self._save(path)
         dev = device
         self._basis = wp.array(np.stack([sh_basis(d) for d in self.dirs]).astype(np.float32), dtype=vec9, device=dev)
         self._miss = wp.zeros((DIRECTION_SETS, self.rays), dtype=wp.vec3, device=dev)
@@ -301,6 +307,80 @@ class ProbeGather:
         out["backface_fraction"] = out["back"].reshape(n, r).mean(axis=1)
         return out
 
+    def _build(self, positions, cell, surfel_size) -> None:
+        """Trace the probes' rays, move probes out of geometry, merge the hits into surfels."""
+        n_probes = len(positions)
+        s = np.arange(n_probes) % DIRECTION_SETS
+        cell = np.asarray(cell, np.float64)
+        origins = np.asarray(positions, np.float64).copy()
+        hits = self._trace(origins, s, progress=True)
+        bad = hits["backface_fraction"] > BACKFACE_LIMIT
+        self.relocated = 0
+        for off in RELOCATIONS:  # probes inside geometry: try a free spot nearby
+            if not bad.any():
+                break
+            idx = np.nonzero(bad)[0]
+            cand = origins[idx] + np.asarray(off) * cell
+            # judged on every RELOCATION_STRIDE-th ray of the set (a spread subset of the spherical
+            # Fibonacci points), then traced in full only where the spot is free
+            ok = self._backface_fraction(cand, s[idx]) <= BACKFACE_LIMIT
+            if not ok.any():
+                continue
+            idx, cand = idx[ok], cand[ok]
+            h2 = self._trace(cand, s[idx])
+            keep = h2["backface_fraction"] <= BACKFACE_LIMIT
+            take = idx[keep]
+            origins[take] = cand[keep]
+            for k in ("hit", "back", "position", "normal", "albedo"):
+                hits[k].reshape(n_probes, self.rays, -1)[take] = h2[k].reshape(len(idx), self.rays, -1)[keep]
+            self.relocated += int(keep.sum())
+            bad[take] = False
+        self.inside = int(bad.sum())  # no free spot found: kept, their back-face hits count as misses
+        self._make_surfels(hits, surfel_size)
+
+    # -- the disk cache
+
+    _CACHED = ("surfel", "surfel_positions", "surfel_normals", "surfel_albedo")
+
+    def _key(self, scene_key: str, positions, cell, surfel_size) -> str:
+        h = hashlib.blake2b(digest_size=20)
+        h.update(f"probegather-v{FORMAT_VERSION}|{scene_key}|{self.rays}|{self.transmissions}|{surfel_size!r}|"
+                 f"{DIRECTION_SETS}|{BACKFACE_LIMIT}|{RELOCATIONS}|{RELOCATION_STRIDE}".encode())
+        for a in (np.asarray(positions, np.float64), np.asarray(cell, np.float64),
+                  np.zeros(0) if self.glossy_energy is None else self.glossy_energy):
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()
+
+    def _save(self, path: Path) -> None:
+        """Write the traced data (an ``.npz`` of plain arrays); an unwritable cache is ignored."""
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+            np.savez(tmp, surfel=self._surfel.numpy(), surfel_positions=self.surfel_positions,
+                     surfel_normals=self.surfel_normals, surfel_albedo=self.surfel_albedo,
+                     meta=np.array([FORMAT_VERSION, self.relocated, self.inside], np.int64))
+            os.replace(tmp, path)
+        except OSError:
+            pass  # an unwritable cache only costs a trace next time
+
+    def _load(self, path: Path, n_probes: int) -> bool:
+        """Read the traced data cached at ``path``; False when absent, unreadable or stale."""
+        if not path.is_file():
+            return False
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                a = {k: np.array(z[k]) for k in self._CACHED}
+                meta = z["meta"].tolist()
+        except (OSError, ValueError, KeyError, EOFError):
+            return False
+        m = len(a["surfel_positions"])
+        if (len(meta) != 3 or meta[0] != FORMAT_VERSION or a["surfel"].shape != (n_probes, self.rays)
+                or a["surfel"].max(initial=-1) >= m):
+            return False
+        self.relocated, self.inside = int(meta[1]), int(meta[2])
+        self._set_surfels(a["surfel"], a["surfel_positions"], a["surfel_normals"], a["surfel_albedo"])
+        return True
+
     def _backface_fraction(self, origins: np.ndarray, sets: np.ndarray) -> np.ndarray:
         """(N,) fraction of back-face hits over every ``RELOCATION_STRIDE``-th ray of each probe's set."""
         sub = self.dirs[:, ::RELOCATION_STRIDE]
@@ -334,10 +414,15 @@ class ProbeGather:
         surfel = np.full(len(hit), -1, np.int32)
         surfel[idx] = inv.astype(np.int32)
         surfel[hits["back"]] = -2  # a back face: no light (a probe kept inside geometry)
-        self.surfel_count = m
+        self._set_surfels(surfel.reshape(-1, self.rays), sp, sn, sa)
+
+    def _set_surfels(self, surfel, sp, sn, sa) -> None:
+        """The surfel each ray hit ((P, R) int32: ≥ 0, −1 a miss, −2 a back face) and the surfels'
+        mean positions, normals and albedo ((S, 3) each)."""
+        self.surfel_count = len(sp)
         self.surfel_positions, self.surfel_normals, self.surfel_albedo = sp, sn, sa
         dev = self.device
-        self._surfel = wp.array(surfel.reshape(-1, self.rays), dtype=wp.int32, device=dev)
+        self._surfel = wp.array(np.ascontiguousarray(surfel, np.int32), dtype=wp.int32, device=dev)
         self._sp = wp.array(sp.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sn = wp.array(sn.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sa = wp.array(sa.astype(np.float32), dtype=wp.vec3, device=dev)

@@ -67,7 +67,7 @@ from serenity.kernels.atmosphere_ref import angle_between_deg, sample_sky_map_np
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
-from serenity.kernels.probegather import OPEN_FADE_CELLS, ProbeGather, direction_sets, volume_irradiance
+from serenity.kernels.probegather import OPEN_FADE_CELLS, ProbeGather, direction_sets, scene_key, volume_irradiance
 from serenity.kernels.quadfit import fit_occlusion_quads
 from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.sampling import cp_rotation, hammersley_np, hash_u32, sample_probe_direction
@@ -462,7 +462,7 @@ class SkyVolume:
                        for m in self.scene.materials] if cfg.glossy else None)
             self._gather = ProbeGather(self.tracer, self.probe_positions(), self.cell_size,
                                        cfg.gather_rays, size, self.device, glossy_energy=glossy,
-                                       transmissions=cfg.gather_transmissions)
+                                       transmissions=cfg.gather_transmissions, cache_key=scene_key(self.scene))
         return self._gather
 
     def _gather_pass_start(self, sun) -> None:

@@ -202,3 +202,32 @@ def test_sun_moving_every_update_then_stopping_converges_to_the_rebuild(device):
     fresh.rebuild(sun_direction=np.array([0.0, math.sin(a), -math.cos(a)]))
     c, f = vol.coefficients(), fresh.coefficients()
     assert np.abs(c - f).max() <= 0.01 * np.abs(f).max()
+
+
+def test_trace_cached_on_disk_reads_back_the_same_volume(device, tmp_path, monkeypatch):
+    import serenity.kernels.probegather as PG
+
+    monkeypatch.setenv("SERENITY_CACHE", str(tmp_path))
+    monkeypatch.setattr(PG, "CACHE_MIN_RAYS", 1)
+    cfg = SkyConfig(method="gather", resolution=(3, 2, 3), gather_rays=64)
+
+    def build():
+        vol = SkyVolume(_plane(), cfg, device=device)
+        vol.rebuild()
+        return vol
+
+    first = build()
+    files = list(tmp_path.glob("probegather-*.npz"))
+    assert not first._gather.from_cache and len(files) == 1
+    second = build()
+    assert second._gather.from_cache
+    assert np.array_equal(first.coefficients(), second.coefficients())
+    files[0].write_bytes(b"not an npz")  # a corrupt cache file: traced again, and rewritten
+    third = build()
+    assert not third._gather.from_cache
+    assert np.array_equal(first.coefficients(), third.coefficients())
+    scene = _plane()
+    scene.materials[0].albedo = np.full(3, 0.25)  # another scene: another key
+    other = SkyVolume(scene, cfg, device=device)
+    other.rebuild()
+    assert not other._gather.from_cache and len(list(tmp_path.glob("probegather-*.npz"))) == 2
