@@ -39,6 +39,7 @@ def cases(quick: bool):
         ("lpv_thin_wall", lambda: S.lpv_thin_wall_case()),
         ("lpv_self_illumination", lambda: S.lpv_self_illumination_case()),
         ("lpv_near_field", lambda: S.lpv_near_field_case(h=1.0)),
+        ("gather_thin_wall", lambda: S.gather_thin_wall_case()),
         ("sky_ringing", lambda: S.sky_ringing_case(3.0, rays=1024 if quick else 4096)),
         ("sky_terrain", lambda: S.terrain_sky_case(24 if quick else 64, 128 if quick else 256)),
         ("shadow_acne", lambda: S.shadow_acne_case(2.0, (160, 90))),

@@ -225,6 +225,11 @@ class SkyConfig:
     """"gather": passes over the volume after a change of the sun (each adds one bounce). 12: the
     courtyard's pale walls and the Cornell box pass light on for many bounces; at 4 the courtyard's
     FLIP read 0.0925, at 8 0.0852, at 12, 16 and 24 0.0849 (320×180, round 11's low)."""
+    gather_visibility: bool = True
+    """"gather": weigh each of the 8 probes around a point by whether it sees the point (DDGI's test,
+    Majercik et al. 2019: a smooth back-face weight and a Chebyshev bound from each probe's octahedral
+    map of its rays' hit distances), so light does not leak through a wall thinner than a cell;
+    False = plain trilinear (the lookup of the other methods)."""
     gather_transmissions: int = 4
     """"gather": transparent interfaces (glass) a probe's ray is bent through before the hit that lights
     it (the tracer's ``transmissions``); 0 = glass stops the rays like an opaque diffuse wall."""
@@ -621,14 +626,15 @@ PRESETS: dict[str, dict] = {
     # each probe traces 512 rays (128 left the Cornell box's probes blotchy: its light comes from a
     # small sunlit patch), 12 passes converge the bounces, and no SSAO: the probes, traced against the
     # real geometry, already hold the occlusion the SSAO multiplied in a second time (FLIP better in
-    # both scenes without it; benchmarks/results/pass_ab_low_round12_*.json). The other presets keep
-    # the paper's LPV.
+    # both scenes without it; benchmarks/results/pass_ab_low_round12_*.json); each probe weighed by
+    # whether it sees the point (``gather_visibility``), so the lookup sits a quarter cell off the
+    # surface instead of half. The other presets keep the paper's LPV.
     "low": {"indirect_scale": 4,
             "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4, "filter_samples": 8,
                        "stagger": True},
             "ssao": {"enabled": False},
             "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_layers": 1, "method": "gather",
-                    "fit": "content", "target_probes": 24_000, "gather_rays": 512},
+                    "fit": "content", "target_probes": 24_000, "gather_rays": 512, "normal_offset": 0.25},
             "lpv": {"enabled": False},
             "rsm_size": 128, "sky_vpl_stride": 8},
 }

@@ -264,7 +264,8 @@ class Renderer:
         if cfg.sky.enabled:
             self.sky_volume = SkyVolume(self.scene, cfg.sky, self.device)
             self.sky_gl = SkyTexturesGL(ctx)
-            sky_defines = {"SKY_GLOSSY": int(cfg.sky.glossy)}
+            sky_defines = {"SKY_GLOSSY": int(cfg.sky.glossy),
+                           "SKY_VISIBILITY": int(cfg.sky.method == "gather" and cfg.sky.gather_visibility)}
             self.sky_pass = IndirectPass(ctx, "sky", defines=sky_defines)
             self.sky_pass_lo = IndirectPass(ctx, "sky", lowres=True, defines=sky_defines) if self.lowres else None
             self._sky_built = False
@@ -525,6 +526,9 @@ class Renderer:
         with self._stage("sky volume build" if first else "sky volume update", gl=False):
             changed = sv.update(layers=sv.resolution[1] if first else self.config.sky_layers_per_frame)
             self._sky_built = True
+        if first and sv.visibility_textures() is not None:
+            with self._stage("sky upload"):
+                self.sky_gl.upload_visibility(*sv.visibility_textures())
         if changed:
             self._sky_volume_version += 1
             with self._stage("sky upload"):

@@ -73,6 +73,61 @@ def _timed(fn, *args, **kw):
 
 
 # ----------------------------------------------------------------------------------------------
+# the sky volume's probes lit by gathering (SkyConfig.method = "gather")
+# ----------------------------------------------------------------------------------------------
+
+
+def gather_thin_wall(frac: float, visibility: bool, device=None, rays: int = 256) -> tuple[float, float]:
+    """A 5 cm wall in a grid of 1 m cells, its centre at x = ``frac`` of a cell, lit on its −x face by
+    the sun 35° high, a lit floor in front of that face only, a black sky: returns (E on the dark
+    face, E on the lit face) of the gathered volume at mid-height, each facing out of the wall
+    (W/m²). Exact dark face: 0 — nothing lies on its side. ``visibility``: ``SkyConfig.gather_visibility``
+    (else plain trilinear; both with the default lookup offset of half a cell along the normal)."""
+    b = _Builder()
+    b.material("wall", albedo=(0.8, 0.8, 0.8))
+    b.material("floor", albedo=(0.5, 0.5, 0.5))
+    x0 = float(frac)
+    b.box("wall", (x0 - 0.025, 0.0, -3.0), (x0 + 0.025, 4.0, 3.0))
+    b.rect("floor", (x0 - 4.025, 0.0, 0.0), (4.0, 0.0, 0.0), (0.0, 0.0, -3.0))
+    b.material("black", albedo=(0.0, 0.0, 0.0))
+    b.box("black", (x0 + 3.9, 0.0, -0.05), (x0 + 4.0, 0.1, 0.05))  # reflects nothing: the grid spans the dark side
+    el = math.radians(35.0)
+    sun = Sun(np.array([-math.cos(el), math.sin(el), 0.0]), irradiance=(1000.0,) * 3)
+    camera = Camera(position=(x0 - 6.0, 2.0, 0.0), target=(x0, 2.0, 0.0))
+    scene = b.scene("gather-thin-wall", camera, sun, Sky(radiance=(0.0, 0.0, 0.0), model="constant"), [], None)
+    cfg = SkyConfig(method="gather", cell_size=1.0, gather_rays=rays, gather_visibility=visibility,
+                    ground_albedo=0.0)
+    vol = SkyVolume(scene, cfg, device=device)
+    vol.grid_origin = np.array([-9.0, 0.5, -3.0])  # probes at integer x: the wall sits ``frac`` into a cell
+    vol.rebuild()
+    q = np.array([[x0 + 0.025, 2.0, 0.3], [x0 - 0.025, 2.0, 0.3]])
+    e = vol.irradiance(q, np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]]))[:, 0]
+    return float(e[0]), float(e[1])
+
+
+def gather_thin_wall_case(fracs=(0.1, 0.3, 0.5, 0.7, 0.9), device=None) -> Case:
+    """Light leaking through a wall thinner than a cell into the gathered probes' lookup, for wall
+    positions across a cell: worst E_dark/E_lit (exact 0) with plain trilinear interpolation (the
+    probes on the lit side, which see the lit face, weigh in on the dark side) vs the probes weighed by
+    their visibility (``SkyConfig.gather_visibility``). Image: E_dark/E_lit per wall position, without
+    (top) and with (bottom)."""
+    without, with_, t0, t1 = [], [], 0.0, 0.0
+    for f in fracs:
+        (d0, l0), ms0 = _timed(gather_thin_wall, f, False, device)
+        (d1, l1), ms1 = _timed(gather_thin_wall, f, True, device)
+        without.append(d0 / l0)
+        with_.append(d1 / l1)
+        t0 += ms0
+        t1 += ms1
+    img = np.array([without, with_])
+    return Case("gathered probes, thin wall (5 cm, 1 m cells)", "sky volume (gather)",
+                "max E_dark/E_lit over wall positions in a cell", "probe visibility (depth moments)",
+                max(without), max(with_), t0 / len(fracs), t1 / len(fracs), exact=0.0,
+                images={"exact": np.zeros_like(img), "without": img[:1], "with": img[1:], "error": img},
+                extra={"fracs": list(fracs), "without": without, "with": with_})
+
+
+# ----------------------------------------------------------------------------------------------
 # light propagation volumes
 # ----------------------------------------------------------------------------------------------
 

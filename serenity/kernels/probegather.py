@@ -72,7 +72,7 @@ _INV_PI = wp.constant(1.0 / math.pi)
 
 
 #: bump when the traced data or its cached layout changes
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 #: traces of at least this many rays are cached on disk (``cache_dir()/probegather-<key>.npz``)
 CACHE_MIN_RAYS = 1_000_000
 #: rays the probes' trace hands the tracer per call (its G-buffer for those rays is the memory peak)
@@ -80,18 +80,89 @@ TRACE_CHUNK_RAYS = 1 << 20
 #: a trace of at least this many rays shows a progress bar
 PROGRESS_RAYS = 4_000_000
 
+#: the probes' depth moments (visibility): an octahedral map of VIS_OCT² texels per probe, stored with a
+#: one-texel border as a VIS_TILE² tile; each texel averages the rays' hit distances d and d² weighted
+#: by max(0, cos)^VIS_POWER around its direction; a miss (or a hit farther) counts as VIS_MAX_CELLS cells
+VIS_OCT = 8
+VIS_TILE = VIS_OCT + 2
+VIS_POWER = 16.0
+VIS_MAX_CELLS = 2.0
+#: a probe's weight below this is crushed (w³/VIS_CRUSH²), as DDGI does, so that a probe the point
+#: cannot see adds next to nothing
+VIS_CRUSH = 0.2
+#: the visibility test looks from the probe at p + VIS_BIAS_CELLS·(smallest cell edge)·n, however small
+#: the lookup's own normal offset: a point on the surface itself sits at the probe's mean depth there
+VIS_BIAS_CELLS = 0.5
+
 #: beyond the grid's sides and top, the lookup fades to the open sky's coefficients over this many cells
 OPEN_FADE_CELLS = 2.0
 
 
 @wp.func
-def volume_irradiance(coeffs: wp.array2d(dtype=float), open_sky: wp.array(dtype=float), origin: wp.vec3,
+def oct_encode(d: wp.vec3) -> wp.vec2:
+    """Octahedral map of a unit direction (y up) onto [-1, 1]²: (x, z) / (|x| + |y| + |z|), the
+    lower half folded over the diagonals."""
+    s = wp.abs(d[0]) + wp.abs(d[1]) + wp.abs(d[2])
+    x = d[0] / s
+    z = d[2] / s
+    if d[1] < 0.0:
+        fx = (1.0 - wp.abs(z)) * wp.where(x >= 0.0, 1.0, -1.0)
+        fz = (1.0 - wp.abs(x)) * wp.where(z >= 0.0, 1.0, -1.0)
+        x = fx
+        z = fz
+    return wp.vec2(x, z)
+
+
+@wp.func
+def probe_visibility(vis: wp.array3d(dtype=wp.vec2), offsets: wp.array(dtype=wp.vec3), probe: int, xi: int,
+                     yi: int, zi: int, grid_pos: wp.vec3, p: wp.vec3, x: wp.vec3, n: wp.vec3) -> float:
+    """DDGI's weight of probe ``probe`` (grid cell xi, yi, zi at ``grid_pos``, moved by its relocation
+    offset) for surface point p with normal n, looked up at x: the smooth back-face weight
+    ((n·ω_p + 1)/2)² + 0.2 towards the probe, times the Chebyshev bound that the probe sees x (its
+    depth moments bilinear at the direction probe → x), crushed below VIS_CRUSH (module docstring)."""
+    q = grid_pos + offsets[probe]
+    to_probe = wp.normalize(q - p)
+    b = (wp.dot(to_probe, n) + 1.0) * 0.5
+    w = b * b + 0.2
+    d = x - q
+    dist = wp.length(d)
+    uv = oct_encode(d / wp.max(dist, 1.0e-9))
+    tu = float(xi * VIS_TILE + 1) + (uv[0] * 0.5 + 0.5) * float(VIS_OCT) - 0.5
+    tv = float(zi * VIS_TILE + 1) + (uv[1] * 0.5 + 0.5) * float(VIS_OCT) - 0.5
+    u0 = int(wp.floor(tu))
+    v0 = int(wp.floor(tv))
+    fu = tu - float(u0)
+    fv = tv - float(v0)
+    lo_u = xi * VIS_TILE
+    lo_v = zi * VIS_TILE
+    ua = wp.clamp(u0, lo_u, lo_u + VIS_TILE - 1)
+    ub = wp.clamp(u0 + 1, lo_u, lo_u + VIS_TILE - 1)
+    va = wp.clamp(v0, lo_v, lo_v + VIS_TILE - 1)
+    vb = wp.clamp(v0 + 1, lo_v, lo_v + VIS_TILE - 1)
+    m = (vis[va, yi, ua] * (1.0 - fu) + vis[va, yi, ub] * fu) * (1.0 - fv) \
+        + (vis[vb, yi, ua] * (1.0 - fu) + vis[vb, yi, ub] * fu) * fv
+    if dist > m[0]:
+        var = wp.abs(m[1] - m[0] * m[0])
+        t = dist - m[0]
+        c = var / (var + t * t + 1.0e-12)
+        w = w * wp.max(c * c * c, 0.0)
+    w = wp.max(w, 1.0e-6)
+    if w < VIS_CRUSH:
+        w = w * w * w / (VIS_CRUSH * VIS_CRUSH)
+    return w
+
+
+@wp.func
+def volume_irradiance(coeffs: wp.array2d(dtype=float), open_sky: wp.array(dtype=float),
+                      vis: wp.array3d(dtype=wp.vec2), offsets: wp.array(dtype=wp.vec3), origin: wp.vec3,
                       cell: wp.vec3, res_x: int, res_y: int, res_z: int, normal_offset: float, p: wp.vec3,
                       n: wp.vec3) -> wp.vec3:
     """Irradiance of the volume at a surface point (sky.glsl's arithmetic): trilinear coefficients
-    at p + offset·n, faded to ``open_sky`` (27, the open sky's) beyond the grid's sides and top,
-    evaluated at n, clamped at 0."""
-    gr = wp.cw_div(p + n * normal_offset - origin, cell)
+    at p + offset·n — each probe's weight also times its visibility (:func:`probe_visibility`) when
+    ``vis`` holds the probes' depth moments (an empty array: plain trilinear) — faded to ``open_sky``
+    (27, the open sky's) beyond the grid's sides and top, evaluated at n, clamped at 0."""
+    x = p + n * normal_offset
+    gr = wp.cw_div(x - origin, cell)
     beyond = wp.max(wp.max(wp.max(-gr[0], gr[0] - float(res_x - 1)), wp.max(-gr[2], gr[2] - float(res_z - 1))),
                     gr[1] - float(res_y - 1))
     w_open = wp.clamp(beyond / OPEN_FADE_CELLS, 0.0, 1.0)
@@ -105,6 +176,9 @@ def volume_irradiance(coeffs: wp.array2d(dtype=float), open_sky: wp.array(dtype=
     az = g[2] - float(z0)
     y = eval_sh9(n)
     e = wp.vec3()
+    wsum = float(0.0)
+    use_vis = vis.shape[0] > 0
+    x_vis = p + n * (VIS_BIAS_CELLS * wp.min(wp.min(cell[0], cell[1]), cell[2]))
     for corner in range(8):
         dx = corner & 1
         dy = (corner >> 1) & 1
@@ -114,14 +188,50 @@ def volume_irradiance(coeffs: wp.array2d(dtype=float), open_sky: wp.array(dtype=
         zi = wp.min(z0 + dz, res_z - 1)
         w = wp.where(dx == 1, ax, 1.0 - ax) * wp.where(dy == 1, ay, 1.0 - ay) * wp.where(dz == 1, az, 1.0 - az)
         probe = (zi * res_y + yi) * res_x + xi
+        if use_vis:
+            q = origin + wp.cw_mul(wp.vec3(float(xi), float(yi), float(zi)), cell)
+            w = w * probe_visibility(vis, offsets, probe, xi, yi, zi, q, p, x_vis, n)
+        wsum += w
         for k in range(9):
             wk = w * y[k]
             e += wp.vec3(coeffs[probe, 3 * k], coeffs[probe, 3 * k + 1], coeffs[probe, 3 * k + 2]) * wk
+    if use_vis:
+        e = e / wp.max(wsum, 1.0e-30)
     e_open = wp.vec3()
     for k in range(9):
         e_open += wp.vec3(open_sky[3 * k], open_sky[3 * k + 1], open_sky[3 * k + 2]) * y[k]
     e = e * (1.0 - w_open) + e_open * w_open
     return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
+
+
+@wp.kernel
+def depth_moments(
+    # inputs
+    dist: wp.array2d(dtype=float),
+    dirs: wp.array2d(dtype=wp.vec3),
+    texel_dirs: wp.array(dtype=wp.vec3),
+    power: float,
+    # outputs
+    moments: wp.array2d(dtype=wp.vec2),
+    offset: int,
+):
+    """Texel t of probe p's octahedral depth map: Σ w·(d, d²) / Σ w over the probe's rays,
+    w = max(0, ω_t·ω_r)^power, d the ray's hit distance (``dist``, misses at the cap)."""
+    i = wp.tid() + offset
+    texels = texel_dirs.shape[0]
+    probe = i // texels
+    t = texel_dirs[i - probe * texels]
+    s = probe % dirs.shape[0]
+    sw = float(0.0)
+    m = wp.vec2()
+    for r in range(dist.shape[1]):
+        c = wp.dot(t, dirs[s, r])
+        if c > 0.0:
+            w = wp.pow(c, power)
+            d = dist[probe, r]
+            sw += w
+            m += wp.vec2(d, d * d) * w
+    moments[probe, i - probe * texels] = m / wp.max(sw, 1.0e-12)
 
 
 @wp.kernel
@@ -135,6 +245,8 @@ def surfel_radiance(
     sun_irradiance: wp.vec3,
     coeffs: wp.array2d(dtype=float),
     open_sky: wp.array(dtype=float),
+    vis: wp.array3d(dtype=wp.vec2),
+    offsets: wp.array(dtype=wp.vec3),
     origin: wp.vec3,
     cell: wp.vec3,
     res_x: int,
@@ -148,7 +260,8 @@ def surfel_radiance(
     """B_s = ρ_s/π·(E_sun·max(0, n·l)·V_s + E_volume(p_s, n_s)) (module docstring)."""
     i = wp.tid() + offset
     n = normals[i]
-    e = volume_irradiance(coeffs, open_sky, origin, cell, res_x, res_y, res_z, normal_offset, positions[i], n)
+    e = volume_irradiance(coeffs, open_sky, vis, offsets, origin, cell, res_x, res_y, res_z, normal_offset,
+                          positions[i], n)
     e += sun_irradiance * (wp.max(wp.dot(n, sun_dir), 0.0) * sun_visible[i])
     radiance[i] = wp.cw_mul(albedo[i], e) * _INV_PI
 
@@ -201,6 +314,59 @@ def gather_probes(
         coeffs[probe, 3 * k + 0] = acc_r[k] * sk
         coeffs[probe, 3 * k + 1] = acc_g[k] * sk
         coeffs[probe, 3 * k + 2] = acc_b[k] * sk
+
+
+def oct_decode_np(uv: np.ndarray) -> np.ndarray:
+    """(N, 3) unit directions of octahedral coordinates (N, 2) in [-1, 1]² (inverse of oct_encode)."""
+    u, v = uv[:, 0].astype(np.float64), uv[:, 1].astype(np.float64)
+    y = 1.0 - np.abs(u) - np.abs(v)
+    x, z = u.copy(), v.copy()
+    low = y < 0
+    x[low] = (1.0 - np.abs(v[low])) * np.where(u[low] >= 0, 1.0, -1.0)
+    z[low] = (1.0 - np.abs(u[low])) * np.where(v[low] >= 0, 1.0, -1.0)
+    d = np.stack([x, y, z], axis=1)
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def oct_encode_np(d: np.ndarray) -> np.ndarray:
+    """(N, 2) octahedral coordinates of unit directions (N, 3): the host twin of oct_encode."""
+    d = np.asarray(d, np.float64)
+    s = np.abs(d).sum(axis=1)
+    x, z = d[:, 0] / s, d[:, 2] / s
+    low = d[:, 1] < 0
+    fx = (1.0 - np.abs(z)) * np.where(x >= 0, 1.0, -1.0)
+    fz = (1.0 - np.abs(x)) * np.where(z >= 0, 1.0, -1.0)
+    return np.stack([np.where(low, fx, x), np.where(low, fz, z)], axis=1)
+
+
+def oct_texel_directions(size: int) -> np.ndarray:
+    """(size², 3) the directions of an octahedral map's texel centres, row-major (v, u)."""
+    c = (np.arange(size) + 0.5) / size * 2.0 - 1.0
+    v, u = np.meshgrid(c, c, indexing="ij")
+    return oct_decode_np(np.stack([u.ravel(), v.ravel()], axis=1))
+
+
+def visibility_atlas(moments: np.ndarray, resolution) -> np.ndarray:
+    """The probes' depth moments ((P, VIS_OCT², 2), storage order z, y, x) as one (Z·T, Y, X·T, 2)
+    float32 array (T = VIS_TILE): probe (x, y, z)'s tile at [z·T : z·T + T, y, x·T : x·T + T], its map
+    inside a one-texel border copied by the octahedral map's wrap (an edge texel's neighbour across
+    the edge is the mirrored texel of the same edge; a corner's is the opposite corner), so that a
+    bilinear tap inside the tile filters across the map's seams."""
+    x, y, z = (int(a) for a in resolution)
+    o, t = VIS_OCT, VIS_TILE
+    m = np.asarray(moments, np.float32).reshape(z, y, x, o, o, 2)  # (..., v, u)
+    tile = np.empty((z, y, x, t, t, 2), np.float32)
+    tile[:, :, :, 1:-1, 1:-1] = m
+    tile[:, :, :, 0, 1:-1] = m[:, :, :, 0, ::-1]
+    tile[:, :, :, -1, 1:-1] = m[:, :, :, -1, ::-1]
+    tile[:, :, :, 1:-1, 0] = m[:, :, :, ::-1, 0]
+    tile[:, :, :, 1:-1, -1] = m[:, :, :, ::-1, -1]
+    tile[:, :, :, 0, 0] = m[:, :, :, -1, -1]
+    tile[:, :, :, 0, -1] = m[:, :, :, -1, 0]
+    tile[:, :, :, -1, 0] = m[:, :, :, 0, -1]
+    tile[:, :, :, -1, -1] = m[:, :, :, 0, 0]
+    # (z, y, x, v, u) -> (z, v, y, x, u) -> (Z·T, Y, X·T)
+    return np.ascontiguousarray(tile.transpose(0, 3, 1, 2, 4, 5).reshape(z * t, y, x * t, 2))
 
 
 def scene_key(scene) -> str:
@@ -336,11 +502,30 @@ class ProbeGather:
             self.relocated += int(keep.sum())
             bad[take] = False
         self.inside = int(bad.sum())  # no free spot found: kept, their back-face hits count as misses
+        self.offsets = (origins - np.asarray(positions, np.float64)).astype(np.float32)
+        self.moments = self._depth_moments(origins, hits, cell)
         self._make_surfels(hits, surfel_size)
+
+    def _depth_moments(self, origins, hits, cell) -> np.ndarray:
+        """(P, VIS_OCT², 2) float32 each probe's octahedral depth moments (mean d, mean d²; module
+        constants), texels in row-major (v, u) order of ``oct_texel_directions``."""
+        n, r = len(origins), self.rays
+        cap = VIS_MAX_CELLS * float(np.linalg.norm(cell))
+        any_hit = (hits["hit"] | hits["back"]).reshape(n, r)
+        dist = np.linalg.norm(hits["position"].reshape(n, r, 3) - origins[:, None, :].astype(np.float32), axis=2)
+        dist = np.where(any_hit, np.minimum(dist, cap), cap).astype(np.float32)
+        dev = self.device
+        texels = oct_texel_directions(VIS_OCT)
+        out = wp.empty((n, len(texels)), dtype=wp.vec2, device=dev)
+        launch(depth_moments, n * len(texels),
+               [wp.array(dist, dtype=float, device=dev),
+                wp.array(self.dirs.astype(np.float32), dtype=wp.vec3, device=dev),
+                wp.array(texels.astype(np.float32), dtype=wp.vec3, device=dev), float(VIS_POWER), out], device=dev)
+        return out.numpy()
 
     # -- the disk cache
 
-    _CACHED = ("surfel", "surfel_positions", "surfel_normals", "surfel_albedo")
+    _CACHED = ("surfel", "surfel_positions", "surfel_normals", "surfel_albedo", "moments", "offsets")
 
     def _key(self, scene_key: str, positions, cell, surfel_size) -> str:
         h = hashlib.blake2b(digest_size=20)
@@ -357,7 +542,8 @@ class ProbeGather:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
             np.savez(tmp, surfel=self._surfel.numpy(), surfel_positions=self.surfel_positions,
-                     surfel_normals=self.surfel_normals, surfel_albedo=self.surfel_albedo,
+                     surfel_normals=self.surfel_normals, surfel_albedo=self.surfel_albedo, moments=self.moments,
+                     offsets=self.offsets,
                      meta=np.array([FORMAT_VERSION, self.relocated, self.inside], np.int64))
             os.replace(tmp, path)
         except OSError:
@@ -375,9 +561,11 @@ class ProbeGather:
             return False
         m = len(a["surfel_positions"])
         if (len(meta) != 3 or meta[0] != FORMAT_VERSION or a["surfel"].shape != (n_probes, self.rays)
-                or a["surfel"].max(initial=-1) >= m):
+                or a["surfel"].max(initial=-1) >= m or a["moments"].shape != (n_probes, VIS_OCT * VIS_OCT, 2)
+                or a["offsets"].shape != (n_probes, 3)):
             return False
         self.relocated, self.inside = int(meta[1]), int(meta[2])
+        self.moments, self.offsets = a["moments"], a["offsets"]
         self._set_surfels(a["surfel"], a["surfel_positions"], a["surfel_normals"], a["surfel_albedo"])
         return True
 
@@ -468,9 +656,10 @@ class ProbeGather:
         out[~up] = np.asarray(ground, np.float64)
         self._miss.assign(out.reshape(DIRECTION_SETS, self.rays, 3).astype(np.float32))
 
-    def update_surfels(self, coeffs, open_sky, grid, sun_direction, sun_irradiance) -> None:
+    def update_surfels(self, coeffs, open_sky, visibility, grid, sun_direction, sun_irradiance) -> None:
         """B_s of every surfel from the volume as it is now (one more bounce); ``open_sky``: the (27,)
-        Warp array of the open sky's coefficients beyond the grid."""
+        Warp array of the open sky's coefficients beyond the grid; ``visibility``: (atlas, offsets) Warp
+        arrays of the lookup's probe visibility (empty arrays: plain trilinear)."""
         origin, cell, res, offset = grid
         if self.surfel_count == 0:
             return
@@ -478,7 +667,8 @@ class ProbeGather:
         sun = sun / max(np.linalg.norm(sun), 1e-12)
         launch(surfel_radiance, self.surfel_count,
                [self._sp, self._sn, self._sa, self._visible, wp.vec3(*sun.astype(np.float32)),
-                wp.vec3(*np.asarray(sun_irradiance, np.float32)), coeffs, open_sky, wp.vec3(*origin.astype(np.float32)),
+                wp.vec3(*np.asarray(sun_irradiance, np.float32)), coeffs, open_sky, *visibility,
+                wp.vec3(*origin.astype(np.float32)),
                 wp.vec3(*cell.astype(np.float32)), int(res[0]), int(res[1]), int(res[2]), float(offset),
                 self._radiance], device=self.device)
 

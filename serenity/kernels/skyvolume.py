@@ -67,7 +67,19 @@ from serenity.kernels.atmosphere_ref import angle_between_deg, sample_sky_map_np
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
-from serenity.kernels.probegather import OPEN_FADE_CELLS, ProbeGather, direction_sets, scene_key, volume_irradiance
+from serenity.kernels.probegather import (
+    OPEN_FADE_CELLS,
+    VIS_BIAS_CELLS,
+    VIS_CRUSH,
+    VIS_OCT,
+    VIS_TILE,
+    ProbeGather,
+    direction_sets,
+    oct_encode_np,
+    scene_key,
+    visibility_atlas,
+    volume_irradiance,
+)
 from serenity.kernels.quadfit import fit_occlusion_quads
 from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.sampling import cp_rotation, hammersley_np, hash_u32, sample_probe_direction
@@ -166,6 +178,8 @@ def lookup_sky_irradiance(
     # inputs
     coeffs: wp.array2d(dtype=float),
     open_sky: wp.array(dtype=float),
+    vis: wp.array3d(dtype=wp.vec2),
+    offsets: wp.array(dtype=wp.vec3),
     origin: wp.vec3,
     cell: wp.vec3,
     res_x: int,
@@ -181,8 +195,8 @@ def lookup_sky_irradiance(
     """The volume's irradiance at surface points (``eval_volume_irradiance`` and sky.glsl's
     arithmetic): trilinear coefficients at p + offset·n, evaluated at n, clamped at 0."""
     i = wp.tid() + offset
-    irradiance[i] = volume_irradiance(coeffs, open_sky, origin, cell, res_x, res_y, res_z, normal_offset, points[i],
-                                      normals[i])
+    irradiance[i] = volume_irradiance(coeffs, open_sky, vis, offsets, origin, cell, res_x, res_y, res_z,
+                                      normal_offset, points[i], normals[i])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -222,15 +236,49 @@ def unpack_sh_textures(textures: list[np.ndarray]) -> np.ndarray:
     return np.concatenate([np.asarray(t, np.float32) for t in textures], axis=-1)
 
 
+def _probe_visibility_np(vis, offsets, idx, cells, grid_pos, p, x, n) -> np.ndarray:
+    """(N,) :func:`serenity.kernels.probegather.probe_visibility` on the host, for one corner: probe
+    indices ``idx`` (N,), their cells (N, 3) and grid positions (N, 3)."""
+    t, o = VIS_TILE, VIS_OCT
+    q = grid_pos + offsets[idx]
+    to_probe = q - p
+    to_probe /= np.maximum(np.linalg.norm(to_probe, axis=1, keepdims=True), 1e-30)
+    b = ((to_probe * n).sum(axis=1) + 1.0) * 0.5
+    w = b * b + 0.2
+    d = x - q
+    dist = np.linalg.norm(d, axis=1)
+    uv = oct_encode_np(d / np.maximum(dist, 1e-9)[:, None])
+    tu = cells[:, 0] * t + 1 + (uv[:, 0] * 0.5 + 0.5) * o - 0.5
+    tv = cells[:, 2] * t + 1 + (uv[:, 1] * 0.5 + 0.5) * o - 0.5
+    u0, v0 = np.floor(tu).astype(np.int64), np.floor(tv).astype(np.int64)
+    fu, fv = (tu - u0)[:, None], (tv - v0)[:, None]
+    lu, lv = cells[:, 0] * t, cells[:, 2] * t
+    ua, ub = np.clip(u0, lu, lu + t - 1), np.clip(u0 + 1, lu, lu + t - 1)
+    va, vb = np.clip(v0, lv, lv + t - 1), np.clip(v0 + 1, lv, lv + t - 1)
+    yi = cells[:, 1]
+    m = (vis[va, yi, ua] * (1 - fu) + vis[va, yi, ub] * fu) * (1 - fv) + \
+        (vis[vb, yi, ua] * (1 - fu) + vis[vb, yi, ub] * fu) * fv
+    var = np.abs(m[:, 1] - m[:, 0] ** 2)
+    c = var / (var + (dist - m[:, 0]) ** 2 + 1e-12)
+    w = np.where(dist > m[:, 0], w * np.maximum(c ** 3, 0.0), w)
+    w = np.maximum(w, 1e-6)
+    return np.where(w < VIS_CRUSH, w ** 3 / VIS_CRUSH ** 2, w)
+
+
 def interpolate_volume(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_offset_m: float, points, normals,
-                       open_coeffs=None) -> np.ndarray:
+                       open_coeffs=None, visibility=None) -> np.ndarray:
     """(N, 9, 3) float64 coefficients the lookup evaluates at each surface point — the shader's
-    arithmetic on the host: trilinear at p + offset·n (clamped to the grid), faded to ``open_coeffs``
-    ((9, 3), the open sky; None = zeros) beyond the grid's sides and top over ``OPEN_FADE_CELLS``."""
+    arithmetic on the host: trilinear at p + offset·n (clamped to the grid) — each probe's weight
+    times its visibility when ``visibility`` = (atlas (Z·T, Y, X·T, 2), offsets (P, 3)) is given
+    (``probegather.probe_visibility``), the weights renormalised — faded to ``open_coeffs`` ((9, 3), the
+    open sky; None = zeros) beyond the grid's sides and top over ``OPEN_FADE_CELLS``."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     res = np.asarray(resolution, np.float64)
-    gr = (p + normal_offset_m * n - np.asarray(origin, np.float64)) / np.asarray(cell, np.float64)
+    origin = np.asarray(origin, np.float64)
+    cell = np.asarray(cell, np.float64)
+    x = p + normal_offset_m * n
+    gr = (x - origin) / cell
     beyond = np.maximum.reduce([-gr[:, 0], gr[:, 0] - (res[0] - 1), -gr[:, 2], gr[:, 2] - (res[2] - 1),
                                 gr[:, 1] - (res[1] - 1)])
     w_open = np.clip(beyond / OPEN_FADE_CELLS, 0.0, 1.0)
@@ -240,6 +288,10 @@ def interpolate_volume(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_
     ri = np.asarray(resolution, np.int64)
     i1 = np.minimum(i0 + 1, ri - 1)
     c = np.asarray(coeffs_zyx).reshape(-1, COEFFS)
+    if visibility is not None:
+        x_vis = p + VIS_BIAS_CELLS * float(np.min(cell)) * n
+        vis = np.asarray(visibility[0], np.float64)
+        offsets = np.asarray(visibility[1], np.float64).reshape(-1, 3)
     # the 8 corners at once: flat cell indices (N, 8) and trilinear weights (N, 8), one gather
     idx = np.empty((len(p), 8), np.int64)
     wts = np.empty((len(p), 8))
@@ -252,8 +304,14 @@ def interpolate_volume(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_
                 xi, wx = (i1[:, 0], a[:, 0]) if dx else (i0[:, 0], 1 - a[:, 0])
                 idx[:, k] = (zi * ri[1] + yi) * ri[0] + xi
                 wts[:, k] = wx * wy * wz
+                if visibility is not None:
+                    cells = np.stack([xi, yi, zi], axis=1)
+                    wts[:, k] *= _probe_visibility_np(vis, offsets, idx[:, k], cells, origin + cells * cell, p, x_vis,
+                                                      n)
                 k += 1
     out = np.einsum("nk,nkc->nc", wts, c[idx], dtype=np.float64).reshape(-1, 9, 3)
+    if visibility is not None:
+        out /= np.maximum(wts.sum(axis=1), 1e-30)[:, None, None]
     if open_coeffs is not None:
         out = out * (1.0 - w_open)[:, None, None] + np.asarray(open_coeffs, np.float64).reshape(1, 9, 3) * \
             w_open[:, None, None]
@@ -263,9 +321,10 @@ def interpolate_volume(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_
 
 
 def eval_volume_irradiance(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_offset_m: float,
-                           points, normals, open_coeffs=None) -> np.ndarray:
+                           points, normals, open_coeffs=None, visibility=None) -> np.ndarray:
     """(N,3) float64 irradiance from (Z, Y, X, 27) coefficients — the shader's arithmetic, on the host."""
-    c = interpolate_volume(coeffs_zyx, origin, cell, resolution, normal_offset_m, points, normals, open_coeffs)
+    c = interpolate_volume(coeffs_zyx, origin, cell, resolution, normal_offset_m, points, normals, open_coeffs,
+                           visibility)
     y = sh_basis(np.asarray(normals, np.float64).reshape(-1, 3))
     return np.maximum(np.einsum("nk,nkc->nc", y, c), 0.0)
 
@@ -281,11 +340,12 @@ def glossy_band_factors(shininess) -> np.ndarray:
 
 
 def eval_volume_glossy(coeffs_zyx: np.ndarray, origin, cell, resolution, normal_offset_m: float, points, normals,
-                       directions, shininess, open_coeffs=None) -> np.ndarray:
+                       directions, shininess, open_coeffs=None, visibility=None) -> np.ndarray:
     """(N,3) float64 radiance around ``directions`` filtered by the Phong lobe of exponent ``shininess``
     (scalar or (N,)), from the coefficients looked up at the points and normals — sky.glsl's glossy
     term (``sky_volume_lookup``), on the host."""
-    c = interpolate_volume(coeffs_zyx, origin, cell, resolution, normal_offset_m, points, normals, open_coeffs)
+    c = interpolate_volume(coeffs_zyx, origin, cell, resolution, normal_offset_m, points, normals, open_coeffs,
+                           visibility)
     d = np.asarray(directions, np.float64).reshape(-1, 3)
     m = np.broadcast_to(np.asarray(shininess, np.float64), (len(d),))
     y = sh_basis(d) * glossy_band_factors(m)
@@ -329,6 +389,10 @@ class SkyVolume:
         self._open_host = np.zeros((9, 3))
         self._open_version = -1
         self._open_dirs = direction_sets(OPEN_SKY_DIRECTIONS, 1)[0]
+        #: "gather" with ``gather_visibility``: (atlas (Z·T, Y, X·T, 2), offsets (P, 3)) of the probes'
+        #: depth moments and relocations, weighing each probe by whether it sees the point; else None
+        self.visibility = None
+        self._vis_wp = (wp.zeros((0, 0, 0), dtype=wp.vec2, device=dev), wp.zeros(0, dtype=wp.vec3, device=dev))
         self._constant_sky = getattr(scene.sky, "model", "atmosphere") == "constant"
         self.sky = SkyMapCache(cfg.sky_map_size, cfg.rebuild_angle_deg, device=dev, steps=cfg.sky_steps,
                               table=cfg.sky_view_table)
@@ -460,15 +524,29 @@ class SkyVolume:
             size = cfg.gather_surfel_size or 0.4 * float(np.min(self.cell_size))
             glossy = ([m.specular if m.reflectivity == 0 and m.transparency == 0 else 0.0
                        for m in self.scene.materials] if cfg.glossy else None)
-            self._gather = ProbeGather(self.tracer, self.probe_positions(), self.cell_size,
-                                       cfg.gather_rays, size, self.device, glossy_energy=glossy,
-                                       transmissions=cfg.gather_transmissions, cache_key=scene_key(self.scene))
+            self._gather = g = ProbeGather(self.tracer, self.probe_positions(), self.cell_size,
+                                           cfg.gather_rays, size, self.device, glossy_energy=glossy,
+                                           transmissions=cfg.gather_transmissions, cache_key=scene_key(self.scene))
+            if cfg.gather_visibility:
+                atlas = visibility_atlas(g.moments, self.resolution)
+                self.visibility = (atlas, g.offsets)
+                self._vis_wp = (wp.array(atlas, dtype=wp.vec2, device=self.device),
+                                wp.array(g.offsets, dtype=wp.vec3, device=self.device))
         return self._gather
+
+    def visibility_textures(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """For the shader (``SkyTexturesGL.upload_visibility``): the depth-moment atlas (Z·T, Y, X·T, 2)
+        and the probes' relocation offsets (Z, Y, X, 3), float32; None without visibility."""
+        if self.visibility is None:
+            return None
+        x, y, z = self.resolution
+        return self.visibility[0], np.ascontiguousarray(self.visibility[1].reshape(z, y, x, 3), np.float32)
 
     def _gather_pass_start(self, sun) -> None:
         """The surfels' radiance from the volume as it is (the start of a pass: one more bounce)."""
-        self._gather.update_surfels(self._coeffs, self._open_sky(), (self.grid_origin, self.cell_size, self.resolution,
-                                                   self.normal_offset_m), sun, scene_sun_irradiance(self.scene, sun))
+        grid = (self.grid_origin, self.cell_size, self.resolution, self.normal_offset_m)
+        self._gather.update_surfels(self._coeffs, self._open_sky(), self._vis_wp, grid, sun,
+                                    scene_sun_irradiance(self.scene, sun))
 
     def _update_gather(self, sun, full: bool) -> bool:
         """"gather": follow a new sky (miss radiance, surfel shadow rays), then run passes over the
@@ -596,7 +674,7 @@ class SkyVolume:
         x, y, z = self.resolution
         dev = self.device
         launch(lookup_sky_irradiance, len(p),
-               [self._coeffs, self._open_sky(), wp.vec3(*self.grid_origin.astype(np.float32)),
+               [self._coeffs, self._open_sky(), *self._vis_wp, wp.vec3(*self.grid_origin.astype(np.float32)),
                 wp.vec3(*self.cell_size.astype(np.float32)), x, y, z, float(self.normal_offset_m),
                 wp.array(p, dtype=wp.vec3, device=dev), wp.array(n, dtype=wp.vec3, device=dev), out], device=dev)
         return out.numpy()
@@ -605,7 +683,7 @@ class SkyVolume:
         """(N, 3) float64 W·m⁻² at surface points with unit normals, as the shader evaluates it."""
         c = self.coefficients().reshape(*self.resolution[::-1], COEFFS)
         return eval_volume_irradiance(c, self.grid_origin, self.cell_size, self.resolution, self.normal_offset_m,
-                                      points, normals, self.open_coefficients())
+                                      points, normals, self.open_coefficients(), self.visibility)
 
     def glossy(self, points, normals, directions, shininess) -> np.ndarray:
         """(N, 3) float64 W·m⁻²·sr⁻¹: the volume's radiance around ``directions`` filtered by the Phong
@@ -613,7 +691,7 @@ class SkyVolume:
         as the shader evaluates it (``SkyConfig.glossy``)."""
         c = self.coefficients().reshape(*self.resolution[::-1], COEFFS)
         return eval_volume_glossy(c, self.grid_origin, self.cell_size, self.resolution, self.normal_offset_m,
-                                  points, normals, directions, shininess, self.open_coefficients())
+                                  points, normals, directions, shininess, self.open_coefficients(), self.visibility)
 
     def _open_sky(self):
         """The (27,) Warp array of :meth:`open_coefficients`, current."""

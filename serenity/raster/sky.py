@@ -9,6 +9,8 @@ the uniforms of ``glsl/sky.glsl`` that the program uses:
     sampler2D u_sky_map;  sampler3D u_sky_volume[7];
     vec3 u_sky_origin (m);  vec3 u_sky_cell (m);  vec3 u_sky_res (X, Y, Z probes);
     float u_sky_normal_offset (m);  vec3 u_sky_open[9] (the open sky's coefficients, ``set_open_sky``)
+    sampler3D u_sky_vis, u_sky_probe_offset (the gathered probes' visibility, ``upload_visibility``;
+    read by programs built with ``SKY_VISIBILITY``)
 
 A shader ``#include "sky.glsl"`` and calls ``sky_map_radiance(u_sky_map, dir)`` (the dome) and
 ``sky_irradiance(p, n)`` (adds albedo/π × it), or ``sky_irradiance_glossy(p, n, r, m, glossy)``
@@ -50,6 +52,10 @@ class SkyTexturesGL:
         self.res = np.ones(3)
         self.normal_offset = 0.0
         self.open_sky = np.zeros((9, 3))
+        #: the probes' depth moments and relocation offsets (``upload_visibility``; 1×1 until then)
+        self.vis = upload_texture3d(ctx, np.zeros((1, 1, 1, 2), np.float32))
+        self.probe_offset = upload_texture3d(ctx, np.zeros((1, 1, 1, 3), np.float32))
+        self.visibility = False
         self._eval = None
         self._target = None
 
@@ -83,6 +89,17 @@ class SkyTexturesGL:
         self.res = np.asarray(res, np.float64).reshape(3)
         self.normal_offset = float(normal_offset)
 
+    def upload_visibility(self, atlas: np.ndarray, offsets: np.ndarray) -> None:
+        """The gathered probes' visibility (``SkyVolume.visibility_textures``): the depth-moment atlas
+        (Z·T, Y, X·T, 2) and the relocation offsets (Z, Y, X, 3), float32, read by programs built with
+        ``SKY_VISIBILITY`` (texelFetch: no filtering)."""
+        for name, arr in (("vis", atlas), ("probe_offset", offsets)):
+            getattr(self, name).release()
+            tex = upload_texture3d(self.ctx, np.asarray(arr, np.float32))
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            setattr(self, name, tex)
+        self.visibility = True
+
     def set_open_sky(self, coefficients) -> None:
         """(9, 3) irradiance coefficients of the open sky (``SkyVolume.open_coefficients``): what the
         lookup fades to beyond the grid's sides and top."""
@@ -103,10 +120,14 @@ class SkyTexturesGL:
             tex.write(a, viewport=(0, int(first_layer), 0, width, n, depth))
 
     def bind(self, program, first_unit: int) -> int:
-        """Bind to texture units first_unit..first_unit+7 and set sky.glsl's uniforms; returns the next free unit."""
+        """Bind to texture units first_unit..first_unit+9 (the sky map, the volume's 7 textures, the
+        visibility's 2) and set sky.glsl's uniforms; returns the next free unit."""
         self.sky_map.use(location=first_unit)
         for t, tex in enumerate(self.volume):
             tex.use(location=first_unit + 1 + t)
+        vis_unit = first_unit + 1 + VOLUME_TEXTURES
+        self.vis.use(location=vis_unit)
+        self.probe_offset.use(location=vis_unit + 1)
         values = {
             "u_sky_map": first_unit,
             "u_sky_volume": tuple(range(first_unit + 1, first_unit + 1 + VOLUME_TEXTURES)),
@@ -115,21 +136,23 @@ class SkyTexturesGL:
             "u_sky_res": tuple(float(x) for x in self.res),
             "u_sky_normal_offset": self.normal_offset,
             "u_sky_open": tuple(tuple(float(x) for x in row) for row in self.open_sky),
+            "u_sky_vis": vis_unit,
+            "u_sky_probe_offset": vis_unit + 1,
         }
         for name, value in values.items():
             if name in program:
                 program[name].value = value
-        return first_unit + 1 + VOLUME_TEXTURES
+        return vis_unit + 2
 
     # -- evaluation on the GPU (tests, debugging)
 
     def _run(self, mode: int, a: np.ndarray, b: np.ndarray | None, c: np.ndarray | None = None,
              shininess: float = 0.0) -> np.ndarray:
         ctx = self.ctx
-        if self._eval is None:
-            prog = load_program(ctx, "sky_eval.glsl")
-            self._eval = (prog, fullscreen_vao(ctx, prog))
-        prog, vao = self._eval
+        if self._eval is None or self._eval[2] != self.visibility:
+            prog = load_program(ctx, "sky_eval.glsl", defines={"SKY_VISIBILITY": int(self.visibility)})
+            self._eval = (prog, fullscreen_vao(ctx, prog), self.visibility)
+        prog, vao, _ = self._eval
         a = np.asarray(a, np.float32).reshape(-1, 3)
         n = len(a)
         w = min(n, 256)

@@ -231,3 +231,21 @@ def test_trace_cached_on_disk_reads_back_the_same_volume(device, tmp_path, monke
     other = SkyVolume(scene, cfg, device=device)
     other.rebuild()
     assert not other._gather.from_cache and len(list(tmp_path.glob("probegather-*.npz"))) == 2
+
+
+def test_visibility_lookup_warp_equals_host(device):
+    """The Warp lookup with the probes' visibility (the surfels' and the sky-light VPLs') equals the
+    numpy twin of sky.glsl's; the octahedral map's encoding inverts its decoding."""
+    from serenity.kernels.probegather import oct_decode_np, oct_encode_np
+    from serenity.scene.procedural import build_scene
+
+    uv = np.random.default_rng(6).uniform(-1, 1, size=(500, 2))
+    assert np.allclose(oct_encode_np(oct_decode_np(uv)), uv, atol=1e-9)
+    scene = build_scene("courtyard")
+    vol = SkyVolume(scene, SkyConfig(method="gather", target_probes=800, gather_rays=32, fit="content"),
+                    device=device)
+    vol.rebuild()
+    g = vol._gather
+    pick = np.arange(0, g.surfel_count, max(1, g.surfel_count // 400))
+    p, n = g.surfel_positions[pick], g.surfel_normals[pick]
+    assert np.allclose(vol.irradiance_wp(p, n), vol.irradiance(p, n), rtol=1e-4, atol=1e-3)

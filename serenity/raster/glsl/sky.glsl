@@ -18,6 +18,11 @@
 // Uniforms set by serenity/raster/sky.py SkyTexturesGL.bind(program, first_unit):
 //   sampler2D u_sky_map; sampler3D u_sky_volume[7]; vec3 u_sky_origin; vec3 u_sky_cell;
 //   vec3 u_sky_res; float u_sky_normal_offset; vec3 u_sky_open[9]   (sky_irradiance(p, n) uses them)
+//   sampler3D u_sky_vis (RG: the probes' octahedral depth moments, tiles of SKY_VIS_TILE² texels,
+//   width X*T, height Y, depth Z*T), sampler3D u_sky_probe_offset (RGB, X, Y, Z: the probes' relocation)
+// SKY_VISIBILITY (SkyConfig.gather_visibility with method "gather"): the 8 probes around the lookup are
+// read one by one (texelFetch) and each weighed by whether it sees the point, as
+// serenity/kernels/probegather.py's probe_visibility (DDGI's back-face weight and Chebyshev bound).
 #ifndef SERENITY_SKY_GLSL
 #define SERENITY_SKY_GLSL
 #include "common.glsl"
@@ -62,9 +67,57 @@ void sky_sh9(vec3 d, out float y[9]) {
 // lobe_l / A_l (serenity/kernels/skyvolume.py, glossy_band_factors). Both clamped at 0.
 const float SKY_OPEN_FADE_CELLS = 2.0;
 
+#ifndef SKY_VISIBILITY
+#define SKY_VISIBILITY 0
+#endif
+#if SKY_VISIBILITY
+const int SKY_VIS_OCT = 8;
+const int SKY_VIS_TILE = SKY_VIS_OCT + 2;
+const float SKY_VIS_CRUSH = 0.2;
+const float SKY_VIS_BIAS_CELLS = 0.5;
+uniform sampler3D u_sky_vis;
+uniform sampler3D u_sky_probe_offset;
+
+vec2 sky_oct_encode(vec3 d) {
+    vec2 o = d.xz / (abs(d.x) + abs(d.y) + abs(d.z));
+    if (d.y < 0.0) o = (1.0 - abs(o.yx)) * vec2(o.x >= 0.0 ? 1.0 : -1.0, o.y >= 0.0 ? 1.0 : -1.0);
+    return o;
+}
+
+// Weight of the probe in grid cell c (at grid_pos, moved by its relocation offset) for surface point p
+// with normal n, looked up at x (probegather.probe_visibility).
+float sky_probe_visibility(ivec3 c, vec3 grid_pos, vec3 p, vec3 x, vec3 n) {
+    vec3 q = grid_pos + texelFetch(u_sky_probe_offset, c, 0).xyz;
+    float b = (dot(normalize(q - p), n) + 1.0) * 0.5;
+    float w = b * b + 0.2;
+    vec3 d = x - q;
+    float dist = length(d);
+    vec2 uv = sky_oct_encode(d / max(dist, 1e-9));
+    vec2 t = vec2(c.xz * SKY_VIS_TILE + 1) + (uv * 0.5 + 0.5) * float(SKY_VIS_OCT) - 0.5;
+    ivec2 t0 = ivec2(floor(t));
+    vec2 f = t - vec2(t0);
+    ivec2 lo = c.xz * SKY_VIS_TILE, hi = lo + SKY_VIS_TILE - 1;
+    ivec2 a = clamp(t0, lo, hi), b1 = clamp(t0 + 1, lo, hi);
+    vec2 m = mix(mix(texelFetch(u_sky_vis, ivec3(a.x, c.y, a.y), 0).xy,
+                     texelFetch(u_sky_vis, ivec3(b1.x, c.y, a.y), 0).xy, f.x),
+                 mix(texelFetch(u_sky_vis, ivec3(a.x, c.y, b1.y), 0).xy,
+                     texelFetch(u_sky_vis, ivec3(b1.x, c.y, b1.y), 0).xy, f.x), f.y);
+    if (dist > m.x) {
+        float var = abs(m.y - m.x * m.x);
+        float e = dist - m.x;
+        float ch = var / (var + e * e + 1e-12);
+        w *= max(ch * ch * ch, 0.0);
+    }
+    w = max(w, 1e-6);
+    if (w < SKY_VIS_CRUSH) w = w * w * w / (SKY_VIS_CRUSH * SKY_VIS_CRUSH);
+    return w;
+}
+#endif
+
 vec3 sky_volume_lookup(sampler3D tex[7], vec3 open_sky[9], vec3 p, vec3 n, vec3 r, float m, vec3 origin, vec3 cell,
                        vec3 res, float normal_offset, out vec3 glossy) {
-    vec3 gr = (p + normal_offset * n - origin) / cell;
+    vec3 xq = p + normal_offset * n;
+    vec3 gr = (xq - origin) / cell;
     vec3 beyond = max(-gr, gr - (res - 1.0));
     float w_open = clamp(max(max(beyond.x, beyond.z), gr.y - (res.y - 1.0)) / SKY_OPEN_FADE_CELLS, 0.0, 1.0);
     vec3 g = clamp(gr, vec3(0.0), res - 1.0);
@@ -74,12 +127,35 @@ vec3 sky_volume_lookup(sampler3D tex[7], vec3 open_sky[9], vec3 p, vec3 n, vec3 
     ivec3 gi1 = min(gi0 + 1, ivec3(res) - 1);
 #endif
     float f[28];
+#if SKY_VISIBILITY
+    for (int k = 0; k < 28; ++k) f[k] = 0.0;
+    ivec3 c0 = ivec3(floor(g));
+    ivec3 cmax = ivec3(res) - 1;
+    vec3 a = g - vec3(c0);
+    float wsum = 0.0;
+    vec3 x_vis = p + SKY_VIS_BIAS_CELLS * min(cell.x, min(cell.y, cell.z)) * n;
+    for (int corner = 0; corner < 8; ++corner) {
+        ivec3 dc = ivec3(corner & 1, (corner >> 1) & 1, corner >> 2);
+        ivec3 c = min(c0 + dc, cmax);
+        vec3 tw = mix(1.0 - a, a, vec3(dc));
+        float w = tw.x * tw.y * tw.z * sky_probe_visibility(c, origin + vec3(c) * cell, p, x_vis, n);
+        wsum += w;
+        for (int t = 0; t < 6; ++t) {
+            vec4 v = w * texelFetch(tex[t], c, 0);
+            f[4 * t + 0] += v.x; f[4 * t + 1] += v.y; f[4 * t + 2] += v.z; f[4 * t + 3] += v.w;
+        }
+        vec3 last = w * texelFetch(tex[6], c, 0).rgb;
+        f[24] += last.x; f[25] += last.y; f[26] += last.z;
+    }
+    for (int k = 0; k < 27; ++k) f[k] /= max(wsum, 1e-30);
+#else
     for (int t = 0; t < 6; ++t) {
         vec4 v = SKY_TAP(tex[t]);
         f[4 * t + 0] = v.x; f[4 * t + 1] = v.y; f[4 * t + 2] = v.z; f[4 * t + 3] = v.w;
     }
     vec3 last = SKY_TAP(tex[6]).rgb;
     f[24] = last.x; f[25] = last.y; f[26] = last.z; f[27] = 0.0;
+#endif
     float y[9], yr[9];
     sky_sh9(n, y);
     sky_sh9(r, yr);
