@@ -11,7 +11,9 @@ Rays (the same arrays for every tracer):
 Tracers: ours (:class:`serenity.kernels.kdtree.KdTree`, closest hit; the default call, which
 reorders incoherent batches before the launch — ``sort=None``, ``serenity.kernels.kdtree.ray_order``
 — with the sort, the gather and the write-back inside the timed call; ``reordered`` per ray set says
-whether it did), Embree (``embreex``, closest hit, one ``run`` call over all rays) and Warp's BVH
+whether it did, and ``rays_per_thread`` how many rays each kernel thread interleaves: a reordered
+batch is traced by the interleaved kernel, ``serenity.kernels.kdtree.trace_rays_kernel``),
+Embree (``embreex``, closest hit, one ``run`` call over all rays) and Warp's BVH
 (``wp.mesh_query_ray``, SAH constructor; both take the rays as they come). Ours and Warp's run on
 1, 2, ... all threads (through ``serenity.kernels.launch``); Embree on 1 thread, and its calls
 split over all threads as Python threads (embreex holds the GIL, so that is shown only as it
@@ -61,7 +63,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from serenity.device import cpu_threads, init_warp
-from serenity.kernels.kdtree import KdTree, intersect_rays, ray_order
+from serenity.kernels.kdtree import CPU_RAYS_PER_THREAD, KdTree, intersect_rays, ray_order
 from serenity.kernels.launch import launch
 from serenity.scene.procedural import lumpy_mesh
 
@@ -322,7 +324,9 @@ def main(argv=None) -> dict:
         data = tree.device_data("cpu")
         reordered = ray_order(data.box_lo, data.box_hi, wp.array(o, dtype=wp.vec3, device="cpu"),
                               wp.array(d, dtype=wp.vec3, device="cpu"), n, None, "cpu").shape[0] > 0
-        figures[name] = {"rays": n, "reordered": reordered, "hit_fraction": float(ours.hit.mean()),
+        figures[name] = {"rays": n, "reordered": reordered,
+                         "rays_per_thread": CPU_RAYS_PER_THREAD if reordered else 1,  # interleaved slots
+                         "hit_fraction": float(ours.hit.mean()),
                          "mrays_per_s": rates,
                          "mrays_per_cpu_s": cpu_rates, "thread_cpu_efficiency": efficiency,
                          "thread_scaling_projected": cpu_bound * efficiency,

@@ -7,8 +7,10 @@ Each REV's ``kdtree.py`` is loaded as its own module (``git show REV:serenity/ke
 ``WORKTREE`` = the file as it is now), so each is its own Warp module; they share this checkout's
 build (``kdtree_build``), with :class:`serenity.config.KdBuildConfig` defaults unless the version
 says otherwise after an ``@`` (``HEAD@max_depth=40,min_empty_fraction=0.1``: the same traversal
-on a tree built with those settings). Rays as in ``bench_kdtree.py``: coherent camera rays and incoherent
-random rays from their hit points. Every round traces both ray sets once with every version, on
+on a tree built with those settings); keys that are not build settings go to ``KdTree.intersect``
+(``WORKTREE@rays_per_thread=1``: the working tree's traversal with one ray per kernel thread).
+Rays as in ``bench_kdtree.py``: coherent camera rays and incoherent random rays from their hit
+points. Every round traces both ray sets once with every version, on
 one thread, in turn; the figure per version is the median over rounds of rays / **CPU seconds of
 the process** (``time.process_time``), not wall time: on a machine shared with other sessions a
 version that happens to be descheduled does not look slower (cache pollution from other processes
@@ -19,6 +21,7 @@ against the first version (same triangle and t on ≥ 99.99 % of the rays).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import json
 import os
@@ -80,11 +83,13 @@ def main(argv=None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         for k, rev in enumerate(args.revs):
             git_rev, _, settings = rev.partition("@")
-            cfg = KdBuildConfig(**{key: json.loads(val) for key, val in
-                                   (kv.split("=") for kv in settings.split(",") if kv)})
+            pairs = {key: json.loads(val) for key, val in (kv.split("=") for kv in settings.split(",") if kv)}
+            build_fields = {fl.name for fl in dataclasses.fields(KdBuildConfig)}
+            cfg = KdBuildConfig(**{key: val for key, val in pairs.items() if key in build_fields})
+            query = {key: val for key, val in pairs.items() if key not in build_fields}  # e.g. rays_per_thread
             mod = load_version(git_rev, Path(tmp), k)
             tree = mod.KdTree.build(v, f, config=cfg, cache=False, progress=False)
-            versions.append((rev, mod, tree))
+            versions.append((rev, mod, tree, query))
         oc, dc = camera_rays(width, height)
         hits = versions[0][2].intersect(oc, dc, device="cpu")
         rng = np.random.default_rng(0)
@@ -94,21 +99,21 @@ def main(argv=None) -> dict:
         di /= np.linalg.norm(di, axis=1, keepdims=True)
         sets = {"coherent": (oc, dc), "incoherent": (oi, di)}
         ref, agreement = {}, {}
-        for k, (_, _, tree) in enumerate(versions):  # also the warm-up (compile, first touch)
+        for k, (_, _, tree, query) in enumerate(versions):  # also the warm-up (compile, first touch)
             for s, (o, d) in sets.items():
-                h = tree.intersect(o, d, device="cpu", threads=1)
+                h = tree.intersect(o, d, device="cpu", threads=1, **query)
                 ref.setdefault(s, h)
                 agreement[(k, s)] = float(np.mean((h.prim == ref[s].prim) & (h.t == ref[s].t)))
         cpu = {(k, s): [] for k in range(len(versions)) for s in sets}  # by position: a version may repeat
         for _ in range(args.rounds):
-            for k, (_, _, tree) in enumerate(versions):
+            for k, (_, _, tree, query) in enumerate(versions):
                 for s, (o, d) in sets.items():
                     c0 = time.process_time()
-                    tree.intersect(o, d, device="cpu", threads=1)
+                    tree.intersect(o, d, device="cpu", threads=1, **query)
                     cpu[(k, s)].append(time.process_time() - c0)
     out_versions = []
     base = None
-    for k, (rev, _, tree) in enumerate(versions):
+    for k, (rev, _, tree, _query) in enumerate(versions):
         entry = {"rev": rev, "nodes": tree.stats.nodes, "references": tree.stats.references, "depth": tree.stats.depth}
         for s, (o, _) in sets.items():
             ts = cpu[(k, s)]

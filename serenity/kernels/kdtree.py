@@ -53,6 +53,25 @@ changes along the batch) and batches below ``SORT_MIN_RAYS`` are traced as they 
 benchmark's incoherent rays: +14-18 % rays per CPU-second, sort and gather included
 (``benchmarks/results/kdtree_ab_final.json``).
 
+Interleaved rays (CPU, reordered batches: :func:`trace_rays_kernel`). Warp runs a CPU launch as a
+loop over the kernel's threads, so one ray per thread is one chain of dependent node loads at a
+time, and the traversal's data-dependent branches (which child, push or not) mispredict often on
+incoherent rays, each flush discarding the work in flight. The interleaved kernel gives each kernel
+thread ``CPU_RAYS_PER_THREAD`` slots, each with its own ray state and stack, and steps them in turn
+(a slot takes the thread's next ray when its ray is done), with a branch-free inner-node step
+(:func:`inner_step_flat`: 0/1 arithmetic and selects; Warp turns ``and``/``or`` into branches and
+the compiler turns an integer select on the loop's chain back into one, so the choices are
+arithmetic), so the out-of-order core overlaps the slots' independent chains. Every ray makes the
+same choices as in :func:`trace_kd`: the same hits, bit for bit (tests). The branch-free step costs
+about twice the instructions of the branchy one, so it pays only where the branchy one stalls:
++7-8 % rays per CPU-second on the benchmark's incoherent (reordered) rays, sort included
+(``benchmarks/results/kdtree_ab_interleave.json``), but a third slower on camera rays, which keep one ray
+per thread. Tried and slower: interleaving with the branchy step (0.6-0.8x: a mispredicted branch
+in one slot flushes the others), more slots (3: no better, 4 and 8: slower: the slots' state no
+longer fits the registers), the slots as a loop instead of unrolled (slower), the pop after an
+empty leaf without branches (slower: it lengthens every step's chain), a float32 pre-reject in the
+leaves (no gain), one ray per kernel thread in a loop of several (no gain).
+
 On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
 ``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
 
@@ -93,8 +112,9 @@ import numpy as np
 import warp as wp
 
 from serenity.config import KD_MAX_DEPTH, KdBuildConfig
-from serenity.device import init_warp, resolve_device
+from serenity.device import cpu_threads, init_warp, resolve_device
 from serenity.errors import SerenityError
+from serenity.kernels.factory import kernel_factory
 from serenity.kernels.kdtree_build import (
     CACHE_MIN_TRIANGLES,
     PROGRESS_MIN_TRIANGLES,
@@ -106,7 +126,7 @@ from serenity.kernels.kdtree_build import (
     save_tree,
     validate_mesh,
 )
-from serenity.kernels.launch import launch
+from serenity.kernels.launch import MIN_ITEMS_PER_CHUNK, launch
 
 #: Kernels that trace (here and in ``raytrace``) are compiled without floating-point contraction
 #: (``fuse_fp``): NVRTC fuses a multiply and an add into one FMA across statements, which moved the
@@ -140,6 +160,13 @@ SORT_MIN_RUN = 4  # ... whose keys change on average more often than every this 
 #: ... estimated from this many evenly spaced pairs of consecutive rays (a coherent batch is then
 #: traced without a key per ray: 3 % of a camera batch's time)
 SORT_SAMPLE_PAIRS = 4096
+#: interleaved CPU queries (module docstring, "Interleaved rays"): the slot counts the kernel
+#: factory ``trace_rays_kernel`` compiles, the default for a reordered batch, and the most rays a
+#: slot takes in turn in one kernel thread (fewer when that would leave a launch too few chunks to
+#: balance the threads: ``_slot_rays``)
+INTERLEAVE_FACTORS = (2, 4)
+CPU_RAYS_PER_THREAD = 2
+RAYS_PER_SLOT = 8
 SORT_ORIGIN_BITS = 3  # at most 4: octant + 3 × bits must fit the 16-bit keys numpy radix-sorts
 
 assert STACK_SIZE & (STACK_SIZE - 1) == 0  # a power of 2: the stack index is masked (``_STACK_MASK``)
@@ -502,6 +529,75 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
     return prim, best_t, hit_u, hit_v
 
 
+@wp.func
+def inner_step_flat(head: int, split: float, oa: float, ia: float, axis_flags: int, t0: float, t1: float,
+                    teps: float):
+    """:func:`trace_kd`'s inner-node step without branches, for the interleaved kernels: the ray's
+    origin ``oa`` and inverse direction ``ia`` on the node's axis, ``axis_flags`` = (direction > 0)
+    | (parallel to the axis) << 1 there, its interval (t0, t1). Returns (next node, its t1, push
+    (0/1), the node to push, its t0, the next node is an empty leaf (0/1)); a pushed entry's t1 is
+    the ray's t1 before the step. The same choices as ``trace_kd``'s, as 0/1 arithmetic: a
+    mispredicted branch discards the other slots' work in flight, Warp turns ``and``/``or`` into
+    branches, and the compiler turns an integer select on the loop's chain back into one."""
+    child = head >> 4
+    dpos = axis_flags & 1
+    par = axis_flags >> 1
+    gt = wp.where(oa > split, 1, 0)
+    ge = wp.where(oa >= split, 1, 0)
+    swap = gt | (ge & dpos)  # 1: the origin is on the right child's side (on the plane: the ray goes there)
+    ts = (split - oa) * ia  # 0 when parallel (the origin lies in the root box, so split - oa is finite)
+    tn = ts + teps
+    tf = ts - teps
+    near_only = par | wp.where(ts <= 0.0, 1, 0) | wp.where(ts > t1 + teps, 1, 0)
+    far_only = (near_only ^ 1) & wp.where(ts < t0 - teps, 1, 0)
+    both = (near_only | far_only) ^ 1
+    pick = swap ^ far_only  # the next child: the origin's side, or the other one when only that is crossed
+    empty_second = (head >> (3 - swap)) & 1
+    # parallel to the plane and on it: both children, as in trace_kd (ge & not gt: oa == split)
+    push = (both | (par & ge & (gt ^ 1))) & (empty_second ^ 1)
+    new_t1 = wp.where((both & wp.where(tn < t1, 1, 0)) != 0, tn, t1)
+    pushed_t0 = wp.where(((par ^ 1) & wp.where(tf > t0, 1, 0)) != 0, tf, t0)
+    return child + pick, new_t1, push, child + 1 - swap, pushed_t0, (head >> (2 + pick)) & 1
+
+
+@wp.func
+def leaf_hits(
+    tree: KdTreeData,
+    first_ref: int,
+    count: int,
+    o: wp.vec3,
+    d: wp.vec3,
+    tlo: float,
+    best_t: float,
+    prim: int,
+    hit_u: float,
+    hit_v: float,
+    any_hit: bool,
+):
+    """A leaf of :func:`trace_kd`'s walk for the interleaved kernels: its ``count`` triangles from
+    reference ``first_ref`` on against the best hit so far (prim, best_t, hit_u, hit_v), which it
+    returns updated. Woop's set-up is made again here (one leaf per ray or so) rather than kept
+    per slot."""
+    kx, ky, kz, sx, sy, sz = setup_ray(d)
+    for j in range(count):
+        r = first_ref + j
+        p0 = ref_v0(tree.refs, r)
+        p1 = ref_v1(tree.refs, r)
+        p2 = ref_v2(tree.refs, r)
+        hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, p0, p1, p2, tlo, best_t)
+        f = int(-1)
+        if hit:
+            f = ref_prim(tree.refs, r)
+        if hit and (t < best_t or f < prim):
+            best_t = t
+            prim = f
+            hit_u = u
+            hit_v = v
+            if any_hit:
+                break
+    return prim, best_t, hit_u, hit_v
+
+
 # ----------------------------------------------------------------------------------------------
 # kernels
 # ----------------------------------------------------------------------------------------------
@@ -636,6 +732,177 @@ def occlude_rays(
     occluded[j] = wp.where(prim >= 0, 1, 0)
 
 
+@kernel_factory(rays=INTERLEAVE_FACTORS, any_hit=(False, True))
+def trace_rays_kernel(rays: int, any_hit: bool):
+    """The CPU query kernel with ``rays`` interleaved slots per kernel thread (module docstring,
+    "Interleaved rays"): thread g traces rays g·per_thread … (g + 1)·per_thread − 1 of the batch,
+    one step of each slot's ray in turn, each slot with its own state and stack, a slot taking the
+    next ray when its ray is done, so that the out-of-order core overlaps the slots' chains of
+    dependent node loads. The inner-node step is branch-free (:func:`inner_step_flat`). Every ray
+    visits the nodes and triangles ``trace_kd`` visits, in its order: the same hits, bit for bit.
+    ``any_hit``: occlusion (output ``occluded``), else closest hits (``hit_t`` … ``hit_v``)."""
+    vec_i = wp.types.vector(length=rays, dtype=wp.int32)
+    vec_f = wp.types.vector(length=rays, dtype=wp.float32)
+    mat_3 = wp.types.matrix(shape=(rays, 3), dtype=wp.float32)
+    mat_3i = wp.types.matrix(shape=(rays, 3), dtype=wp.int32)
+    stack_i = wp.types.matrix(shape=(rays, STACK_SIZE), dtype=wp.int32)
+    stack_f = wp.types.matrix(shape=(rays, STACK_SIZE), dtype=wp.float32)
+
+    @wp.func
+    def trace_range(
+        tree: KdTreeData,
+        origins: wp.array(dtype=wp.vec3),
+        directions: wp.array(dtype=wp.vec3),
+        tmin: float,
+        tmax: wp.array(dtype=float),
+        order: wp.array(dtype=wp.int32),
+        first: int,
+        end: int,
+        hit_t: wp.array(dtype=float),
+        hit_prim: wp.array(dtype=wp.int32),
+        hit_u: wp.array(dtype=float),
+        hit_v: wp.array(dtype=float),
+        occluded: wp.array(dtype=wp.int32),
+    ):
+        """:func:`trace_kd` of rays first … end − 1 over the slots (the loops over slots are
+        unrolled: each slot's state lives in registers or at fixed places); writes each ray's
+        result at its index (``order[i]`` when reordered)."""
+        o_m = mat_3()
+        d_m = mat_3()
+        inv_m = mat_3()
+        flags_m = mat_3i()
+        t0 = vec_f()
+        t1 = vec_f()
+        teps = vec_f()
+        best_t = vec_f()
+        hu = vec_f()
+        hv = vec_f()
+        prim = vec_i()
+        node = vec_i()
+        sp = vec_i()
+        ray = vec_i()  # the slot's ray; -1 before its first, -2 when no rays are left
+        fin = vec_i()  # 1: the slot's ray is done (write it out, take the next)
+        st_node = stack_i()
+        st_t0 = stack_f()
+        st_t1 = stack_f()
+        nxt = first
+        tlo = wp.max(tmin, 0.0)  # as start_ray's
+        alive = int(rays)
+        for r in range(wp.static(rays)):
+            ray[r] = -1
+            fin[r] = 1
+        while alive > 0:
+            for r in range(wp.static(rays)):
+                if fin[r] == 0:
+                    nd = node[r]
+                    head = node_head(tree.nodes, nd)
+                    axis = head & 3
+                    leaf_end = False
+                    if axis != 3:
+                        nn, new_t1, push, pushed, pushed_t0, empty = inner_step_flat(
+                            head, node_split(tree.nodes, nd), o_m[r, axis], inv_m[r, axis], flags_m[r, axis],
+                            t0[r], t1[r], teps[r])
+                        k = sp[r] & _STACK_MASK  # written whether pushed or not: above the top, unused
+                        st_node[r, k] = pushed
+                        st_t0[r, k] = pushed_t0
+                        st_t1[r, k] = t1[r]
+                        sp[r] = sp[r] + push
+                        node[r] = nn
+                        t1[r] = new_t1
+                        leaf_end = empty != 0
+                    else:
+                        rprim, rt, ru, rv = leaf_hits(tree, head >> 2, int(node_split(tree.nodes, nd)), o_m[r],
+                                                      d_m[r], tlo, best_t[r], prim[r], hu[r], hv[r],
+                                                      wp.static(any_hit))
+                        prim[r] = rprim
+                        best_t[r] = rt
+                        hu[r] = ru
+                        hv[r] = rv
+                        leaf_end = True
+                    if leaf_end:
+                        # a branch: rarer than the steps and mostly predicted (a branch-free pop
+                        # lengthens every step's chain: slower)
+                        if prim[r] >= 0 and (wp.static(any_hit) or best_t[r] <= t1[r]):
+                            fin[r] = 1
+                        else:
+                            popped = int(0)
+                            s = sp[r]
+                            while s > 0 and popped == 0:
+                                s -= 1
+                                k = s & _STACK_MASK
+                                node[r] = st_node[r, k]
+                                t0[r] = st_t0[r, k]
+                                t1[r] = st_t1[r, k]
+                                if t0[r] <= best_t[r]:
+                                    popped = 1
+                            sp[r] = s
+                            fin[r] = 1 - popped
+                elif ray[r] >= -1:
+                    i = ray[r]
+                    if i >= 0:
+                        j = i
+                        if order.shape[0] > 0:
+                            j = order[i]
+                        if wp.static(any_hit):
+                            occluded[j] = wp.where(prim[r] >= 0, 1, 0)
+                        else:
+                            hit_prim[j] = prim[r]
+                            hit_t[j] = wp.where(prim[r] >= 0, best_t[r], _INF)
+                            hit_u[j] = hu[r]
+                            hit_v[j] = hv[r]
+                    if nxt < end:
+                        o = origins[nxt]
+                        d = directions[nxt]
+                        tm = tmax[nxt]
+                        _kx, _ky, _kz, _sx, _sy, _sz, rinv, rt0, rt1, rteps, _tlo, rdone = start_ray(
+                            tree, o, d, tmin, tm)
+                        o_m[r] = o
+                        d_m[r] = d
+                        inv_m[r] = rinv
+                        for a in range(3):
+                            flags_m[r, a] = wp.where(d[a] > 0.0, 1, 0) | wp.where(rinv[a] == 0.0, 2, 0)
+                        t0[r] = rt0
+                        t1[r] = rt1
+                        teps[r] = rteps
+                        best_t[r] = tm
+                        prim[r] = -1
+                        hu[r] = 0.0
+                        hv[r] = 0.0
+                        node[r] = 0
+                        sp[r] = 0
+                        ray[r] = nxt
+                        fin[r] = wp.where(rdone, 1, 0)
+                        nxt += 1
+                    else:
+                        ray[r] = -2
+                        alive -= 1
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def trace_rays(
+        # inputs
+        tree: KdTreeData,
+        origins: wp.array(dtype=wp.vec3),
+        directions: wp.array(dtype=wp.vec3),
+        tmin: float,
+        tmax: wp.array(dtype=float),
+        order: wp.array(dtype=wp.int32),
+        n: int,
+        per_thread: int,
+        # outputs
+        hit_t: wp.array(dtype=float),
+        hit_prim: wp.array(dtype=wp.int32),
+        hit_u: wp.array(dtype=float),
+        hit_v: wp.array(dtype=float),
+        occluded: wp.array(dtype=wp.int32),
+        offset: int,
+    ):
+        first = (wp.tid() + offset) * per_thread
+        trace_range(tree, origins, directions, tmin, tmax, order, first, wp.min(first + per_thread, n),
+                    hit_t, hit_prim, hit_u, hit_v, occluded)
+
+    return trace_rays
+
+
 # ----------------------------------------------------------------------------------------------
 # host
 # ----------------------------------------------------------------------------------------------
@@ -700,6 +967,40 @@ def gather_in_order(order: wp.array, arrays: list, device: str, threads: int | N
         out.append(b)
     return out
 
+
+def _slot_rays(n: int, slots: int, threads: int | None) -> int:
+    """Rays per slot and kernel thread for ``n`` rays on ``slots`` slots: ``RAYS_PER_SLOT``, fewer
+    when the launch would otherwise have fewer than ``CHUNKS_PER_THREAD`` chunks of
+    ``MIN_ITEMS_PER_CHUNK`` kernel threads per worker (``serenity.kernels.launch``)."""
+    workers = threads or cpu_threads()
+    return max(1, min(RAYS_PER_SLOT, n // (slots * MIN_ITEMS_PER_CHUNK * workers * CHUNKS_PER_THREAD)))
+
+
+def _launch_query(any_hit: bool, n: int, inputs: list, outputs: list, device: str, threads: int | None,
+                  rays_per_thread: int | None) -> None:
+    """Launch the closest-hit (``any_hit=False``; outputs t, prim, u, v) or occlusion query (outputs
+    [occluded]) over ``n`` rays. ``inputs`` end with the trace order (empty: as given). On the CPU a
+    reordered batch goes to the interleaved kernel with ``CPU_RAYS_PER_THREAD`` slots
+    (:func:`trace_rays_kernel`), a batch in the caller's order (coherent: camera rays) to one ray
+    per kernel thread (``intersect_rays`` / ``occlude_rays``: faster there, module docstring);
+    ``rays_per_thread`` forces 1 (one ray) or a slot count of ``INTERLEAVE_FACTORS``. CUDA traces
+    one ray per thread (its parallelism is threads)."""
+    one_ray = occlude_rays if any_hit else intersect_rays
+    on_cpu = device.startswith("cpu")
+    k = rays_per_thread
+    if k is None:
+        k = CPU_RAYS_PER_THREAD if on_cpu and inputs[-1].shape[0] > 0 else 1
+    if k != 1 and k not in INTERLEAVE_FACTORS:
+        raise SerenityError(f"rays_per_thread={k}: 1 or one of {INTERLEAVE_FACTORS}")
+    if k == 1 or not on_cpu:
+        launch(one_ray, n, [*inputs, *outputs], device=device, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+        return
+    per = k * _slot_rays(n, k, threads)
+    none_f = wp.empty(0, dtype=float, device=device)
+    none_i = wp.empty(0, dtype=wp.int32, device=device)
+    outs = [none_f, none_i, none_f, none_f, *outputs] if any_hit else [*outputs, none_i]
+    launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device, threads=threads,
+           chunks_per_thread=CHUNKS_PER_THREAD)
 
 class KdTree:
     """An SAH kd-tree over a static triangle mesh, traversed by Warp kernels.
@@ -815,11 +1116,13 @@ class KdTree:
         return [data, origins, directions, tmin, tmax, order]
 
     def intersect(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
-                  threads: int | None = None, sort: bool | None = None) -> Hits:
+                  threads: int | None = None, sort: bool | None = None, rays_per_thread: int | None = None) -> Hits:
         """Closest hits of rays ``origins`` (N,3), ``directions`` (N,3) with tmin < t < tmax
         (scalar or (N,)); t in units of |direction|. ``sort``: trace the rays in the reordered
-        order (:func:`ray_order`; None = for batches of ≥ ``SORT_MIN_RAYS``); the results are the
-        same either way, in the caller's order."""
+        order (:func:`ray_order`; None = for batches of ≥ ``SORT_MIN_RAYS``); ``rays_per_thread``:
+        1 (one ray per kernel thread) or a slot count of ``INTERLEAVE_FACTORS`` (interleaved rays,
+        CPU only; None = interleaved when reordered, ``_launch_query``). The results are the same
+        either way, in the caller's order."""
         dev = resolve_device(device)
         o, d, tm = self._rays(origins, directions, tmax)
         n = len(o)
@@ -829,26 +1132,27 @@ class KdTree:
         out_v = wp.empty(n, dtype=float, device=dev)
         if n:
             args = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
-            args += [out_t, out_p, out_u, out_v]
-            launch(intersect_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+            _launch_query(False, n, args, [out_t, out_p, out_u, out_v], dev, threads, rays_per_thread)
         return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
-                 threads: int | None = None, sort: bool | None = None) -> np.ndarray:
+                 threads: int | None = None, sort: bool | None = None,
+                 rays_per_thread: int | None = None) -> np.ndarray:
         """(N,) bool: does anything lie on each ray with tmin < t < tmax? (any hit: the traversal
-        stops at the first one; ``sort`` as for :meth:`intersect`)"""
+        stops at the first one; ``sort`` and ``rays_per_thread`` as for :meth:`intersect`)"""
         dev = resolve_device(device)
         o, d, tm = self._rays(origins, directions, tmax)
         n = len(o)
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
-            args = [*self._query_inputs(o, d, tm, dev, tmin, sort, threads), out]
-            launch(occlude_rays, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+            args = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
+            _launch_query(True, n, args, [out], dev, threads, rays_per_thread)
         return out.numpy().astype(bool)
 
 
-__all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "PROGRESS_MIN_TRIANGLES", "SORT_MIN_RAYS", "Hits",
-           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_float",
-           "gather_in_order", "gather_vec3", "intersect_rays", "intersect_triangle", "intersect_triangle_fixed",
-           "node_head", "node_split", "occlude_rays", "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1",
-           "ref_v2", "sample_key_changes", "setup_ray", "sort_keys", "start_ray", "trace_kd"]
+__all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS",
+           "PROGRESS_MIN_TRIANGLES", "SORT_MIN_RAYS", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
+           "KdTreeData", "cache_dir", "finite", "gather_float", "gather_in_order", "gather_vec3", "inner_step_flat",
+           "intersect_rays", "intersect_triangle", "intersect_triangle_fixed", "leaf_hits", "node_head",
+           "node_split", "occlude_rays", "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2",
+           "sample_key_changes", "setup_ray", "sort_keys", "start_ray", "trace_kd", "trace_rays_kernel"]

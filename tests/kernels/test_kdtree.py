@@ -11,10 +11,13 @@ import trimesh
 from serenity.device import init_warp
 from serenity.errors import SerenityError
 from serenity.kernels.kdtree import (
+    CPU_RAYS_PER_THREAD,
+    INTERLEAVE_FACTORS,
     SORT_MIN_RAYS,
     TRACE_MODULE_OPTIONS,
     KdBuildConfig,
     KdTree,
+    inner_step_flat,
     intersect_triangle,
     ray_order,
     setup_ray,
@@ -214,6 +217,155 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
     octant = (d2[order] < 0) @ np.array([1, 2, 4])
     assert np.all(np.diff(octant) >= 0)
 
+
+
+def _edge_case_rays(rng, tree, n):
+    """Random rays with the traversal's edge cases mixed in: origins on split planes, rays inside
+    them and parallel to the axes, on many planes at once, invalid rays, and per-ray tmax."""
+    o, d = random_rays(rng, n, extent=2.0)
+    inner = (tree.node_head & 3) != 3
+    axes, planes = tree.node_head[inner] & 3, tree.node_split[inner]
+    q = n // 8
+    pick = rng.integers(0, len(planes), 2 * q)
+    rows = np.arange(2 * q)
+    o[rows, axes[pick]] = planes[pick]  # origin exactly on a split plane
+    d[rows[:q], axes[pick[:q]]] = 0.0  # ... and running inside it
+    d[2 * q:3 * q, :2] = 0.0  # along z only
+    o[3 * q:4 * q] = np.round(o[3 * q:4 * q] * 4) / 4  # on several planes at once
+    d[3 * q:4 * q] = np.round(d[3 * q:4 * q])  # axis-parallel or diagonal (some zero: invalid)
+    d[4 * q:4 * q + 8] = np.nan
+    o[4 * q + 8:4 * q + 16] = np.inf
+    tmax = rng.uniform(0.0, 4.0, n).astype(np.float32)
+    tmax[: n // 2] = np.inf
+    return o, d, tmax
+
+
+def test_interleaved_traversal_gives_the_one_ray_bits(device):
+    """The CPU's interleaved kernels (every slot count shipped, closest and any hit, reordered or
+    not, one thread or several) give the one-ray traversal's hits bit for bit, on rays that hit
+    split planes, run inside them, are axis-parallel or invalid, on a soup, a closed mesh and a
+    flat grid of coplanar triangles (on CUDA ``rays_per_thread`` is accepted and one ray per thread
+    is traced)."""
+    rng = np.random.default_rng(21)
+    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=40, minor_sections=20)
+    grid = trimesh.creation.box((4.0, 4.0, 4.0)).subdivide().subdivide()
+    gv = grid.vertices.astype(np.float32).copy()
+    gv[:, 1] = 0.0
+    scenes = [random_soup(rng, 800), (torus.vertices.astype(np.float32), torus.faces.astype(np.int32)),
+              (gv, grid.faces.astype(np.int32))]
+    for v, f in scenes:
+        tree = KdTree.build(v, f)
+        o, d, tmax = _edge_case_rays(rng, tree, 12_000)
+        one = tree.intersect(o, d, tmax, device=device, rays_per_thread=1, sort=False)
+        occ = tree.occluded(o, d, tmax, device=device, rays_per_thread=1, sort=False)
+        assert 0.05 < one.hit.mean() < 0.95
+        for k in INTERLEAVE_FACTORS:
+            for sort, threads in ((False, 1), (True, 1), (True, 3)):
+                kw = dict(device=device, rays_per_thread=k, sort=sort, threads=threads)
+                assert _hits_equal(tree.intersect(o, d, tmax, **kw), one), (k, sort, threads)
+                assert np.array_equal(tree.occluded(o, d, tmax, **kw), occ), (k, sort, threads)
+    with pytest.raises(SerenityError, match="rays_per_thread"):
+        tree.intersect(o, d, device="cpu", rays_per_thread=5)
+
+
+
+@wp.kernel
+def _steps(head: wp.array(dtype=int), split: wp.array(dtype=float), oa: wp.array(dtype=float),
+           da: wp.array(dtype=float), ia: wp.array(dtype=float), t0: wp.array(dtype=float),
+           t1: wp.array(dtype=float), teps: wp.array(dtype=float), flat: wp.array2d(dtype=float),
+           ref: wp.array2d(dtype=float)):
+    i = wp.tid()
+    flags = wp.where(da[i] > 0.0, 1, 0) | wp.where(ia[i] == 0.0, 2, 0)
+    nn, nt1, push, pushed, pt0, empty = inner_step_flat(head[i], split[i], oa[i], ia[i], flags, t0[i], t1[i],
+                                                        teps[i])
+    flat[i, 0] = float(nn)
+    flat[i, 1] = nt1
+    flat[i, 2] = float(push)
+    flat[i, 3] = float(pushed * push)
+    flat[i, 4] = pt0 * float(push)
+    flat[i, 5] = float(empty)
+    # trace_kd's step, as written there
+    h = head[i]
+    child = h >> 4
+    first = child
+    second = child + 1
+    empty_first = (h >> 2) & 1
+    empty_second = (h >> 3) & 1
+    if oa[i] > split[i] or (oa[i] == split[i] and da[i] > 0.0):
+        first = child + 1
+        second = child
+        empty_first = (h >> 3) & 1
+        empty_second = (h >> 2) & 1
+    node = first
+    tt1 = t1[i]
+    rpush = 0
+    rt0 = float(0.0)
+    leaf_end = empty_first
+    if ia[i] == 0.0:
+        if oa[i] == split[i] and empty_second == 0:
+            rpush = 1
+            rt0 = t0[i]
+    else:
+        ts = (split[i] - oa[i]) * ia[i]
+        if ts <= 0.0 or ts > t1[i] + teps[i]:
+            node = first
+        elif ts < t0[i] - teps[i]:
+            node = second
+            leaf_end = empty_second
+        else:
+            if empty_second == 0:
+                rpush = 1
+                rt0 = wp.max(t0[i], ts - teps[i])
+            tt1 = wp.min(t1[i], ts + teps[i])
+    ref[i, 0] = float(node)
+    ref[i, 1] = tt1
+    ref[i, 2] = float(rpush)
+    ref[i, 3] = float(second * rpush)
+    ref[i, 4] = rt0
+    ref[i, 5] = float(leaf_end)
+
+
+def test_branch_free_step_makes_trace_kd_s_choices():
+    """The interleaved kernels' branch-free inner-node step against ``trace_kd``'s branches, on
+    inputs drawn from a few values so that every tie occurs: origin on the plane, parallel rays
+    (inverse direction 0, direction 0 or tiny of either sign), the plane at the interval's ends
+    with and without the overlap, empty-leaf flags."""
+    rng = np.random.default_rng(23)
+    n = 200_000
+    head = ((rng.integers(1, 1000, n) << 4) | (rng.integers(0, 4, n) << 2) | rng.integers(0, 3, n)).astype(np.int32)
+    split = rng.choice([-1.0, 0.0, 0.5, 1.0], n).astype(np.float32)
+    oa = rng.choice([-1.0, 0.0, 0.5, 1.0, 2.0], n).astype(np.float32)
+    ia = rng.choice([0.0, 1.0, -1.0, 2.0, -2.0, 0.5, -0.5], n).astype(np.float32)
+    da = np.where(ia != 0, 1 / np.where(ia != 0, ia, 1), rng.choice([0.0, 1e-38, -1e-38], n)).astype(np.float32)
+    t0 = rng.choice([0.0, 0.25, 0.5, 1.0], n).astype(np.float32)
+    t1 = (t0 + rng.choice([0.0, 0.25, 0.5, 1.0, 2.0], n)).astype(np.float32)
+    teps = rng.choice([0.0, 0.25], n).astype(np.float32)
+    arrays = [wp.array(a, device="cpu") for a in (head, split, oa, da, ia, t0, t1, teps)]
+    flat = wp.zeros((n, 6), dtype=float, device="cpu")
+    ref = wp.zeros((n, 6), dtype=float, device="cpu")
+    wp.launch(_steps, n, [*arrays, flat, ref], device="cpu")
+    flat, ref = flat.numpy(), ref.numpy()
+    assert ref[:, 2].mean() > 0.05 and (ref[:, 0] != (head >> 4)).mean() > 0.1  # pushes, right children
+    assert np.array_equal(flat, ref)
+
+def test_big_incoherent_batches_are_traced_interleaved_and_coherent_ones_one_by_one(monkeypatch):
+    """The default CPU query: a reordered (incoherent) batch goes to the interleaved kernel with
+    ``CPU_RAYS_PER_THREAD`` slots, camera rays (left in their order) to one ray per thread."""
+    import serenity.kernels.kdtree as K
+
+    v, f = lumpy_mesh(3)
+    tree = KdTree.build(v, f)
+    launched = []
+    original = K.launch
+    monkeypatch.setattr(K, "launch", lambda kernel, *a, **kw: (launched.append(kernel), original(kernel, *a, **kw)))
+    oc, dc = camera_rays(320, 180, position=(0.0, 0.6, 3.5))
+    o2, d2 = random_rays(np.random.default_rng(22), SORT_MIN_RAYS + 1000, extent=2.0)
+    tree.intersect(oc, dc, device="cpu")
+    assert launched[-1] is K.intersect_rays
+    tree.intersect(o2, d2, device="cpu")
+    assert launched[-1] is K.trace_rays_kernel(CPU_RAYS_PER_THREAD, False)
+    tree.occluded(o2, d2, device="cpu")
+    assert launched[-1] is K.trace_rays_kernel(CPU_RAYS_PER_THREAD, True)
 
 def test_build_does_not_depend_on_the_thread_count():
     from serenity.kernels.kdtree_build import build_arrays
