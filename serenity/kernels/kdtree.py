@@ -63,14 +63,15 @@ thread ``CPU_RAYS_PER_THREAD`` slots, each with its own ray state and stack, and
 the compiler turns an integer select on the loop's chain back into one, so the choices are
 arithmetic), so the out-of-order core overlaps the slots' independent chains. Every ray makes the
 same choices as in :func:`trace_kd`: the same hits, bit for bit (tests). The branch-free step costs
-about twice the instructions of the branchy one, so it pays only where the branchy one stalls:
-+7-8 % rays per CPU-second on the benchmark's incoherent (reordered) rays, sort included
-(``benchmarks/results/kdtree_ab_interleave.json``), but a third slower on camera rays, which keep one ray
-per thread. Tried and slower: interleaving with the branchy step (0.6-0.8x: a mispredicted branch
-in one slot flushes the others), more slots (3: no better, 4 and 8: slower: the slots' state no
-longer fits the registers), the slots as a loop instead of unrolled (slower), the pop after an
-empty leaf without branches (slower: it lengthens every step's chain), a float32 pre-reject in the
-leaves (no gain), one ray per kernel thread in a loop of several (no gain).
+1.4-1.7 times the instructions per ray of the branchy one, so it pays only where that one stalls:
++6-8 % rays per CPU-second on the benchmark's incoherent (reordered) rays, sort included
+(``benchmarks/results/kdtree_ab_interleave.json``), but a third slower on camera rays, which keep
+one ray per thread. Tried in scratch A/Bs and slower or no better (README, "The kd-tree ray
+tracer", fifth round): interleaving with the branchy step (0.67-0.80x: a mispredicted branch in one
+slot flushes the others), fixed groups of rays instead of refilled slots, 3, 4 or 8 slots, the
+slots as a loop instead of unrolled, the push as a branch, the pop after an empty leaf without
+branches (it lengthens every step's chain), two steps per turn, the slots' rays far apart, a
+float32 pre-reject in the leaves, one ray per kernel thread in a loop of several.
 
 On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
 ``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
