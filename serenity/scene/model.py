@@ -157,33 +157,6 @@ class Mesh:
         if not np.all(np.isfinite(self.normals)) or not np.all(np.isfinite(self.uvs)):
             raise SceneError(f"mesh {n!r}: normals or uvs contain NaN or infinite values")
 
-    def content_bounds(self, margin: float = 0.1) -> np.ndarray:
-        """(2,3) float64 bounds of what stands on the ground: every triangle except those lying flat in
-        the scene's lowest horizontal plane (a ground plane), widened by ``margin`` × the contents'
-        horizontal extent on each side, down to the ground, and clipped to :attr:`bounds`. A ground
-        plane that reaches far beyond the buildings on it adds nothing a volume of light must hold
-        but open sky, so volumes fitted to this (``SkyConfig.fit = "content"``) spend their cells
-        where the geometry is. A scene that is only a ground plane (or has none) gives ``bounds``."""
-        full = self.bounds
-        extent = float(np.max(full[1] - full[0]))
-        eps = 1e-5 * max(extent, 1e-6)
-        keep = []
-        for m in self.meshes:
-            if not m.triangle_count:
-                continue
-            tri = m.positions[m.faces]  # (T, 3, 3)
-            flat = np.all(np.abs(tri[:, :, 1] - full[0, 1]) <= eps, axis=1)
-            keep.append(tri[~flat].reshape(-1, 3))
-        pts = np.concatenate(keep) if keep else np.zeros((0, 3))
-        if len(pts) == 0:
-            return full.copy()
-        lo, hi = pts.min(axis=0).astype(np.float64), pts.max(axis=0).astype(np.float64)
-        pad = margin * float(max(hi[0] - lo[0], hi[2] - lo[2]))
-        lo[[0, 2]] -= pad
-        hi[[0, 2]] += pad
-        lo[1] = full[0, 1]
-        return np.stack([np.maximum(lo, full[0]), np.minimum(hi, full[1])])
-
     @property
     def triangle_count(self) -> int:
         return int(len(self.faces))
