@@ -491,24 +491,9 @@ def trace_kd(tree: KdTreeData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float,
                     t1 = wp.min(t1, ts + teps)
                     leaf_end = empty_first != 0
         else:
-            first_ref = head >> 2
-            n = int(node_split(tree.nodes, node))
-            for j in range(n):
-                r = first_ref + j
-                p0 = ref_v0(tree.refs, r)
-                p1 = ref_v1(tree.refs, r)
-                p2 = ref_v2(tree.refs, r)
-                hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, p0, p1, p2, tlo, best_t)
-                f = int(-1)
-                if hit:
-                    f = ref_prim(tree.refs, r)
-                if hit and (t < best_t or f < prim):
-                    best_t = t
-                    prim = f
-                    hit_u = u
-                    hit_v = v
-                    if any_hit:
-                        break
+            prim, best_t, hit_u, hit_v = intersect_leaf(tree, head >> 2, int(node_split(tree.nodes, node)), o, kx,
+                                                        ky, kz, sx, sy, sz, tlo, best_t, prim, hit_u, hit_v,
+                                                        any_hit)
             leaf_end = True
         if leaf_end:
             if prim >= 0 and (any_hit or best_t <= t1):
@@ -562,12 +547,17 @@ def inner_step_flat(head: int, split: float, oa: float, ia: float, axis_flags: i
 
 
 @wp.func
-def leaf_hits(
+def intersect_leaf(
     tree: KdTreeData,
     first_ref: int,
     count: int,
     o: wp.vec3,
-    d: wp.vec3,
+    kx: int,
+    ky: int,
+    kz: int,
+    sx: float,
+    sy: float,
+    sz: float,
     tlo: float,
     best_t: float,
     prim: int,
@@ -575,11 +565,9 @@ def leaf_hits(
     hit_v: float,
     any_hit: bool,
 ):
-    """A leaf of :func:`trace_kd`'s walk for the interleaved kernels: its ``count`` triangles from
-    reference ``first_ref`` on against the best hit so far (prim, best_t, hit_u, hit_v), which it
-    returns updated. Woop's set-up is made again here (one leaf per ray or so) rather than kept
-    per slot."""
-    kx, ky, kz, sx, sy, sz = setup_ray(d)
+    """A leaf of :func:`trace_kd`'s walk: its ``count`` triangles from reference ``first_ref`` on,
+    against the ray's Woop set-up (:func:`setup_ray`), tested against the best hit so far (prim,
+    best_t, hit_u, hit_v), which it returns updated (the lower primitive index wins a tie)."""
     for j in range(count):
         r = first_ref + j
         p0 = ref_v0(tree.refs, r)
@@ -597,6 +585,27 @@ def leaf_hits(
             if any_hit:
                 break
     return prim, best_t, hit_u, hit_v
+
+
+@wp.func
+def leaf_hits(
+    tree: KdTreeData,
+    first_ref: int,
+    count: int,
+    o: wp.vec3,
+    d: wp.vec3,
+    tlo: float,
+    best_t: float,
+    prim: int,
+    hit_u: float,
+    hit_v: float,
+    any_hit: bool,
+):
+    """:func:`intersect_leaf` for the interleaved kernels, which make Woop's set-up again here (one
+    leaf per ray or so) rather than keep it per slot."""
+    kx, ky, kz, sx, sy, sz = setup_ray(d)
+    return intersect_leaf(tree, first_ref, count, o, kx, ky, kz, sx, sy, sz, tlo, best_t, prim, hit_u, hit_v,
+                          any_hit)
 
 
 # ----------------------------------------------------------------------------------------------
