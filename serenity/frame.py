@@ -526,9 +526,10 @@ class Renderer:
         with self._stage("sky volume build" if first else "sky volume update", gl=False):
             changed = sv.update(layers=sv.resolution[1] if first else self.config.sky_layers_per_frame)
             self._sky_built = True
-        if first and sv.visibility_textures() is not None:
+        visibility = sv.visibility_textures() if first else None
+        if visibility is not None:  # the gathered probes' depth moments: static, uploaded once
             with self._stage("sky upload"):
-                self.sky_gl.upload_visibility(*sv.visibility_textures())
+                self.sky_gl.upload_visibility(*visibility)
         if changed:
             self._sky_volume_version += 1
             with self._stage("sky upload"):

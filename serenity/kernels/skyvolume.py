@@ -33,13 +33,18 @@ f = 4t..4t+3 in RGBA, texture 6 holds f = 24..26 in RGB. ``textures()`` returns 
 arrays (Z, Y, X, 4) ×6 + (Z, Y, X, 3), ready for ``upload_texture3d`` (width X, height Y,
 depth Z).
 
-Lookup (``irradiance``; ``serenity/raster/glsl/sky.glsl``'s ``sky_volume_irradiance`` is the
-same arithmetic):
+Lookup (``irradiance``; ``serenity/raster/glsl/sky.glsl``'s ``sky_volume_lookup`` is the same
+arithmetic, ``interpolate_volume`` its numpy twin, ``probegather.volume_irradiance`` its Warp twin):
     p' = p + normal_offset_m·n;  g = clamp((p' − grid_origin)/cell_size, 0, resolution − 1);
     texture coordinate (g + ½)/resolution, trilinear (GL_LINEAR, clamp to edge) of the 27
-    coefficients; E(n) = max(0, Σ_k E_k·Y_k(n)) per channel, W·m⁻².
+    coefficients — for the gathered probes with ``SkyConfig.gather_visibility``, the 8 probes read
+    one by one, each weighed by its visibility (``probegather.probe_visibility``); beyond the grid's
+    sides and top the coefficients fade to the open sky's (``open_coefficients``) over
+    ``OPEN_FADE_CELLS``; E(n) = max(0, Σ_k E_k·Y_k(n)) per channel, W·m⁻², and (``glossy``) the radiance
+    around a direction filtered by the Phong lobe from the same coefficients (``glossy_band_factors``).
 ``normal_offset_m`` = ``normal_offset`` (in cells) × the smallest cell edge: it moves the lookup
-off the surface, away from probes behind it.
+off the surface, away from probes behind it. The grid covers the scene's bounds, or with
+``SkyConfig.fit = "content"`` what stands on the ground (``Scene.content_bounds``).
 
 Updating: ``update(layers=1)`` — the per-frame path — rebakes the sky map when the sun moved more
 than ``rebuild_angle_deg`` (``atmosphere.SkyMapCache``), which restarts the sweep at layer 0, then
