@@ -1,10 +1,10 @@
 """``serenity bench``: a frame benchmark in the manner of the paper's Table 1 (§10).
 
 Renders N frames along a camera path (a slow orbit-and-dolly around the camera's target) with the
-sun moving (a few minutes of the day per frame), first with the overlapped schedule and then
-serially, and reports per stage the median milliseconds, the total, FPS, the serial total and the
-overlap gain. Writes JSON and a timeline chart of one overlapped frame (paper Fig. 21): one lane
-for the main thread (GL passes and volume kernels), one for the CPU ray-tracing worker.
+sun moving (a few minutes of the day per frame), the overlapped and the serial schedule taking
+turns frame by frame (``run_schedules``), and reports per stage the median milliseconds, the total,
+FPS, the serial total and the overlap gain. Writes JSON and a timeline chart of one overlapped
+frame (paper Fig. 21): one lane for the main thread (GL passes and volume kernels), one for the CPU ray-tracing worker.
 
 Also tracked, for the "frame to frame" contract: the process's resident memory after each frame
 (it must stay flat: no per-frame allocation growth) and that no frame contains NaN.
@@ -74,24 +74,45 @@ def sun_path(base_dir: np.ndarray, t: float, degrees: float = 20.0) -> np.ndarra
 
 
 def run_frames(scene, width, height, frames, device=None, overlap=True, progress=True, quality="high"):
-    """Render ``frames`` frames of the path; returns per-frame records and the last Frame."""
-    scene = copy.deepcopy(scene)
-    base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-    renderer = Renderer(scene, width, height, device=device, config=RenderConfig.preset(quality, overlap=overlap))
-    records, frame, sample = [], None, None
-    label = "overlapped" if overlap else "serial"
-    for i in tqdm(range(frames), desc=f"bench {scene.name} ({label})", disable=not progress, unit="frame"):
-        t = i / max(1, frames - 1)
-        scene.camera = camera_path(base_cam, t)
-        scene.sun.direction = sun_path(base_sun, t)
-        # nothing read back, as in an interactive view; the tone-mapping pass counts the non-finite pixels
-        frame = renderer.render(read_back=False)
-        records.append({"timings": frame.timings, "wall_ms": frame.wall_ms, "cpu_ms": frame.cpu_ms, "rss_mb": rss_mb(),
-                        "nan": frame.nonfinite_pixels > 0, "rays": frame.rays})
-        if i == frames // 2:
-            sample = frame
-    renderer.close()
-    return records, sample or frame
+    """Render ``frames`` frames of the path with one schedule; returns (records, a sample Frame)."""
+    runs = run_schedules(scene, width, height, frames, device, (overlap,), progress, quality)
+    return runs[overlap]
+
+
+def run_schedules(scene, width, height, frames, device=None, schedules=(True, False), progress=True,
+                  quality="high"):
+    """Render the path once per schedule (overlap True / False), the schedules' renderers taking
+    turns frame by frame, each at the same camera and sun, in an order that alternates from frame
+    to frame. Interleaved, a drift of the machine's speed over the run (another job, the clock)
+    weighs on both alike; run one after the other, it showed as an overlap gain or loss of a few
+    per cent either way between runs of the same code. Returns {overlap: (records, the Frame of the
+    middle of the run)}."""
+    scenes = {o: copy.deepcopy(scene) for o in schedules}
+    base_cam, base_sun = scene.camera, np.asarray(scene.sun.direction, np.float64).copy()
+    renderers = {o: Renderer(scenes[o], width, height, device=device,
+                             config=RenderConfig.preset(quality, overlap=o)) for o in schedules}
+    records = {o: [] for o in schedules}
+    sample = {o: None for o in schedules}
+    label = " + ".join("overlapped" if o else "serial" for o in schedules)
+    try:
+        for i in tqdm(range(frames), desc=f"bench {scene.name} ({label})", disable=not progress, unit="frame"):
+            t = i / max(1, frames - 1)
+            order = schedules if i % 2 == 0 else tuple(reversed(schedules))
+            for o in order:
+                sc = scenes[o]
+                sc.camera = camera_path(base_cam, t)
+                sc.sun.direction = sun_path(base_sun, t)
+                # nothing read back, as in an interactive view; the tone-mapping pass counts the
+                # non-finite pixels
+                frame = renderers[o].render(read_back=False)
+                records[o].append({"timings": frame.timings, "wall_ms": frame.wall_ms, "cpu_ms": frame.cpu_ms,
+                                   "rss_mb": rss_mb(), "nan": frame.nonfinite_pixels > 0, "rays": frame.rays})
+                if i == frames // 2 or sample[o] is None:
+                    sample[o] = frame
+    finally:
+        for r in renderers.values():
+            r.close()
+    return {o: (records[o], sample[o]) for o in schedules}
 
 
 def summarise(records: list[dict], skip_first: int = 1) -> dict:
@@ -166,8 +187,8 @@ def bench(scene_name: str, width: int, height: int, frames: int, device=None, js
     scene = load(scene_name)
     device = resolve_device(device)
     t0 = time.perf_counter()
-    over_recs, sample = run_frames(scene, width, height, frames, device, overlap=True, quality=quality)
-    serial_recs, _ = run_frames(scene, width, height, frames, device, overlap=False, quality=quality)
+    runs = run_schedules(scene, width, height, frames, device, (True, False), quality=quality)
+    (over_recs, sample), (serial_recs, _) = runs[True], runs[False]
     over, serial = summarise(over_recs), summarise(serial_recs)
     rss = [r["rss_mb"] for r in over_recs]
     result = {
