@@ -3,9 +3,9 @@
     python benchmarks/bench_lpv_room.py [--json FILE] [--quick]
 
 For each LPV setting (``VARIANTS``: the settings before the closed-room work, each of its three changes
-alone — ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — all three, the default (all three +
-``lookup_planes``), and near-field / coverage-blocking / self-illumination-damping alternatives that were
-measured and not adopted):
+alone — ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — all three, round 12's default (all three +
+``lookup_planes``), near-field and coverage-blocking alternatives that were measured and not adopted,
+and the self-illumination damping, the default since round 13):
 
 - ``cornell_indirect``: the Cornell box's indirect light alone at 160×90 (ours = frame with the LPV −
   frame without it; the reference = Mitsuba full − direct, 4096 spp, cached — the same as
@@ -57,30 +57,33 @@ from serenity.scene import load  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 WALL = time.perf_counter
-BEFORE = {"clamp_faces": False, "lookup_occlusion": False, "scene_cells": 0.0, "lookup_planes": False}
+BEFORE = {"clamp_faces": False, "lookup_occlusion": False, "scene_cells": 0.0, "lookup_planes": False,
+          "self_damping": 0.0}
+#: round 12's default: everything of the closed-room work but the self-illumination damping
+UNDAMPED = {"self_damping": 0.0}
 VARIANTS = {
     "before (paper transfer, view-fitted cells)": BEFORE,
     "face clamp": {**BEFORE, "clamp_faces": True},
     "lookup occlusion": {**BEFORE, "lookup_occlusion": True},
     "scene-fitted coarsest cascade (6 cells)": {**BEFORE, "scene_cells": 6.0},
-    "all three (the previous default)": {"lookup_planes": False},
-    "default (all three + lookup planes)": {},
-    "default, scene-fitted 8 cells": {"scene_cells": 8.0},
-    "default + lookups without the injected lobes": {"accumulate_injected": False},
-    "default + injection offset 1 cell": {"injection_offset": 1.0},
+    "all three": {**UNDAMPED, "lookup_planes": False},
+    "all three + lookup planes (round 12's default)": UNDAMPED,
+    "round 12's default, scene-fitted 8 cells": {**UNDAMPED, "scene_cells": 8.0},
+    "round 12's default + lookups without the injected lobes": {**UNDAMPED, "accumulate_injected": False},
+    "round 12's default + injection offset 1 cell": {**UNDAMPED, "injection_offset": 1.0},
+    "round 12's default + injection offset 0.75 cell": {**UNDAMPED, "injection_offset": 0.75},
+    "round 12's default + coverage blocking": {**UNDAMPED, "coverage_blocking": True},
+    "+ self-illumination damping (1.5 cells, power 2)": {"self_damping": 1.5, "self_damping_power": 2.0},
+    "+ self-illumination damping (2 cells, power 2)": {"self_damping": 2.0, "self_damping_power": 2.0},
+    "**default (+ self-illumination damping, 2.5 cells, power 2)**": {},
     "default + coverage blocking": {"coverage_blocking": True},
     "default + coverage blocking, coarsest cascade 24 iterations": {"coverage_blocking": True,
                                                                     "iterations": (8, 24, 24)},
-    "default + self-illumination damping (2 cells, power 2)": {"self_damping": 2.0, "self_damping_power": 2.0},
-    "default + self-illumination damping (1.5 cells, power 2)": {"self_damping": 1.5, "self_damping_power": 2.0},
-    "default + self-illumination damping (2.5 cells, power 2)": {"self_damping": 2.5, "self_damping_power": 2.0},
-    "default + injection offset 0.75 cell": {"injection_offset": 0.75},
-    "default + self-illumination damping (2.5 cells) and coverage blocking": {"self_damping": 2.5,
-                                                                              "coverage_blocking": True},
 }
 
 COST_VARIANTS = {k: VARIANTS[k] for k in ("before (paper transfer, view-fitted cells)", "face clamp",
-                                          "all three (the previous default)", "default (all three + lookup planes)")}
+                                          "all three + lookup planes (round 12's default)",
+                                          "**default (+ self-illumination damping, 2.5 cells, power 2)**")}
 
 
 def _reference(scene, w, h, spp, component):

@@ -22,7 +22,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from serenity.config import RenderConfig
+from serenity.config import BENCH_QUALITY, RenderConfig
 from serenity.device import resolve_device
 from serenity.frame import LPV_UPDATE_STAGES, SKY_UPDATE_STAGES, STAGES, Renderer
 from serenity.optional import pyplot
@@ -183,7 +183,7 @@ def format_table(over: dict, serial: dict) -> str:
 
 
 def bench(scene_name: str, width: int, height: int, frames: int, device=None, json_path=None,
-          chart_path=None, quality: str = "medium") -> dict:
+          chart_path=None, quality: str = BENCH_QUALITY) -> dict:
     scene = load(scene_name)
     device = resolve_device(device)
     t0 = time.perf_counter()

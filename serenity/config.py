@@ -354,11 +354,15 @@ class LPVConfig:
     cells (the surfels' mean offset along each axis), and a surface on the far side of a blocker that
     shares its cell takes its home cell across it (a wall row just under a ceiling that lies in a
     cell's lower half no longer reads the light above the roof; compiled in/out)."""
-    self_damping: float = 0.0
+    self_damping: float = 2.5
     """Self-illumination damping (``kernels/lpv`` docstring, "Self-illumination"; 0 = off): an irradiance
     lookup's SH is scaled by (DC self_damping cells further along the normal / DC where it looks up)^
     ``self_damping_power``, clamped to [0, 1] (Kaplanyan & Dachsbacher 2010: light whose intensity falls
-    off along the normal flows away from the surface, most of it the surface's own)."""
+    off along the normal flows away from the surface, most of it the surface's own). On since round
+    13 (off before): a lit plane gets 0.02-0.05 of its exitance back instead of 0.33-0.41, the open
+    ground is within 5 % of the reference instead of 12 % too bright, and the Cornell box's indirect
+    light beats no LPV on relMSE and FLIP; the courtyard's FLIP rises by ~0.01
+    (``benchmarks/bench_lpv_room.py`` → ``lpv_room.json``)."""
     self_damping_power: float = 2.0
     """The exponent of ``self_damping``'s ratio."""
     coverage_blocking: bool = False
@@ -604,7 +608,7 @@ PRESETS: dict[str, dict] = {
     # the defaults: indirect light and SSAO at half resolution, the sky volume by visibility
     # transfer (every probe current every frame), the 256² sky map
     "high": {},
-    # what `serenity render` and `serenity bench` use unless told: indirect light and SSAO at quarter
+    # what `serenity bench` uses unless told (`serenity render` until round 12): indirect light and SSAO at quarter
     # resolution (the indirect light is smooth: the frontier's FLIP moved by under 0.002 from half
     # resolution, the LPV lighting pass got ~4x cheaper), shadow cascades of 2.4 texels per pixel of
     # the image (768² at 320×180; at most 1024²: 640×360 and up) redrawn in turn,
@@ -642,5 +646,12 @@ PRESETS: dict[str, dict] = {
 Each is one point of the speed-vs-error charts (``benchmarks/bench_frontier.py``)."""
 
 QUALITY_PRESETS = tuple(PRESETS)
-DEFAULT_QUALITY = "medium"
-"""The preset the command line renders with unless ``--quality`` says otherwise."""
+DEFAULT_QUALITY = "low"
+"""The preset ``serenity render``, ``view`` and ``sweep`` use unless ``--quality`` says otherwise.
+"low" since round 13 (``medium`` before): on the speed-vs-error frontier it is both the cheapest
+preset and the closest to the path-traced reference in both test scenes (README, "Against path
+tracing + denoising"), so it is what a user should get first; its name says what it costs, not
+how good it looks. The presets that keep the paper's LPV are a ``--quality`` away."""
+BENCH_QUALITY = "medium"
+"""The preset ``serenity bench`` times unless told: the paper's Table 1 has every technique on
+(SSAO, the LPV), which ``low`` leaves out."""

@@ -69,7 +69,7 @@ def report_error(error: BaseException) -> int:
     return 2
 
 
-def add_quality_argument(parser) -> None:
+def add_quality_argument(parser, default: str = DEFAULT_QUALITY) -> None:
     """``--quality`` (a ``RenderConfig.preset`` name)."""
-    parser.add_argument("--quality", choices=QUALITY_PRESETS, default=DEFAULT_QUALITY,
+    parser.add_argument("--quality", choices=QUALITY_PRESETS, default=default,
                         help="quality preset (default %(default)s; 'paper' = the paper's settings)")

@@ -171,13 +171,14 @@ def lpv_thin_wall(frac: float, geometry_volume: bool, leak_guard: bool, device=N
 
 def lpv_thin_wall_case(fracs=(0.1, 0.3, 0.5, 0.7, 0.9), device=None) -> Case:
     """Light leaking through a wall thinner than a cell, for wall positions across a cell: worst
-    E_dark/E_lit (exact 0) of the plain volume vs the default mitigations (geometry volume + leak
-    guard). Image: E_dark/E_lit per wall position (columns), plain (top) vs mitigated (bottom)."""
+    E_dark/E_lit (exact 0) of the plain volume (no geometry volume, leak guard or self-illumination
+    damping) vs the default mitigations (geometry volume + leak guard + damping). Image:
+    E_dark/E_lit per wall position (columns), plain (top) vs mitigated (bottom)."""
     plain, both, t_plain, t_both = [], [], 0.0, 0.0
-    lpv_thin_wall(fracs[0], False, False, device)  # compile both kernel variants outside the timing
+    lpv_thin_wall(fracs[0], False, False, device, self_damping=0.0)  # compile both variants outside the timing
     lpv_thin_wall(fracs[0], True, True, device)
     for f in fracs:
-        (d0, l0), ms0 = _timed(lpv_thin_wall, f, False, False, device)
+        (d0, l0), ms0 = _timed(lpv_thin_wall, f, False, False, device, self_damping=0.0)
         (d1, l1), ms1 = _timed(lpv_thin_wall, f, True, True, device)
         plain.append(d0 / l0)
         both.append(d1 / l1)
@@ -185,7 +186,8 @@ def lpv_thin_wall_case(fracs=(0.1, 0.3, 0.5, 0.7, 0.9), device=None) -> Case:
         t_both += ms1
     img = np.array([plain, both])
     return Case("LPV thin wall (5 cm, 1 m cells)", "lpv", "max E_dark/E_lit over wall positions in a cell",
-                "geometry volume + leak guard", max(plain), max(both), t_plain / len(fracs), t_both / len(fracs),
+                "geometry volume + leak guard + damping", max(plain), max(both), t_plain / len(fracs),
+                t_both / len(fracs),
                 exact=0.0, images={"exact": np.zeros_like(img), "without": img[:1], "with": img[1:],
                                    "error": img},
                 extra={"wall_position_in_cell": list(fracs), "ratio_plain": plain, "ratio_mitigated": both})
@@ -209,16 +211,19 @@ def lpv_self_illumination(y0: float, leak_guard: bool = True, device=None, surfe
 
 def lpv_self_illumination_case(heights=(3.01, 3.3, 3.6, 3.9), device=None) -> Case:
     """The LPV's known bias: a lit plane lights itself through its VPLs' wide L1 lobes. Worst E/M
-    over plane heights within a cell, leak guard off vs on (the only lookup-side mitigation)."""
-    lpv_self_illumination(heights[0], False, device)  # compile outside the timing
-    lpv_self_illumination(heights[0], True, device)
-    off, t_off = zip(*[_timed(lpv_self_illumination, y, False, device) for y in heights], strict=True)
-    on, t_on = zip(*[_timed(lpv_self_illumination, y, True, device) for y in heights], strict=True)
+    over plane heights within a cell, with its surfels in the geometry volume as in a frame, without
+    and with the self-illumination damping (``LPVConfig.self_damping``, on by default since round 13)."""
+    lpv_self_illumination(heights[0], True, device, surfels=True, self_damping=0.0)  # compile outside the timing
+    lpv_self_illumination(heights[0], True, device, surfels=True)
+    off, t_off = zip(*[_timed(lpv_self_illumination, y, True, device, surfels=True, self_damping=0.0)
+                       for y in heights], strict=True)
+    on, t_on = zip(*[_timed(lpv_self_illumination, y, True, device, surfels=True) for y in heights], strict=True)
     img = np.array([off, on])
     return Case("LPV self-illumination of a lit plane", "lpv", "max E_self/M over plane heights in a cell",
-                "leak guard", max(off), max(on), float(np.mean(t_off)), float(np.mean(t_on)), exact=0.0,
+                "self-illumination damping (2.5 cells)", max(off), max(on), float(np.mean(t_off)),
+                float(np.mean(t_on)), exact=0.0,
                 images={"exact": np.zeros_like(img), "without": img[:1], "with": img[1:], "error": img},
-                extra={"plane_height_m": list(heights), "ratio_no_guard": list(off), "ratio_guard": list(on)})
+                extra={"plane_height_m": list(heights), "ratio_undamped": list(off), "ratio_damped": list(on)})
 
 
 NEAR_FIELD_HALF = 4.0

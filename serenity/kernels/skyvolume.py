@@ -208,9 +208,29 @@ def lookup_sky_irradiance(
 # host
 
 
+#: the grid is at least this fraction of its widest side high: a scene that is (or whose contents
+#: are) flat, e.g. a ground plane alone, still gets a volume of light above it, not one layer of
+#: probes in the plane (which took the plane scene to 256 × 1 × 256 probes, more than asked for)
+MIN_HEIGHT_FRACTION = 1.0 / 16.0
+#: 3D textures of this size per axis are what every GL 4.x must allow (GL_MAX_3D_TEXTURE_SIZE,
+#: llvmpipe's limit too): the gathered probes' visibility atlas holds VIS_TILE texels per probe
+#: along x and z, so a grid with visibility has at most this / VIS_TILE probes along them
+GL_MIN_MAX_3D_TEXTURE = 2048
+
+
+def max_axis_probes(config: SkyConfig) -> int:
+    """The most probes along one axis of the grid: 255, or fewer where the visibility atlas must fit
+    a 3D texture (``GL_MIN_MAX_3D_TEXTURE``)."""
+    if config.method == "gather" and config.gather_visibility:
+        return min(255, GL_MIN_MAX_3D_TEXTURE // VIS_TILE)
+    return 255
+
+
 def fit_grid(bounds: np.ndarray, config: SkyConfig) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
-    """(origin (3,), cell_size (3,), resolution (X, Y, Z)) of the probe grid for scene bounds (2,3)."""
-    lo, hi = np.asarray(bounds, np.float64)
+    """(origin (3,), cell_size (3,), resolution (X, Y, Z)) of the probe grid for scene bounds (2,3),
+    raised to at least ``MIN_HEIGHT_FRACTION`` of its widest side above their floor."""
+    lo, hi = np.array(bounds, np.float64)
+    hi[1] = max(hi[1], lo[1] + MIN_HEIGHT_FRACTION * float(np.max(hi - lo)))
     extent = np.maximum(hi - lo, 0.0)
     centre = (lo + hi) / 2
     if config.resolution is not None:
@@ -222,7 +242,7 @@ def fit_grid(bounds: np.ndarray, config: SkyConfig) -> tuple[np.ndarray, np.ndar
         if c is None:
             vol = float(np.prod(np.maximum(extent, 1e-3 * max(float(extent.max()), 1e-3))))
             c = (vol / config.target_probes) ** (1.0 / 3.0)
-            c = max(c, float(extent.max()) / 255.0, 1e-6)
+            c = max(c, float(extent.max()) / (max_axis_probes(config) - 1), 1e-6)
         res = np.maximum(np.ceil(extent / c - 1e-9).astype(np.int64) + 1, 1)
         cell = np.full(3, float(c))
     origin = centre - (res - 1) * cell / 2

@@ -12,6 +12,8 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from serenity.errors import SerenityError
+
 _DTYPES = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
 
 
@@ -54,6 +56,10 @@ def upload_texture3d(ctx, arr: np.ndarray, dtype: str = "f4"):
     """A 3-D texture from (D, H, W, C) data (no flip: volumes are indexed as stored)."""
     a = np.ascontiguousarray(arr, dtype=_DTYPES[dtype])
     d, h, w, c = a.shape
+    limit = int(ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 0) or 0)
+    if limit and max(w, h, d) > limit:  # GL would fail later, at an unrelated call, with a bare 0x501
+        raise SerenityError(f"a volume of {w} x {h} x {d} texels does not fit this GL's 3D textures "
+                            f"(at most {limit} per axis); use a coarser grid")
     tex = ctx.texture3d((w, h, d), c, a.tobytes(), dtype=dtype)
     tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
     tex.repeat_x = tex.repeat_y = tex.repeat_z = False

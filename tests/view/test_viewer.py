@@ -74,26 +74,28 @@ def test_time_of_day_gives_the_noaa_sun():
 
 
 def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
+    from serenity.config import DEFAULT_QUALITY
     from serenity.view.controls import Settings, quality_config
 
-    s = Settings()
+    q = "medium"  # a preset with every technique (the default, low, has no SSAO and no LPV)
+    s = Settings(quality=q)
     base = s.config()
     for name, value in (("exposure", 0.05), ("ssao", False), ("shadow_filter", "pcf"), ("lpv_diffuse", False),
                         ("lpv_glossy", False), ("reflections", False), ("refractions", False), ("taa", False)):
-        t = Settings(**{name: value})
+        t = Settings(quality=q, **{name: value})
         assert not Settings.needs_rebuild(base, t.config()), name
     for name, value in (("sky_lighting", False), ("quality", "low")):
-        assert Settings.needs_rebuild(base, Settings(**{name: value}).config()), name
+        assert Settings.needs_rebuild(base, Settings(**{"quality": q, name: value}).config()), name
     # one term of a pair switches live; both off turns the technique off, which needs a rebuild
-    lpv = Settings(lpv_glossy=False).config().lpv
+    lpv = Settings(quality=q, lpv_glossy=False).config().lpv
     assert lpv.enabled and lpv.diffuse and not lpv.glossy
-    off = Settings(lpv_diffuse=False, lpv_glossy=False).config()
+    off = Settings(quality=q, lpv_diffuse=False, lpv_glossy=False).config()
     assert not off.lpv.enabled and Settings.needs_rebuild(base, off)
-    rt = Settings(refractions=False).config()
+    rt = Settings(quality=q, refractions=False).config()
     assert rt.ray_tracing and rt.reflections and not rt.refractions
-    off = Settings(reflections=False, refractions=False).config()
+    off = Settings(quality=q, reflections=False, refractions=False).config()
     assert not off.ray_tracing and Settings.needs_rebuild(base, off)
-    assert quality_config("medium") == Settings().config(), "the viewer starts at serenity render's quality"
+    assert quality_config(DEFAULT_QUALITY) == Settings().config(), "the viewer starts at serenity render's quality"
     with pytest.raises(SerenityError, match="quality preset"):
         quality_config("ultra")
 
@@ -220,8 +222,10 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
               f'[[step]]\nframe = {done + 1}\nkey = "W"\n[[step]]\nframe = {done + 2}\nexit = true\n')
     (tmp_path / "s.toml").write_text(SCRIPT.replace("{still}", str(still)).replace("{views}", views))
     env = {**os.environ, "PYTHONPATH": ROOT}
+    # medium: the live switches under test (SSAO, the LPV) are not in the default preset, low
     cmd = _xvfb_prefix() + [sys.executable, "-m", "serenity", "view", "courtyard", "--size", f"{SIZE[0]}x{SIZE[1]}",
-                            "--script", "s.toml", "--trace", "trace.json", "--out-dir", "saved", "--taa", str(TAA)]
+                            "--quality", "medium", "--script", "s.toml", "--trace", "trace.json", "--out-dir", "saved",
+                            "--taa", str(TAA)]
     p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900, cwd=tmp_path)
     if p.returncode != 0 and "cannot open a window" in p.stderr:
         pytest.skip(f"no X server could be had: {p.stderr.strip().splitlines()[-1]}")
@@ -256,7 +260,8 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     saved = tmp_path / "saved" / "courtyard_000"
     f12 = np.asarray(Image.open(str(saved) + ".png").convert("RGB")).astype(np.int16)
     out = tmp_path / "render.png"
-    assert main(["render", str(saved) + ".toml", "--size", f"{SIZE[0]}x{SIZE[1]}", "-o", str(out)]) == 0
+    assert main(["render", str(saved) + ".toml", "--size", f"{SIZE[0]}x{SIZE[1]}", "--quality", "medium",
+                 "-o", str(out)]) == 0
     ref = np.asarray(Image.open(out).convert("RGB")).astype(np.int16)
     assert shot.shape == ref.shape == (SIZE[1], SIZE[0], 3)
     assert np.array_equal(shot, f12), "the window shows exactly the frame F12 saved"
