@@ -93,19 +93,21 @@ def test_lpv_terms_add_up_and_both_off_skip_the_pass(courtyard):
 
 def test_lpv_self_damping_is_compiled_in_when_on(courtyard):
     """``LPVConfig.self_damping`` is compiled into the LPV lighting passes only when on (lpv.glsl's
-    LPV_DAMPING; fixed when the renderer is built, like the LPV's other lookup settings): a renderer
-    built with it dims the LPV's light (never brightens it) and leaves the rest."""
+    LPV_DAMPING; fixed when the renderer is built, like the LPV's other lookup settings; on by
+    default since round 13): the damped default renderer's LPV light is at most the undamped
+    one's (never brighter), and the two differ."""
     base = RenderConfig.preset("medium", indirect_scale=1)
+    assert base.lpv.self_damping > 0
     r = Renderer(load("courtyard"), W, H, config=dataclasses.replace(
-        base, lpv=dataclasses.replace(base.lpv, self_damping=2.5)))
+        base, lpv=dataclasses.replace(base.lpv, self_damping=0.0)))
     try:
         r.render()
-        damped = r.render().hdr
+        undamped = r.render().hdr
     finally:
         r.close()
-    full = courtyard.full.hdr
-    assert np.abs(damped - full).max() > 0
-    assert np.all(damped <= full * (1 + 1e-4) + 1e-4 * full.max())
+    damped = courtyard.full.hdr
+    assert np.abs(damped - undamped).max() > 0
+    assert np.all(damped <= undamped * (1 + 1e-4) + 1e-4 * undamped.max())
 
 
 def test_reflections_off_changes_only_reflecting_pixels(courtyard):

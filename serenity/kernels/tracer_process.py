@@ -25,6 +25,11 @@ from __future__ import annotations
 
 import os
 import pickle
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows: the pipes keep their size
+    fcntl = None
 import struct
 import subprocess
 import sys
@@ -51,8 +56,9 @@ PIPE_BYTES = 1 << 20
 
 
 def _widen(fd: int) -> None:
-    """Let ``fd``'s pipe hold PIPE_BYTES (or the system's ``pipe-max-size``), where the OS allows."""
-    import fcntl
+    """Let ``fd``'s pipe hold PIPE_BYTES (or 256 KiB), where the OS allows (Linux)."""
+    if fcntl is None:  # pragma: no cover - not POSIX
+        return
     for size in (PIPE_BYTES, 1 << 18):
         try:
             fcntl.fcntl(fd, getattr(fcntl, "F_SETPIPE_SZ", 1031), size)
