@@ -73,12 +73,6 @@ def sun_path(base_dir: np.ndarray, t: float, degrees: float = 20.0) -> np.ndarra
     return direction_from_angles(max(-5.0, el - degrees / 2 * t), az + degrees * t)
 
 
-def run_frames(scene, width, height, frames, device=None, overlap=True, progress=True, quality="high"):
-    """Render ``frames`` frames of the path with one schedule; returns (records, a sample Frame)."""
-    runs = run_schedules(scene, width, height, frames, device, (overlap,), progress, quality)
-    return runs[overlap]
-
-
 def run_schedules(scene, width, height, frames, device=None, schedules=(True, False), progress=True,
                   quality="high"):
     """Render the path once per schedule (overlap True / False), the schedules' renderers taking
