@@ -478,6 +478,12 @@ class RenderConfig:
     overlap: bool = True
     """Run the CPU ray tracing in a worker thread while the GL work proceeds (paper §10); False
     traces inline first (the serial schedule, for comparison)."""
+    overlap_volumes: bool = True
+    """With ``overlap``, on the CPU: the volumes' kernels (the sky volume's update from the frame's
+    start; the LPV's VPLs, injection and propagation once its RSM is read back) run in a worker
+    thread while the main thread issues the GL passes that do not need them (G-buffer, ray-casting
+    buffer, shadow cascades, SSAO), as on a GPU they would queue beside them. False: on the main
+    thread between those passes (the serial schedule always does)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
     rt_sun_shadows: str = "traced"
@@ -610,15 +616,17 @@ PRESETS: dict[str, dict] = {
     "high": {},
     # what `serenity bench` uses unless told (`serenity render` until round 12): indirect light and SSAO at quarter
     # resolution (the indirect light is smooth: the frontier's FLIP moved by under 0.002 from half
-    # resolution, the LPV lighting pass got ~4x cheaper), shadow cascades of 2.4 texels per pixel of
-    # the image (768² at 320×180; at most 1024²: 640×360 and up) redrawn in turn,
-    # fewer PCSS, SSAO and glossy-LPV taps, a 96² sky map baked in 12 steps, the sky volume re-lit one
-    # layer per frame after a rebake (the paper's sweep, by transfer), coarser RSM and sky VPLs
+    # resolution, the LPV lighting pass got ~4x cheaper), shadow cascades of 1.6 texels per pixel of
+    # the image (512² at 320×180; at most 1024²) redrawn in turn and no contact-shadow march (round
+    # 14: both ~2 ms at 320×180, FLIP 0.1188 -> 0.1166, relMSE 0.0277 -> 0.0307 by bench_pass_ab;
+    # 2.4 texels and 6 steps before), fewer PCSS, SSAO and glossy-LPV taps, a 64² sky map baked in
+    # 12 steps (96² before: FLIP +0.0003, relMSE unchanged), the sky volume re-lit one layer per
+    # frame after a rebake (the paper's sweep, by transfer), coarser RSM and sky VPLs
     "medium": {"indirect_scale": 4,
-               "shadow": {"size": 1024, "texels_per_pixel": 2.4, "blocker_samples": 6, "filter_samples": 12,
-                          "stagger": True},
+               "shadow": {"size": 1024, "texels_per_pixel": 1.6, "blocker_samples": 6, "filter_samples": 12,
+                          "stagger": True, "contact_steps": 0},
                "ssao": {"directions": 6, "steps": 2},
-               "sky": {"sky_map_size": 96, "sky_steps": 12, "transfer_layers": 1},
+               "sky": {"sky_map_size": 64, "sky_steps": 12, "transfer_layers": 1},
                "lpv": {"glossy_steps": 4, "stagger": True},
                "rsm_size": 128, "sky_vpl_stride": 8},
     # the cheapest, and since round 11 beyond the paper: indirect light at quarter resolution, 3 shadow

@@ -53,7 +53,7 @@ from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.skyvolume import SkyVolume
 from serenity.kernels.tracer_process import TracerProcess
 from serenity.raster.composite import CompositePass
-from serenity.raster.context import get_context
+from serenity.raster.context import finish, get_context
 from serenity.raster.deferred import DeferredPass, LightingInputs
 from serenity.raster.fxaa import FXAAPass
 from serenity.raster.gbuffer import GBufferPass
@@ -75,9 +75,9 @@ MAIN_LANE = "main (GL + volumes)"
 STAGES = (
     "upload",
     "g-buffer", "ray casting buffer", "kd-tree build", "cpu ray tracing",  # sync 1, the tracer starts
-    "sky volume build", "sky volume update", "sky upload",             # paper §7
-    "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload",  # paper §8
-    "shadow maps (CSM)", "low-res guide", "ssao",                      # the main view
+    "sky volume build", "sky volume update", "wait for volumes", "sky upload",  # paper §7
+    "rsm", "lpv inputs", "lpv inject", "lpv propagate",                # paper §8
+    "shadow maps (CSM)", "low-res guide", "ssao", "lpv upload",        # the main view
     "sun visibility", "direct lighting", "sky lighting", "lpv lighting",
     "wait for ray tracing", "rt g-buffer upload", "shadow maps (OSM)",  # sync 2, paper §9
     "rt direct lighting", "rt sky lighting", "rt lpv lighting", "composite",
@@ -85,7 +85,11 @@ STAGES = (
 )
 """Every stage a frame can time, in pipeline order (``Frame.timings`` keys are a subsequence; with
 ``indirect_scale`` > 1 "sky lighting" and "lpv lighting" run at low resolution before "direct
-lighting", which then includes their upsampling: one full-resolution pass)."""
+lighting", which then includes their upsampling: one full-resolution pass). "rsm" includes the
+read-back of the RSM and of the G-buffer's samples; with the volume worker
+(``RenderConfig.overlap_volumes``) "sky volume update", "lpv inputs", "lpv inject" and "lpv
+propagate" run on its lane beside the GL stages, and "wait for volumes" is what the main thread
+waited for them."""
 LPV_UPDATE_STAGES = ("rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload")
 """The parts of the paper's "Light Propagation Volumes Update" (Table 1)."""
 SKY_UPDATE_STAGES = ("sky volume update", "sky upload")
@@ -93,6 +97,7 @@ SKY_UPDATE_STAGES = ("sky volume update", "sky upload")
 READ_BACK = ("hdr", "ldr", "aovs")
 """What ``Renderer.render(read_back=...)`` can bring back to the host."""
 RT_LANE = "worker (CPU ray tracing)"
+VOLUME_LANE = "worker (volume kernels)"
 
 
 @dataclass
@@ -227,10 +232,20 @@ class Renderer:
                 self._pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-rt")
                               if cfg.overlap and not str(self.device).startswith("cpu") else None)
             self._init_gi()
+            # the volumes' kernels beside the GL passes (``_render``): on the CPU only, where the GL
+            # passes are llvmpipe's threads and the kernels would otherwise wait for them in turn
+            # ("gather" sky volumes stay on the main thread: their passes are split over every core
+            # already, and beside the GL passes they only slowed both: low at 320×180 1.09× serial)
+            self._sky_in_worker = self.sky_volume is not None and cfg.sky.method != "gather"
+            self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-volumes")
+                                 if cfg.overlap and cfg.overlap_volumes and str(self.device).startswith("cpu")
+                                 and (self._sky_in_worker or self.lpv is not None) else None)
         self._upload_ms = self._timings.pop("upload")
         self._first = True
         self._changes = ChangeTracker()
         self._lpv_inputs_version = 0  # counts the changes of the LPV's inputs (its update key)
+        self._lpv_pending_upload = False  # the LPV changed since its textures were uploaded
+        self._lpv_sky_version = 0  # the sky volume's version the LPV's sky-light VPLs were last made from
 
     # ------------------------------------------------------------------------------------ timing
 
@@ -243,12 +258,24 @@ class Renderer:
     def _stage(self, name: str, gl: bool = True) -> Iterator[None]:
         sync = self.config.sync_stages
         if not gl and sync == "cpu":  # the queued GL work first: it would contend with this stage's
-            self.ctx.finish()           # CPU work for the cores
+            finish(self.ctx)           # CPU work for the cores
         t0 = time.perf_counter()
         yield
         if gl and sync == "each":
-            self.ctx.finish()
+            finish(self.ctx)  # the GIL released while llvmpipe renders: the volume worker goes on
         self._record(MAIN_LANE, name, t0, time.perf_counter())
+
+    @contextmanager
+    def _cpu_stage(self, name: str) -> Iterator[None]:
+        """A stage of host work (numpy, Warp launches) on whichever thread runs it: the volume worker's
+        lane when that is the calling thread, else ``_stage`` (no GL call here: the worker has none)."""
+        if threading.current_thread() is threading.main_thread() or self._volume_pool is None:
+            with self._stage(name, gl=False):
+                yield
+            return
+        t0 = time.perf_counter()
+        yield
+        self._record(VOLUME_LANE, name, t0, time.perf_counter())
 
     def _init_gi(self) -> None:
         """The volumes: the sky irradiance volume (paper §7) and the light propagation volumes
@@ -316,13 +343,31 @@ class Renderer:
             proj[1, 2] -= 2.0 * float(jitter[1]) / self.height
         view_proj = proj @ cam.view_matrix()
         light = lighting_inputs(self.scene, self.config, view_proj)
+        pool = self._volume_pool
+        sky_job = sky_may_change = None
+        if pool is not None and self._sky_in_worker:  # the sky volume needs only the sun: it starts at once
+            sky_may_change = self.sky_volume.may_change()
+            sky_job = pool.submit(self._compute_sky)
         with self._stage("g-buffer"):
             gbuf = self.gbuffer_pass.render(view_proj, self.scene.camera.position)
         rcb, join = self._start_ray_tracing(view_proj, gbuf)            # sync 1
-        # the volumes first: their Warp kernels mostly keep one core busy, so the tracer process gets
-        # the other; the GL passes that follow keep both busy (llvmpipe's threads)
-        self._update_volumes(gbuf, light)
-        shadow, ao, guide = self._main_view(view_proj, gbuf)
+        if pool is None:
+            # the volumes first: their Warp kernels mostly keep one core busy, so the tracer process
+            # gets the other; the GL passes that follow keep both busy (llvmpipe's threads)
+            self._update_volumes(gbuf, light)
+            shadow, ao, guide = self._main_view(view_proj, gbuf)
+        else:  # the LPV's kernels in the worker too, after the sky's; the main view's GL passes beside them
+            if self.sky_volume is not None and sky_job is None:  # a "gather" sky volume: here, in turn
+                self._upload_sky(self._compute_sky())
+                sky_may_change = self._lpv_sky_version != self._sky_volume_version  # known now
+            lpv_job = self._start_lpv(gbuf, light, sky_may_change)
+            shadow, ao, guide = self._main_view(view_proj, gbuf)
+            with self._stage("wait for volumes", gl=False):
+                prepared = sky_job.result() if sky_job is not None else None
+                if lpv_job is not None:
+                    lpv_job.result()
+            self._upload_sky(prepared)
+            self._upload_lpv()
         lit = self._light_main_view(gbuf, shadow, light, ao, guide)
         out_hdr = self._ray_traced_views(rcb, join, gbuf, lit, light)  # sync 2
         if self.fxaa_pass is not None:
@@ -336,7 +381,7 @@ class Renderer:
         self.outputs = {"hdr": out_hdr, "ldr": self.tonemap_pass.ldr, "direct": lit.direct, "ao": ao,
                         "gbuffer": gbuf, "rcb": rcb}
         hdr, ldr, aovs = self._read_back(wanted, out_hdr, gbuf, lit, ao, rcb, cam)
-        self.ctx.finish()  # the frame is done when its GL work is (sync_stages other than "each" leave some queued)
+        finish(self.ctx)  # the frame is done when its GL work is (sync_stages other than "each" leave some queued)
         return self._end_frame(hdr, ldr, aovs, rcb)
 
     def render_accumulated(self, samples: int) -> Frame:
@@ -423,18 +468,48 @@ class Renderer:
 
     def _update_volumes(self, gbuf, light: LightingInputs) -> None:
         """The sky irradiance volume (paper §7) and the light propagation volumes (paper §8), each
-        only as far as the sun, the sky and the camera changed."""
+        only as far as the sun, the sky and the camera changed; on this thread, in turn."""
         if self.sky_volume is not None:
-            self._update_sky()
-        if self.lpv is not None:
-            cam = self.scene.camera
-            changed = self._changes.changed(
-                lpv=np.concatenate([self.scene.sun.direction, light.sun_irradiance, cam.position, cam.target,
-                                    [cam.fov_y_deg, self._sky_volume_version]]))
-            if changed:
-                self._lpv_inputs_version += 1
-            if changed or self.lpv.pending_levels:  # LPVConfig.stagger: the cascades still behind
-                self._update_lpv(gbuf, light.sun_irradiance)
+            self._upload_sky(self._compute_sky())
+        if self.lpv is None:
+            return
+        view_changed = self._lpv_view_changed(light)
+        if view_changed or self._lpv_sky_version != self._sky_volume_version or self.lpv.pending_levels:
+            self._lpv_job(view_changed, self._read_lpv_inputs(gbuf, light.sun_irradiance))
+            self._upload_lpv()
+
+    def _start_lpv(self, gbuf, light: LightingInputs, sky_may_change: bool | None):
+        """With the volume worker: read the LPV's inputs back from GL and queue its kernels behind
+        the sky volume's update, when the LPV may change this frame (the view changed, a staggered
+        cascade is behind, or the sky volume may change: ``SkyVolume.may_change``, asked before its
+        update started). The worker then decides exactly (``_lpv_job``). Returns the job or None."""
+        if self.lpv is None:
+            return None
+        view_changed = self._lpv_view_changed(light)
+        if not (view_changed or sky_may_change or self.lpv.pending_levels):
+            return None
+        return self._volume_pool.submit(self._lpv_job, view_changed,
+                                        self._read_lpv_inputs(gbuf, light.sun_irradiance))
+
+    def _lpv_view_changed(self, light: LightingInputs) -> bool:
+        """Whether the LPV's inputs other than the sky volume (the sun, its irradiance, the camera)
+        changed since the last frame (main thread: the change tracker's state)."""
+        cam = self.scene.camera
+        return self._changes.changed(
+            lpv=np.concatenate([self.scene.sun.direction, light.sun_irradiance, cam.position, cam.target,
+                                [cam.fov_y_deg]]))
+
+    def _lpv_job(self, view_changed: bool, inputs) -> None:
+        """Re-inject and propagate when the LPV's inputs changed (the view, or the sky volume since the
+        LPV last read it: the sky-light VPLs) or a staggered LPV's cascades are still behind
+        (``LPVConfig.stagger``); else nothing (the inputs were read for a sky that did not change)."""
+        sky_changed = self._lpv_sky_version != self._sky_volume_version
+        if view_changed or sky_changed:
+            self._lpv_inputs_version += 1
+            self._lpv_sky_version = self._sky_volume_version
+        elif not self.lpv.pending_levels:
+            return
+        self._compute_lpv(*inputs)
 
     def _light_main_view(self, gbuf, shadow, light: LightingInputs, ao, guide):
         """Phong + CSM/PCSS and the sky volume's and the LPV's light: at full resolution added onto
@@ -517,61 +592,85 @@ class Renderer:
         shape = points.shape[:-1]
         return self.sky_volume.irradiance_wp(points.reshape(-1, 3), normals.reshape(-1, 3)).reshape(*shape, 3)
 
-    def _update_sky(self) -> None:
+    def _compute_sky(self) -> dict | None:
         """The sky volume follows the sky (``SkyVolume.update``: the whole volume on the first
-        frame; then by transfer, or ``sky_layers_per_frame`` layers of the paper's sweep); the sky
-        map and the volume's textures are uploaded when they changed."""
+        frame; then by transfer, or ``sky_layers_per_frame`` layers of the paper's sweep), and the
+        host side of its upload is prepared: the sky map when rebaked, the open sky's coefficients,
+        the texture arrays of the layers that changed. No GL: the volume worker may run it. Returns
+        what ``_upload_sky`` writes, or None when no probe changed."""
         sv = self.sky_volume
         first = not self._sky_built
-        with self._stage("sky volume build" if first else "sky volume update", gl=False):
+        with self._cpu_stage("sky volume build" if first else "sky volume update"):
             changed = sv.update(layers=sv.resolution[1] if first else self.config.sky_layers_per_frame)
             self._sky_built = True
-        visibility = sv.visibility_textures() if first else None
-        if visibility is not None:  # the gathered probes' depth moments: static, uploaded once
-            with self._stage("sky upload"):
-                self.sky_gl.upload_visibility(*visibility)
-        if changed:
-            self._sky_volume_version += 1
-            with self._stage("sky upload"):
-                if sv.sky.version != self._sky_map_version:
-                    self.sky_gl.upload_sky_map(sv.sky_map())
-                    self._sky_map_version = sv.sky.version
-                self.sky_gl.set_open_sky(sv.open_coefficients())
+            if not changed and not first:
+                return None
+            out = {"visibility": sv.visibility_textures() if first else None, "changed": changed}
+            if changed:
+                self._sky_volume_version += 1
                 slabs = sv.updated_layers  # the first update always re-lights the whole volume
-                if slabs == [(0, sv.resolution[1])]:
-                    self.sky_gl.upload_volume(sv.textures(), sv.grid_origin, sv.cell_size, sv.resolution,
-                                              sv.normal_offset_m)
-                else:  # only the layers this update re-lit
-                    for slab in slabs:
-                        self.sky_gl.upload_volume_layers(sv.textures(layers=slab), slab[0])
+                out.update(sky_version=sv.sky.version, open=sv.open_coefficients(),
+                           sky_map=sv.sky_map() if sv.sky.version != self._sky_map_version else None,
+                           whole=sv.textures() if slabs == [(0, sv.resolution[1])] else None,
+                           slabs=[] if slabs == [(0, sv.resolution[1])] else
+                           [(slab[0], sv.textures(layers=slab)) for slab in slabs])
+            return out
 
-    def _update_lpv(self, gbuf, sun_irradiance: np.ndarray) -> None:
-        """Re-inject and propagate (the sun, the sky or the camera changed): the sun's RSM, then
-        the VPLs and surfels of the RSM and of the sky-lit G-buffer (paper Fig. 11), injected and
-        propagated, then uploaded."""
-        scene, cam = self.scene, self.scene.camera
+    def _upload_sky(self, prepared: dict | None) -> None:
+        """The sky map and the volume's textures uploaded, where ``_compute_sky`` changed them."""
+        if prepared is None:
+            return
+        sv = self.sky_volume
+        if prepared["visibility"] is not None:  # the gathered probes' depth moments: static, uploaded once
+            with self._stage("sky upload"):
+                self.sky_gl.upload_visibility(*prepared["visibility"])
+        if prepared["changed"]:
+            with self._stage("sky upload"):
+                if prepared["sky_map"] is not None:
+                    self.sky_gl.upload_sky_map(prepared["sky_map"])
+                    self._sky_map_version = prepared["sky_version"]
+                self.sky_gl.set_open_sky(prepared["open"])
+                if prepared["whole"] is not None:
+                    self.sky_gl.upload_volume(prepared["whole"], sv.grid_origin, sv.cell_size, sv.resolution,
+                                              sv.normal_offset_m)
+                for first_layer, textures in prepared["slabs"]:  # only the layers this update re-lit
+                    self.sky_gl.upload_volume_layers(textures, first_layer)
+
+    def _read_lpv_inputs(self, gbuf, sun_irradiance: np.ndarray):
+        """What the LPV is injected from, read back from GL: the sun's RSM and every
+        ``sky_vpl_stride``-th pixel of the G-buffer (gathered on the GL side). Returns (rsm, samples)."""
         with self._stage("rsm"):
-            self.rsm_pass.render(scene.sun.direction, sun_irradiance, self.scene_gl.bounds)
-            rsm = self.rsm_pass.read()
-        with self._stage("lpv inputs", gl=False):
-            vpls, surfels = self._lpv_inputs(gbuf, rsm)
+            self.rsm_pass.render(self.scene.sun.direction, sun_irradiance, self.scene_gl.bounds)
+            return self.rsm_pass.read(), self.gbuffer_samples.read(gbuf)
+
+    def _compute_lpv(self, rsm, g) -> None:
+        """Re-inject and propagate (the sun, the sky or the camera changed): the VPLs and surfels of
+        the RSM and of the sky-lit G-buffer (paper Fig. 11), injected and propagated. No GL: the
+        volume worker may run it."""
+        with self._cpu_stage("lpv inputs"):
+            vpls, surfels = self._lpv_inputs(rsm, g)
         t0 = time.perf_counter()
         # the key: which change of the inputs this is (a staggered LPV's cascades catch up under one key)
-        self.lpv.update(cam, self.scene_gl.bounds, vpls, surfels, key=self._lpv_inputs_version)
+        self.lpv.update(self.scene.camera, self.scene_gl.bounds, vpls, surfels, key=self._lpv_inputs_version)
         t_inject = (self.lpv.timings.get("inject", 0.0) + self.lpv.timings.get("inject_geometry", 0.0)) / 1e3
         t1 = time.perf_counter()
-        self._record(MAIN_LANE, "lpv inject", t0, min(t1, t0 + t_inject))
-        self._record(MAIN_LANE, "lpv propagate", min(t1, t0 + t_inject), t1)
-        with self._stage("lpv upload"):
-            self.lpv_gl.upload(self.lpv)
+        lane = MAIN_LANE if threading.current_thread() is threading.main_thread() else VOLUME_LANE
+        self._record(lane, "lpv inject", t0, min(t1, t0 + t_inject))
+        self._record(lane, "lpv propagate", min(t1, t0 + t_inject), t1)
+        self._lpv_pending_upload = True
 
-    def _lpv_inputs(self, gbuf, rsm):
-        """(VPL sets, surfel sets) of the sun's RSM and of every ``sky_vpl_stride``-th G-buffer
-        pixel (the sky-lit G-buffer as a second RSM, paper Fig. 11)."""
+    def _upload_lpv(self) -> None:
+        if self._lpv_pending_upload:
+            with self._stage("lpv upload"):
+                self.lpv_gl.upload(self.lpv)
+            self._lpv_pending_upload = False
+
+    def _lpv_inputs(self, rsm, g):
+        """(VPL sets, surfel sets) of the sun's RSM and of the G-buffer's samples ``g`` (the sky-lit
+        G-buffer as a second RSM, paper Fig. 11)."""
         scene, cam = self.scene, self.scene.camera
         vpls = [(rsm.positions, rsm.normals, rsm.flux)]
         surfels = [rsm_surfels(rsm, scene.sun.direction)]
-        g = self.gbuffer_samples.read(gbuf)  # every sky_vpl_stride-th pixel, gathered on the GL side
         pos, nrm = g["position"], g["normal"][..., :3]
         samples = sample_gbuffer(pos, nrm, cam.position, cam.forward, cam.fov_y_deg, stride=1)  # w = 0: no surface
         surfels.append(surfels_from_samples(samples))
@@ -685,9 +784,10 @@ class Renderer:
     def close(self) -> None:
         """Stop the ray-tracing worker thread or process (the GL objects go with the process's
         context)."""
-        pool = getattr(self, "_pool", None)
-        if pool is not None:
-            pool.shutdown(wait=True)
+        for name in ("_pool", "_volume_pool"):
+            pool = getattr(self, name, None)
+            if pool is not None:
+                pool.shutdown(wait=True)
         proc = getattr(self, "_tracer_proc", None)
         if proc is not None:
             proc.close()

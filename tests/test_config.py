@@ -63,7 +63,8 @@ def test_shadow_maps_sized_to_the_image():
     assert cfg.size_for(640, 360) == 1024         # 1536, capped at size
     assert cfg.size_for(160, 90) == 512           # at least 512 (384 left the 160×90 courtyard 11 % worse)
     assert ShadowConfig(size=1024).size_for(320, 180) == 1024
-    assert RenderConfig.preset("medium").shadow.size_for(320, 180) == 768
+    assert RenderConfig.preset("medium").shadow.size_for(320, 180) == 512   # 1.6 x 320
+    assert RenderConfig.preset("medium").shadow.size_for(640, 360) == 1024
     assert RenderConfig.preset("paper").shadow.size_for(1280, 720) == 2048
 
 

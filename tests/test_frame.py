@@ -171,3 +171,39 @@ def test_sync_modes_give_the_same_frames(courtyard):
     assert RenderConfig(sync_stages=False).sync_stages == "none"
     with pytest.raises(ConfigError, match="sync_stages"):
         RenderConfig(sync_stages="sometimes")
+
+
+def test_volume_worker_gives_the_serial_frames(courtyard):
+    """The volume worker (``overlap_volumes``: the sky volume's update and the LPV's kernels in a
+    thread beside the GL passes) renders what the main thread renders doing them in turn, frame
+    after frame while the sun and camera move (the sky map rebaked, one transfer layer per frame,
+    the staggered LPV's cascades re-injected), and then with nothing moving, until the sky volume's
+    sweep and the LPV have caught up and the LPV is left alone. Only the ray tracing's schedule is
+    the same in both (in the tracer process)."""
+    runs = {}
+    for worker in (True, False):
+        scene = copy.deepcopy(courtyard)
+        base_cam, base_sun = scene.camera, scene.sun.direction.copy()
+        r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium", overlap_volumes=worker))
+        try:
+            assert (r._volume_pool is not None) == worker
+            frames, lanes, stages = [], set(), []
+            for i in range(12):
+                if i < 4:
+                    scene.camera = camera_path(base_cam, i / 4)
+                    scene.sun.direction = sun_path(base_sun, i / 4)
+                f = r.render(read_back=("hdr",))
+                frames.append(f.hdr)
+                lanes |= {lane for lane, *_ in f.events}
+                stages.append(set(f.timings))
+        finally:
+            r.close()
+        runs[worker] = frames, lanes, stages
+    for a, b in zip(runs[True][0], runs[False][0], strict=True):
+        assert np.array_equal(a, b)
+    from serenity.frame import VOLUME_LANE
+    assert VOLUME_LANE in runs[True][1] and VOLUME_LANE not in runs[False][1]
+    for stages in (runs[True][2], runs[False][2]):
+        assert "lpv propagate" in stages[1] and "sky volume update" in stages[1]
+        assert "lpv propagate" in stages[4] or "lpv propagate" in stages[5]  # the sweep goes on: sky VPLs
+        assert "lpv propagate" not in stages[11]  # nothing changed

@@ -505,6 +505,17 @@ class SkyVolume:
     def _sun(self, sun_direction):
         return np.asarray(self.scene.sun.direction if sun_direction is None else sun_direction, np.float64)
 
+    def may_change(self, sun_direction=None) -> bool:
+        """Whether ``update`` (with ``layers`` > 0) could change a probe now; False only when it surely
+        changes none: the sky map needs no rebake and every layer is current. "gather" always says
+        True. For a scheduler that decides before the update runs (``Renderer``'s volume worker)."""
+        if self.config.method == "gather" or np.any(self.layer_versions < 0):
+            return True
+        if self._constant_sky:
+            return self._constant_map is None or self.pending_layers > 0
+        return (self.sky.sky_map is None or self.sky.needs_rebuild(self._sun(sun_direction))
+                or self.pending_layers > 0)
+
     def update(self, layers: int = 1, sun_direction=None) -> bool:
         """Bring the volume towards the current sky; returns whether any probe changed
         (``updated_layers`` then says which y-layers).

@@ -13,12 +13,14 @@ import moderngl
 import numpy as np
 
 from serenity.errors import SerenityError
+from serenity.raster.context import finish
 
 _DTYPES = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
 
 
 def read_texture(tex, components: int | None = None) -> np.ndarray:
     """(H, W, C) array of a 2-D texture (top row first); float targets come back as float32."""
+    finish(tex.ctx)  # the read waits for the rendering with the GIL held; this waits without it
     c = tex.components
     data = np.frombuffer(tex.read(), dtype=_DTYPES[tex.dtype]).reshape(tex.height, tex.width, c)
     data = data[::-1]
@@ -29,6 +31,7 @@ def read_texture(tex, components: int | None = None) -> np.ndarray:
 
 def read_depth(tex) -> np.ndarray:
     """(H, W) float32 window-space depth in [0, 1] (top row first)."""
+    finish(tex.ctx)
     data = np.frombuffer(tex.read(), dtype=np.float32).reshape(tex.height, tex.width)
     return np.ascontiguousarray(data[::-1])
 

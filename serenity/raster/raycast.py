@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from serenity.raster.context import load_program
+from serenity.raster.context import finish, load_program
 
 TRACE_REFLECTION = 1
 TRACE_REFRACTION = 2
@@ -156,7 +156,7 @@ class RayCastPass:
             # llvmpipe does not count a draw's storage-buffer writes as pending on the buffer: a read
             # without the barrier and the finish returns what the previous draw left
             self.ctx.memory_barrier()
-            self.ctx.finish()
+            finish(self.ctx)
             n = min(int(np.frombuffer(self.counter.read(), np.uint32)[0]), w * h)
         rec = np.frombuffer(self.records.read(size=n * RECORD_VEC4S * 16), np.float32) if n else \
             np.zeros(0, np.float32)
