@@ -79,8 +79,9 @@ def finish(ctx) -> None:
     Python's GIL released during the wait when ``ctx`` is the headless context made here. moderngl
     holds the GIL through the call, and on llvmpipe the wait *is* the rendering: a thread running
     Warp launches and numpy beside the GL passes (``Renderer``'s volume worker) would stall behind
-    every pass. Measured on the 2-core machine (a thread issuing small Warp launches beside a 15 ms
-    fragment-bound pass): 61–76 launches/s through ``ctx.finish()``, 394–417 through this, 504 alone.
+    every pass. Measured on the 2-core machine (``benchmarks/bench_gil_finish.py``: a thread issuing
+    small Warp launches beside a 12–18 ms fragment-bound pass): 85–86 launches/s through
+    ``ctx.finish()``, 438–442 through this, 516 alone.
     Other contexts (the viewer's window) wait through moderngl."""
     native = _native_finish
     if native is not None and native[0] is ctx:
