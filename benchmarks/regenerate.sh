@@ -6,6 +6,7 @@
 #
 #   bash benchmarks/regenerate.sh            # everything below
 #   bash benchmarks/regenerate.sh frame      # only the Table-1 benches (serenity bench)
+#   bash benchmarks/regenerate.sh ab         # round 14's A/Bs, the GIL-free finish, the 320x180 spread
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=.venv/bin/python
@@ -28,6 +29,21 @@ frame() {
         --chart serenity_out/timeline_320_low.png
 }
 
+ab() {
+    # round 14's medium settings against the ones before (the README's Table-1 section), and what the
+    # frame's GIL-free finish lets a worker thread do; then the 320x180 bench five times (its spread)
+    local P="$PY benchmarks/bench_pass_ab.py --moving --reference --frames 24"
+    for sc in courtyard cornell; do
+        $P --scene $sc --stage "direct lighting" --b-config shadow.contact_steps=6 \
+            --b-config shadow.texels_per_pixel=2.4 --json $R/pass_ab_round14_medium_shadow_$sc.json
+        $P --scene $sc --stage "direct lighting" --b-config shadow.contact_steps=3 \
+            --json $R/pass_ab_round14_contact3_$sc.json
+    done
+    $P --stage "sky volume update" --b-config sky.sky_map_size=96 --json $R/pass_ab_round14_skymap_courtyard.json
+    $PY benchmarks/bench_gil_finish.py
+    $PY benchmarks/bench_frame_repeat.py --runs 5 --size 320x180
+}
+
 accuracy() {
     $PY benchmarks/bench_lpv_room.py
     $PY benchmarks/bench_baseline.py
@@ -43,7 +59,8 @@ render() {
 case $what in
     frame) frame ;;
     accuracy) accuracy ;;
+    ab) ab ;;
     render) render ;;
-    all) accuracy; frame; render ;;
-    *) echo "usage: $0 [all|frame|accuracy|render]" >&2; exit 2 ;;
+    all) accuracy; frame; ab; render ;;
+    *) echo "usage: $0 [all|frame|accuracy|ab|render]" >&2; exit 2 ;;
 esac
