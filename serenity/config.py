@@ -618,9 +618,11 @@ PRESETS: dict[str, dict] = {
     # resolution (the indirect light is smooth: the frontier's FLIP moved by under 0.002 from half
     # resolution, the LPV lighting pass got ~4x cheaper), shadow cascades of 1.6 texels per pixel of
     # the image (512² at 320×180; at most 1024²) redrawn in turn and no contact-shadow march (round
-    # 14: both ~2 ms at 320×180, FLIP 0.1188 -> 0.1166, relMSE 0.0277 -> 0.0307 by bench_pass_ab;
-    # 2.4 texels and 6 steps before), fewer PCSS, SSAO and glossy-LPV taps, a 64² sky map baked in
-    # 12 steps (96² before: FLIP +0.0003, relMSE unchanged), the sky volume re-lit one layer per
+    # 14, 2.4 texels and 6 steps before: the direct lighting 7.1 -> 5.8 ms and the CSM ~2 ms less at
+    # 320×180; courtyard FLIP 0.1191 -> 0.1169, relMSE 0.0277 -> 0.0307; Cornell FLIP 0.1100 ->
+    # 0.1118, relMSE* 0.530 -> 0.591: pass_ab_round14_medium_shadow_*.json), fewer PCSS, SSAO and
+    # glossy-LPV taps, a 64² sky map baked in 12 steps (96² before: FLIP 0.1166 -> 0.1169, relMSE
+    # unchanged, pass_ab_round14_skymap_courtyard.json), the sky volume re-lit one layer per
     # frame after a rebake (the paper's sweep, by transfer), coarser RSM and sky VPLs
     "medium": {"indirect_scale": 4,
                "shadow": {"size": 1024, "texels_per_pixel": 1.6, "blocker_samples": 6, "filter_samples": 12,

@@ -80,8 +80,8 @@ def finish(ctx) -> None:
     holds the GIL through the call, and on llvmpipe the wait *is* the rendering: a thread running
     Warp launches and numpy beside the GL passes (``Renderer``'s volume worker) would stall behind
     every pass. Measured on the 2-core machine (``benchmarks/bench_gil_finish.py``: a thread issuing
-    small Warp launches beside a 13–16 ms fragment-bound pass): 77–84 launches/s through
-    ``ctx.finish()``, 415–418 through this, 516 alone (``gil_finish.json``).
+    small Warp launches beside a 15–20 ms fragment-bound pass): 73–76 launches/s through
+    ``ctx.finish()``, 405–408 through this, 474 alone (``gil_finish.json``).
     Other contexts (the viewer's window) wait through moderngl."""
     native = _native_finish
     if native is not None and native[0] is ctx:
