@@ -98,6 +98,7 @@ READ_BACK = ("hdr", "ldr", "aovs")
 """What ``Renderer.render(read_back=...)`` can bring back to the host."""
 RT_LANE = "worker (CPU ray tracing)"
 VOLUME_LANE = "worker (volume kernels)"
+VOLUME_THREAD = "serenity-volumes"  # the volume worker's thread name prefix
 
 
 @dataclass
@@ -237,7 +238,7 @@ class Renderer:
             # ("gather" sky volumes stay on the main thread: their passes are split over every core
             # already, and beside the GL passes they only slowed both: low at 320×180 1.09× serial)
             self._sky_in_worker = self.sky_volume is not None and cfg.sky.method != "gather"
-            self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-volumes")
+            self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix=VOLUME_THREAD)
                                  if cfg.overlap and cfg.overlap_volumes and str(self.device).startswith("cpu")
                                  and (self._sky_in_worker or self.lpv is not None) else None)
         self._upload_ms = self._timings.pop("upload")
@@ -265,11 +266,15 @@ class Renderer:
             finish(self.ctx)  # the GIL released while llvmpipe renders: the volume worker goes on
         self._record(MAIN_LANE, name, t0, time.perf_counter())
 
+    def _on_volume_worker(self) -> bool:
+        """Whether the calling thread is the volume worker (the thread that renders may be any)."""
+        return self._volume_pool is not None and threading.current_thread().name.startswith(VOLUME_THREAD)
+
     @contextmanager
     def _cpu_stage(self, name: str) -> Iterator[None]:
         """A stage of host work (numpy, Warp launches) on whichever thread runs it: the volume worker's
         lane when that is the calling thread, else ``_stage`` (no GL call here: the worker has none)."""
-        if threading.current_thread() is threading.main_thread() or self._volume_pool is None:
+        if not self._on_volume_worker():
             with self._stage(name, gl=False):
                 yield
             return
@@ -671,7 +676,7 @@ class Renderer:
         self.lpv.update(self.scene.camera, self.scene_gl.bounds, vpls, surfels, key=self._lpv_inputs_version)
         t_inject = (self.lpv.timings.get("inject", 0.0) + self.lpv.timings.get("inject_geometry", 0.0)) / 1e3
         t1 = time.perf_counter()
-        lane = MAIN_LANE if threading.current_thread() is threading.main_thread() else VOLUME_LANE
+        lane = VOLUME_LANE if self._on_volume_worker() else MAIN_LANE
         self._record(lane, "lpv inject", t0, min(t1, t0 + t_inject))
         self._record(lane, "lpv propagate", min(t1, t0 + t_inject), t1)
         self._lpv_pending_upload = True
