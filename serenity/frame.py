@@ -236,7 +236,7 @@ class Renderer:
             # the volumes' kernels beside the GL passes (``_render``): on the CPU only, where the GL
             # passes are llvmpipe's threads and the kernels would otherwise wait for them in turn
             # ("gather" sky volumes stay on the main thread: their passes are split over every core
-            # already, and beside the GL passes they only slowed both: low at 320×180 1.09× serial)
+            # already, and beside the GL passes they only slowed both)
             self._sky_in_worker = self.sky_volume is not None and cfg.sky.method != "gather"
             self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix=VOLUME_THREAD)
                                  if cfg.overlap and cfg.overlap_volumes and str(self.device).startswith("cpu")
@@ -498,9 +498,7 @@ class Renderer:
         view_changed = self._lpv_view_changed(light)
         if not (view_changed or sky_may_change or self.lpv.pending_levels):
             return None
-        with self._stage("rsm"):
-            self.rsm_pass.render(self.scene.sun.direction, light.sun_irradiance, self.scene_gl.bounds)
-            return view_changed, self.rsm_pass.read()
+        return view_changed, self._read_rsm(light.sun_irradiance)
 
     def _start_lpv(self, gbuf, plan):
         """With the volume worker, after the G-buffer: its samples read back and the LPV's kernels
@@ -509,9 +507,7 @@ class Renderer:
         if plan is None:
             return None
         view_changed, rsm = plan
-        with self._stage("rsm"):  # the stage's G-buffer half (``STAGES``)
-            samples = self.gbuffer_samples.read(gbuf)
-        return self._volume_pool.submit(self._lpv_job, view_changed, (rsm, samples))
+        return self._volume_pool.submit(self._lpv_job, view_changed, (rsm, self._read_gbuffer_samples(gbuf)))
 
     def _lpv_view_changed(self, light: LightingInputs) -> bool:
         """Whether the LPV's inputs other than the sky volume (the sun, its irradiance, the camera)
@@ -659,11 +655,20 @@ class Renderer:
                     self.sky_gl.upload_volume_layers(textures, first_layer)
 
     def _read_lpv_inputs(self, gbuf, sun_irradiance: np.ndarray):
-        """What the LPV is injected from, read back from GL: the sun's RSM and every
-        ``sky_vpl_stride``-th pixel of the G-buffer (gathered on the GL side). Returns (rsm, samples)."""
+        """What the LPV is injected from, read back from GL: (the sun's RSM, the G-buffer's samples)."""
+        return self._read_rsm(sun_irradiance), self._read_gbuffer_samples(gbuf)
+
+    def _read_rsm(self, sun_irradiance: np.ndarray):
+        """The sun's RSM, drawn and read back as VPLs (stage "rsm")."""
         with self._stage("rsm"):
             self.rsm_pass.render(self.scene.sun.direction, sun_irradiance, self.scene_gl.bounds)
-            return self.rsm_pass.read(), self.gbuffer_samples.read(gbuf)
+            return self.rsm_pass.read()
+
+    def _read_gbuffer_samples(self, gbuf) -> dict:
+        """Every ``sky_vpl_stride``-th pixel of the G-buffer, gathered on the GL side and read back
+        (the "rsm" stage's G-buffer half, ``STAGES``)."""
+        with self._stage("rsm"):
+            return self.gbuffer_samples.read(gbuf)
 
     def _compute_lpv(self, rsm, g) -> None:
         """Re-inject and propagate (the sun, the sky or the camera changed): the VPLs and surfels of
