@@ -13,7 +13,7 @@ by a frame of the other, so a shared machine's drifting load falls on both alike
 default (the camera and sun of the scene); ``--moving``: the ``serenity bench`` camera path and sun,
 so that the work a moving frame redoes (shadow tiles, the volumes) is timed. Per variant: the
 stage's median, 10th percentile and minimum over the frames after two warm-up frames, the whole
-frame's median; whether the two variants' still frames (the scene's camera and sun, a fresh renderer
+frame's median and every stage's; whether the two variants' still frames (the scene's camera and sun, a fresh renderer
 each, second frame) are bit-identical; with ``--reference``, their FLIP and relMSE (all pixels and
 0.1 % trimmed) against the frontier's cached 1024-spp reference.
 """
@@ -118,7 +118,7 @@ def main(argv=None) -> int:
         r = Renderer(scene, w, h, config=make_config(args.preset, variants[v]["config"]))
         for _ in range(2):  # every program variant compiles in the first frames, with this variant's files
             r.render(read_back=False)
-        runs[v] = {"renderer": r, "scene": scene, "stage_ms": [], "frame_ms": []}
+        runs[v] = {"renderer": r, "scene": scene, "stage_ms": [], "frame_ms": [], "timings": []}
     active.clear()
     bc, bs = base.camera, base.sun.direction.copy()
     for i in range(args.frames):
@@ -131,6 +131,7 @@ def main(argv=None) -> int:
             f = run["renderer"].render(read_back=False)
             run["stage_ms"].append(f.timings.get(args.stage, 0.0))
             run["frame_ms"].append(f.wall_ms)
+            run["timings"].append(f.timings)
     images = {}
     for v in "ab":  # the still scene's converged frame (a fresh renderer: no amortised volume lags behind)
         active.clear()
@@ -158,7 +159,10 @@ def main(argv=None) -> int:
                         zip(variants[v]["glsl"], getattr(args, f"{v}_glsl"), strict=True)},
                "config": variants[v]["config"], "shadow_size": run["renderer"].shadow_size,
                "stage_ms_median": float(np.median(s)), "stage_ms_p10": float(np.percentile(s, 10)),
-               "stage_ms_min": float(np.min(s)), "frame_ms_median": float(np.median(run["frame_ms"][2:]))}
+               "stage_ms_min": float(np.min(s)), "frame_ms_median": float(np.median(run["frame_ms"][2:])),
+               # every stage's median too: a change to one pass moves the others' contention
+               "stages_ms_median": {k: float(np.median([t.get(k, 0.0) for t in run["timings"][2:]]))
+                                    for k in dict.fromkeys(k for t in run["timings"][2:] for k in t)}}
         if ref is not None:
             m = compare(images[v], ref, exposure=run["renderer"].config.exposure)
             rec.update(flip=float(m["flip"]), rel_mse=float(m["rel_mse"]),

@@ -6,7 +6,7 @@
 #
 #   bash benchmarks/regenerate.sh            # everything below
 #   bash benchmarks/regenerate.sh frame      # only the Table-1 benches (serenity bench)
-#   bash benchmarks/regenerate.sh ab         # round 14's A/Bs, the GIL-free finish, the 320x180 spread
+#   bash benchmarks/regenerate.sh ab         # round 14-15's A/Bs, the GIL-free finish, the 320x180 spread
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=.venv/bin/python
@@ -41,6 +41,11 @@ ab() {
     done
     $P --stage "sky volume update" --b-config sky.sky_map_size=96 --json $R/pass_ab_round14_skymap_courtyard.json
     $PY benchmarks/bench_gil_finish.py
+    # round 15: the low-res targets centred on llvmpipe's tiles (a = not), both sizes, the bench's path
+    for size in 320x180 640x360; do
+        $PY benchmarks/bench_pass_ab.py --moving --frames 40 --size $size --stage "lpv lighting" \
+            --a-config lowres_tile_balance=false --json $R/pass_ab_round15_tiles_$size.json
+    done
     $PY benchmarks/bench_frame_repeat.py --runs 5 --size 320x180
 }
 

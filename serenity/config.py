@@ -500,6 +500,11 @@ class RenderConfig:
     indirect_scale: int = 2
     """The main view's SSAO and indirect light (sky volume, LPV) are computed at 1/scale of the
     view per axis and joint-bilaterally upsampled (1 = full resolution, the paper's)."""
+    lowres_tile_balance: bool = True
+    """Lay those reduced-resolution images out centred on the GL rasteriser's 64-pixel tiles
+    (``raster/context.LowResLayout``): llvmpipe shades each tile on one thread, and at 320×180 a
+    quarter-resolution row of 80 texels fell into tiles of 64 and 16. The same image either way
+    (within float rounding); False: the images at their targets' origin."""
     texture_taps: int = 4
     """Trilinear taps per textured G-buffer fragment along its footprint's long axis: anisotropic
     texture filtering in the shader (``glsl/gbuffer.glsl``); 1 = GL's isotropic trilinear, which

@@ -206,8 +206,8 @@ class Renderer:
             self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl, cfg.texture_taps)
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
-            self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect_scale)
-            self.lowres_guide = LowResGuide(self.ctx, cfg.indirect_scale)
+            self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect_scale, cfg.lowres_tile_balance)
+            self.lowres_guide = LowResGuide(self.ctx, cfg.indirect_scale, cfg.lowres_tile_balance)
             for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass, self.lowres_guide):
                 p.resize(self.width, self.height)
             self.fxaa_pass = FXAAPass(self.ctx) if cfg.antialiasing == "fxaa" else None
@@ -288,7 +288,7 @@ class Renderer:
         cfg, ctx = self.config, self.ctx
         self.lowres = None
         if cfg.indirect_scale > 1 and (cfg.sky.enabled or cfg.lpv.enabled):
-            self.lowres = LowResIndirect(ctx, cfg.indirect_scale)
+            self.lowres = LowResIndirect(ctx, cfg.indirect_scale, cfg.lowres_tile_balance)
             self.lowres.resize(self.width, self.height)
         self.sky_volume = None
         self._sky_map_version = -1

@@ -12,6 +12,7 @@ import ctypes
 import re
 import threading
 from contextlib import contextmanager
+from dataclasses import dataclass
 from importlib import resources
 
 import moderngl
@@ -245,6 +246,61 @@ def low_res_size(width: int, height: int, scale: int) -> tuple[int, int]:
     """Size of a pass run at 1/scale of a width×height view (``glsl/lowres.glsl``)."""
     s = max(1, int(scale))
     return (width + s - 1) // s, (height + s - 1) // s
+
+
+#: llvmpipe (Mesa's CPU rasteriser) bins a draw into tiles of this many pixels per side and hands
+#: whole tiles to its threads
+RASTER_TILE = 64
+
+
+@dataclass(frozen=True)
+class LowResLayout:
+    """Where a reduced-resolution image (``low_res_size``) lies in its render targets: ``size``
+    texels from target texel ``origin`` (GL's bottom-left convention); the targets are
+    ``texture_size``, padded below and to the left of the image.
+
+    Why padded: llvmpipe rasterises 64×64 tiles, each on one thread, so a small image's work is
+    split by where the tile borders cut it. At 320×180 a quarter-resolution pass is 80×45 texels,
+    one tile of 64 columns and one of 16: one of two threads shaded 4/5 of it. Centred on the
+    borders (origin 24), each tile holds 40 columns. It never adds a tile (the image stays within
+    the same number of tiles per axis) and changes nothing on a GPU but a few unused texels."""
+
+    size: tuple[int, int]
+    origin: tuple[int, int] = (0, 0)
+
+    @property
+    def texture_size(self) -> tuple[int, int]:
+        return self.origin[0] + self.size[0], self.origin[1] + self.size[1]
+
+    @property
+    def viewport(self) -> tuple[int, int, int, int]:
+        return (*self.origin, *self.size)
+
+    def set_uniforms(self, program) -> None:
+        """``u_lowres_origin`` / ``u_lowres_size`` (``glsl/lowres.glsl``) of ``program``, where it has them."""
+        for name, value in (("u_lowres_origin", self.origin), ("u_lowres_size", self.size)):
+            if name in program:
+                program[name].value = value
+
+    def crop(self, image):
+        """The image's texels of a read-back of the targets ((rows, cols, ...), top row first)."""
+        (ox, oy), (w, h) = self.origin, self.size
+        rows = image.shape[0]
+        return image[rows - oy - h:rows - oy, ox:ox + w]
+
+
+def _tile_centred(n: int) -> int:
+    tiles = -(-n // RASTER_TILE)
+    return (tiles * RASTER_TILE - n) // 2
+
+
+def low_res_layout(width: int, height: int, scale: int, balance: bool = True) -> LowResLayout:
+    """The layout of a 1/scale pass of a width×height view: the image centred on llvmpipe's tile
+    borders (``balance``, and scale > 1), else at the targets' origin."""
+    size = low_res_size(width, height, scale)
+    if not balance or scale <= 1:
+        return LowResLayout(size)
+    return LowResLayout(size, (_tile_centred(size[0]), _tile_centred(size[1])))
 
 
 def draw_fullscreen(ctx, vao, rects=None) -> None:

@@ -231,6 +231,7 @@ class DeferredPass(FullscreenPass):
             for loc, name in enumerate(("u_irr", "u_gloss", "u_guide"), start=UPSAMPLE_UNIT):
                 self._set(p, name, loc)
             self._set(p, "u_scale", upsample[0].scale)
+            upsample[0].layout.set_uniforms(p)
         self._set(p, "u_use_sky_map", sky is not None)
         if sky is not None:
             sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)

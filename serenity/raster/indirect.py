@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import moderngl
 
-from serenity.raster.context import BlendedTargets, draw_fullscreen, fullscreen_vao, load_program, low_res_size
+from serenity.raster.context import BlendedTargets, draw_fullscreen, fullscreen_vao, load_program, low_res_layout
 
 TECHNIQUES = {"sky": 1, "lpv": 2}
 #: texture units 0..5 are the G-buffer, eye and AO; the volume's own textures start here
@@ -88,6 +88,7 @@ class IndirectPass:
     def _set_uniforms(self, p, target, bind, camera_pos, ao, rt_view, diffuse: bool, glossy: bool) -> None:
         if self.lowres:
             p["u_scale"].value = target.scale
+            target.layout.set_uniforms(p)
         for loc, name in enumerate(("g_albedo", "g_normal", "g_position", "g_material")):
             if name in p:
                 p[name].value = loc
@@ -108,10 +109,12 @@ class LowResIndirect:
     RGBA16F targets that the ``lowres`` :class:`IndirectPass` programs add to; the deferred pass
     upsamples them (joint bilateral, ``glsl/upsample.glsl``) as it lights the full-resolution view."""
 
-    def __init__(self, ctx, scale: int):
+    def __init__(self, ctx, scale: int, balance: bool = True):
         self.ctx = ctx
         self.scale = max(1, int(scale))
+        self.balance = balance  # the padded layout of the targets (raster/context.LowResLayout)
         self.size = None
+        self.layout = None
         self.depth = None  # the guide's class depth attached to fbo (LowResGuide)
 
     def resize(self, width: int, height: int) -> None:
@@ -120,10 +123,12 @@ class LowResIndirect:
         if self.size is not None:
             for o in {self.fbo, self._colour_fbo, self.irr, self.gloss}:
                 o.release()
-        low = low_res_size(width, height, self.scale)
+        self.layout = low_res_layout(width, height, self.scale, self.balance)
+        low = self.layout.texture_size
         self.irr = self.ctx.texture(low, 4, dtype="f2")
         self.gloss = self.ctx.texture(low, 4, dtype="f2")
         self._colour_fbo = self.ctx.framebuffer(color_attachments=[self.irr, self.gloss])  # clears keep the depth
+        self._colour_fbo.viewport = self.layout.viewport
         self.fbo = self._colour_fbo
         self.depth = None
         self.size = (width, height)
@@ -134,6 +139,7 @@ class LowResIndirect:
             if self.fbo is not self._colour_fbo:
                 self.fbo.release()
             self.fbo = self.ctx.framebuffer(color_attachments=[self.irr, self.gloss], depth_attachment=depth)
+            self.fbo.viewport = self.layout.viewport
             self.depth = depth
 
     def clear(self) -> None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from serenity.raster.context import FullscreenPass, low_res_size
+from serenity.raster.context import FullscreenPass, LowResLayout, low_res_layout
 from serenity.raster.interop import read_texture
 
 
@@ -24,13 +24,15 @@ class LowResGuide(FullscreenPass):
     SHADER = "lowres_guide.glsl"
     TARGETS = {"guide": (4, "f4")}
 
-    def __init__(self, ctx, scale: int):
+    def __init__(self, ctx, scale: int, balance: bool = True):
         super().__init__(ctx)
         self.scale = max(1, int(scale))
+        self.balance = balance
         self.depth = None
+        self.layout: LowResLayout | None = None
 
     def target_size(self, width: int, height: int) -> tuple[int, int]:
-        return low_res_size(width, height, self.scale)
+        return low_res_layout(width, height, self.scale, self.balance).texture_size
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
@@ -39,11 +41,14 @@ class LowResGuide(FullscreenPass):
         if self.depth is not None:
             self.depth.release()
         self.fbo.release()
-        self.depth = self.ctx.depth_texture(self.target_size(width, height))
+        self.layout = low_res_layout(width, height, self.scale, self.balance)
+        self.depth = self.ctx.depth_texture(self.layout.texture_size)
         self.fbo = self.ctx.framebuffer(color_attachments=[self.guide], depth_attachment=self.depth)
+        self.fbo.viewport = self.layout.viewport
 
     def render(self, gbuffer, camera_pos, camera_forward):
-        """The (W/scale, H/scale) RGBA32F guide texture of ``gbuffer``."""
+        """The RGBA32F guide texture of ``gbuffer``: (W/scale, H/scale) texels laid out by ``layout``
+        (the class depth alike)."""
         p = self.program
         with self.ctx.debug_scope("lowres guide"):
             self.fbo.use()
@@ -52,6 +57,7 @@ class LowResGuide(FullscreenPass):
             p["g_position"].value = 0
             p["g_normal"].value = 1
             p["u_scale"].value = self.scale
+            self.layout.set_uniforms(p)
             p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
             p["u_camera_forward"].value = tuple(float(x) for x in camera_forward)
             ctx = self.ctx

@@ -34,7 +34,7 @@ uniform sampler2D g_normal;
 uniform sampler2D g_position;
 uniform sampler2D g_material;
 uniform sampler2D g_eye;        // rt views: ray origin
-uniform sampler2D u_ao;         // SSAO (1 = open)
+uniform sampler2D u_ao;         // SSAO (1 = open; not padded: LOWRES reads the image's texel)
 uniform bool u_use_ao;
 uniform bool u_rt_view;
 uniform vec3 u_camera_pos;
@@ -51,12 +51,13 @@ out vec4 o_hdr;
 
 void main() {
 #if LOWRES
-    ivec2 px = representative_pixel(ivec2(gl_FragCoord.xy), textureSize(g_position, 0));
+    ivec2 low = lowres_pixel();
+    ivec2 px = representative_pixel(low, textureSize(g_position, 0));
     o_irr = vec4(0.0); o_gloss = vec4(0.0);
     vec4 pos = GBUF(g_position);
     if (pos.w == 0.0) return;
     vec3 albedo = vec3(1.0);
-    float ao = u_use_ao ? texelFetch(u_ao, ivec2(gl_FragCoord.xy), 0).r : 1.0;
+    float ao = u_use_ao ? texelFetch(u_ao, low, 0).r : 1.0;
 #else
     vec4 pos = GBUF(g_position);
     if (pos.w == 0.0) { o_hdr = vec4(0.0); return; }     // background, miss, or not traced

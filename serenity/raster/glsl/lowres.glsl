@@ -6,6 +6,18 @@
 #ifndef SERENITY_LOWRES_GLSL
 #define SERENITY_LOWRES_GLSL
 uniform int u_scale;
+// Where the low-res image lies in its targets (raster/context.LowResLayout): texel (0, 0) of the
+// image is target texel u_lowres_origin, and the image is u_lowres_size texels; the targets are
+// padded so that the image straddles llvmpipe's 64-pixel tiles evenly (an 80-texel row in one
+// 64-texel tile and one 16-texel tile left one of two rasteriser threads with 4/5 of the pass).
+uniform ivec2 u_lowres_origin;
+uniform ivec2 u_lowres_size;
+#if defined FRAGMENT_SHADER
+// In a low-res pass drawn into the padded targets: the image texel being shaded.
+ivec2 lowres_pixel() { return ivec2(gl_FragCoord.xy) - u_lowres_origin; }
+#endif
+// The target texel of image texel i, clamped to the image (as clamp-to-edge would an unpadded one).
+ivec2 lowres_texel(ivec2 i) { return clamp(i, ivec2(0), u_lowres_size - 1) + u_lowres_origin; }
 
 // The glossy LPV light is looked up only where the specular lobe is strong enough to show it (the
 // march costs glossy_steps x 3 cascades x 3 fetches per pixel; k_s = 0.05 plaster gains < 1 %).

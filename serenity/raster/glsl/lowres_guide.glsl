@@ -14,7 +14,7 @@ uniform vec3 u_camera_pos;
 uniform vec3 u_camera_forward;
 out vec4 o_guide;
 void main() {
-    ivec2 rq = representative_pixel(ivec2(gl_FragCoord.xy), textureSize(g_position, 0));
+    ivec2 rq = representative_pixel(lowres_pixel(), textureSize(g_position, 0));
     vec4 p = texelFetch(g_position, rq, 0);
     if (p.w == 0.0) {
         o_guide = vec4(0.0, 0.0, 0.0, -1.0);

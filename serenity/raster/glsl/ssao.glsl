@@ -26,15 +26,16 @@ out float o_ao;
 float ign(vec2 pixel) { return fract(52.9829189 * fract(dot(pixel, vec2(0.06711056, 0.00583715)))); }
 
 void main() {
-    ivec2 px = representative_pixel(ivec2(gl_FragCoord.xy), textureSize(g_position, 0));
+    ivec2 low = lowres_pixel();
+    ivec2 px = representative_pixel(low, textureSize(g_position, 0));
     vec4 pw = texelFetch(g_position, px, 0);
     if (pw.w == 0.0) { o_ao = 1.0; return; }
     vec3 p = pw.xyz;
     vec3 n = normalize(texelFetch(g_normal, px, 0).xyz);
     vec3 t = normalize(abs(n.y) < 0.99 ? cross(n, vec3(0.0, 1.0, 0.0)) : cross(n, vec3(1.0, 0.0, 0.0)));
     vec3 b = cross(n, t);
-    float phi = 6.2831853 * ign(gl_FragCoord.xy);
-    float jitter = ign(gl_FragCoord.yx + 17.0);
+    float phi = 6.2831853 * ign(vec2(low) + 0.5);
+    float jitter = ign(vec2(low.yx) + 17.5);
     int blocked = 0;
     for (int i = 0; i < u_directions; ++i) {
         // cosine-weighted direction: Vogel point in the unit disc lifted to the hemisphere

@@ -17,7 +17,6 @@ uniform sampler2D u_guide;   // per low-res texel: xyz = normal, w = view depth 
 
 // albedo * E + G at full-resolution pixel px (view depth z, G-buffer normal n)
 vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
-    ivec2 low_max = textureSize(u_irr, 0) - 1;
     ivec2 i0;
     vec2 f;
     lowres_footprint(px, u_scale, i0, f);
@@ -26,7 +25,7 @@ vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
     vec3 best_irr = vec3(0.0), best_gloss = vec3(0.0);
     for (int k = 0; k < 4; ++k) {
         ivec2 o = ivec2(k & 1, k >> 1);
-        ivec2 q = clamp(i0 + o, ivec2(0), low_max);
+        ivec2 q = lowres_texel(i0 + o);
         vec4 g = texelFetch(u_guide, q, 0);
         float bil = bilinear_weight(o, f);
         float sim = guide_similarity(g.xyz, g.w, n, z);
