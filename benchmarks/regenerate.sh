@@ -46,6 +46,9 @@ ab() {
         $PY benchmarks/bench_pass_ab.py --moving --frames 40 --size $size --stage "lpv lighting" \
             --a-config lowres_tile_balance=false --json $R/pass_ab_round15_tiles_$size.json
     done
+    $PY benchmarks/bench_pass_ab.py --moving --frames 40 --size 320x180 --stage "lpv lighting" \
+        --a-config lowres_tile_balance=false --a-config overlap=false --b-config overlap=false \
+        --json $R/pass_ab_round15_tiles_serial_320x180.json
     $PY benchmarks/bench_frame_repeat.py --runs 5 --size 320x180
 }
 
