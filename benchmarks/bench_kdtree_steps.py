@@ -15,7 +15,9 @@ one thread, in turn; the figure per version is the median over rounds of rays / 
 the process** (``time.process_time``), not wall time: on a machine shared with other sessions a
 version that happens to be descheduled does not look slower (cache pollution from other processes
 still adds noise: look at ``spread``, the (max − min) / median of the rounds). Hits are checked
-against the first version (same triangle and t on ≥ 99.99 % of the rays).
+against the first version (same triangle and t on ≥ 99.99 % of the rays). ``vs_first`` is the ratio of
+the medians; ``vs_first_paired`` the median over rounds of the ratio within a round (the versions
+of one round run seconds apart, so the host's drift from round to round cancels out of it).
 """
 
 from __future__ import annotations
@@ -123,11 +125,16 @@ def main(argv=None) -> dict:
         base = base or entry
         for s in sets:
             entry[s]["vs_first"] = entry[s]["mrays_per_cpu_s"] / base[s]["mrays_per_cpu_s"]
+            # paired: the first version's time / this one's within each round (seconds apart), median
+            # over rounds; the host's drift between rounds cancels out of it
+            entry[s]["vs_first_paired"] = statistics.median(a / b for a, b in zip(cpu[(0, s)], cpu[(k, s)],
+                                                                                     strict=True))
         out_versions.append(entry)
         print(f"{rev:>24}: coherent {entry['coherent']['mrays_per_cpu_s']:6.3f} Mrays/CPU-s "
-              f"({entry['coherent']['vs_first']:4.2f}x, spread {entry['coherent']['spread']:.2f})   incoherent "
-              f"{entry['incoherent']['mrays_per_cpu_s']:6.3f} ({entry['incoherent']['vs_first']:4.2f}x, spread "
-              f"{entry['incoherent']['spread']:.2f})", flush=True)
+              f"({entry['coherent']['vs_first']:4.2f}x, paired {entry['coherent']['vs_first_paired']:4.2f}x, spread "
+              f"{entry['coherent']['spread']:.2f})   incoherent {entry['incoherent']['mrays_per_cpu_s']:6.3f} "
+              f"({entry['incoherent']['vs_first']:4.2f}x, paired {entry['incoherent']['vs_first_paired']:4.2f}x, "
+              f"spread {entry['incoherent']['spread']:.2f})", flush=True)
     out = {"benchmark": "kdtree_steps", "rounds": args.rounds, "size": [width, height],
            "triangles": len(f), "threads": 1, "timing": "process CPU seconds, median over rounds",
            "load_average": {"before": list(load_before), "after": list(os.getloadavg())},

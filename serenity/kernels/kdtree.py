@@ -42,16 +42,19 @@ below ~1e-30), a NaN origin, tmax ≤ tmin or NaN — are misses.
 Ray reordering (``sort`` in :meth:`KdTree.intersect` / :meth:`KdTree.occluded`, :func:`ray_order`;
 Pharr et al., "Rendering complex scenes with memory-coherent ray tracing", 1997; Garanzha & Loop,
 "Fast ray sorting and breadth-first packet traversal for GPU ray tracing", 2010): a batch of
-incoherent rays is traced in the order of a 12-bit key — the direction's octant, then the Morton
-code of the origin's cell on an 8³ grid over the root box — so that consecutive rays on a thread
-walk the same nodes and triangles while they are still in the caches. The keys are a Warp kernel,
+incoherent rays is traced in the order of a 16-bit key — the Morton code of the origin's cell on
+an 8³ grid over the root box, then the direction's octant, then its cell on a 4×4 grid of that
+octant's octahedral map — so that consecutive rays on a thread start in the same cell and head the
+same way, and walk the same nodes and triangles while they are still in the caches. The keys are a Warp kernel,
 the sort numpy's radix sort of 16-bit keys; the rays are gathered into the sorted order (a
 separate pass: a random read per ray inside the traversal costs more than the pass), traced, and
 each result written back to the ray's own index, so the results do not depend on the order. Rays
 already in a coherent order (camera rays; the default ``sort=None`` looks at how often the key
 changes along the batch) and batches below ``SORT_MIN_RAYS`` are traced as they come. On the
 benchmark's incoherent rays: +14-18 % rays per CPU-second, sort and gather included
-(``benchmarks/results/kdtree_ab_final.json``).
+(``benchmarks/results/kdtree_ab_final.json``, with the earlier key: octant, then origin); the origin
+first with the finer direction cells, a further ~5-10 % on the interleaved kernel
+(``benchmarks/results/kdtree_ab_sortkey.json``).
 
 Interleaved rays (CPU, reordered batches: :func:`trace_rays_kernel`). Warp runs a CPU launch as a
 loop over the kernel's threads, so one ray per thread is one chain of dependent node loads at a
@@ -153,9 +156,10 @@ TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is
 #: at 1.45-1.48x one on the benchmark's rays, 1.95-1.99x with 16 (``serenity.kernels.launch``)
 CHUNKS_PER_THREAD = 16
 #: ray reordering (``sort=None`` in the queries): batches of at least this many rays are traced in
-#: the order of a 12-bit key, the direction's octant then the origin's Morton code on a
-#: ``SORT_ORIGIN_BITS``-bit grid per axis over the root box, so that consecutive rays walk the same
-#: nodes and triangles (module docstring, "Ray reordering")
+#: the order of a 16-bit key, the origin's Morton code on a ``SORT_ORIGIN_BITS``-bit grid per axis
+#: over the root box, then the direction's octant and its cell on a ``SORT_DIRECTION_BITS``-bit grid
+#: per coordinate of the octant's octahedral map, so that consecutive rays walk the same nodes and
+#: triangles (module docstring, "Ray reordering")
 SORT_MIN_RAYS = 1 << 15
 SORT_MIN_RUN = 4  # ... whose keys change on average more often than every this many rays (``ray_order``)
 #: ... estimated from this many evenly spaced pairs of consecutive rays (a coherent batch is then
@@ -168,8 +172,11 @@ SORT_SAMPLE_PAIRS = 4096
 INTERLEAVE_FACTORS = (2, 4)
 CPU_RAYS_PER_THREAD = 2
 RAYS_PER_SLOT = 8
-SORT_ORIGIN_BITS = 3  # at most 4: octant + 3 × bits must fit the 16-bit keys numpy radix-sorts
+SORT_ORIGIN_BITS = 3
+SORT_DIRECTION_BITS = 2
 
+#: the key must fit the 16-bit integers numpy radix-sorts
+assert 3 * SORT_ORIGIN_BITS + 3 + 2 * SORT_DIRECTION_BITS <= 16
 assert STACK_SIZE & (STACK_SIZE - 1) == 0  # a power of 2: the stack index is masked (``_STACK_MASK``)
 _STACK_MASK = wp.constant(STACK_SIZE - 1)
 _stack_i = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
@@ -181,6 +188,8 @@ _TINY = wp.constant(TINY_DIRECTION)
 _FLT_MAX = wp.constant(float(np.finfo(np.float32).max))
 _SORT_BITS = wp.constant(SORT_ORIGIN_BITS)
 _SORT_CELLS = wp.constant(float(1 << SORT_ORIGIN_BITS))
+_SORT_DIR_BITS = wp.constant(SORT_DIRECTION_BITS)
+_SORT_DIR_CELLS = wp.constant(float(1 << SORT_DIRECTION_BITS))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -615,9 +624,10 @@ def leaf_hits(
 
 @wp.func
 def ray_sort_key(box_lo: wp.vec3, box_hi: wp.vec3, o: wp.vec3, d: wp.vec3) -> int:
-    """The reordering key of a ray: its direction's octant (bits 3·SORT_ORIGIN_BITS and up), then
-    the Morton code of its origin's cell on a 2^SORT_ORIGIN_BITS grid per axis over the root box
-    (origins outside it, or NaN, clamp to the border cells)."""
+    """The reordering key of a ray: the Morton code of its origin's cell on a 2^SORT_ORIGIN_BITS grid
+    per axis over the root box (the high bits; origins outside it, or NaN, clamp to the border
+    cells), then its direction's octant, then the direction's cell on a 2^SORT_DIRECTION_BITS grid
+    per coordinate of the octahedral map of that octant (|d| / (|dx| + |dy| + |dz|), x and y)."""
     key = int(0)
     for a in range(3):
         f = (o[a] - box_lo[a]) / (box_hi[a] - box_lo[a]) * _SORT_CELLS
@@ -627,7 +637,16 @@ def ray_sort_key(box_lo: wp.vec3, box_hi: wp.vec3, o: wp.vec3, d: wp.vec3) -> in
         for b in range(_SORT_BITS):
             key = key | (((q >> b) & 1) << (3 * b + a))
     octant = wp.where(d[0] < 0.0, 1, 0) | wp.where(d[1] < 0.0, 2, 0) | wp.where(d[2] < 0.0, 4, 0)
-    return key | (octant << (3 * _SORT_BITS))
+    l1 = wp.abs(d[0]) + wp.abs(d[1]) + wp.abs(d[2])
+    du = float(0.0)
+    dv = float(0.0)
+    if l1 > 0.0 and finite(l1):  # else (zero, NaN or infinite: a miss anyway) cell 0
+        du = wp.abs(d[0]) / l1 * _SORT_DIR_CELLS
+        dv = wp.abs(d[1]) / l1 * _SORT_DIR_CELLS
+    qu = int(wp.min(du, _SORT_DIR_CELLS - 1.0))
+    qv = int(wp.min(dv, _SORT_DIR_CELLS - 1.0))
+    direction = (((octant << _SORT_DIR_BITS) | qu) << _SORT_DIR_BITS) | qv
+    return (key << (3 + 2 * _SORT_DIR_BITS)) | direction
 
 
 @wp.kernel(enable_backward=False)
@@ -1161,8 +1180,9 @@ class KdTree:
 
 
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS",
-           "PROGRESS_MIN_TRIANGLES", "SORT_MIN_RAYS", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
-           "KdTreeData", "cache_dir", "finite", "gather_float", "gather_in_order", "gather_vec3", "inner_step_flat",
-           "intersect_rays", "intersect_triangle", "intersect_triangle_fixed", "leaf_hits", "node_head",
-           "node_split", "occlude_rays", "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2",
-           "sample_key_changes", "setup_ray", "sort_keys", "start_ray", "trace_kd", "trace_rays_kernel"]
+           "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS", "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits",
+           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_float",
+           "gather_in_order", "gather_vec3", "inner_step_flat", "intersect_rays", "intersect_triangle",
+           "intersect_triangle_fixed", "leaf_hits", "node_head", "node_split", "occlude_rays", "ray_order",
+           "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes", "setup_ray", "sort_keys",
+           "start_ray", "trace_kd", "trace_rays_kernel"]

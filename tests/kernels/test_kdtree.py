@@ -14,6 +14,7 @@ from serenity.kernels.kdtree import (
     CPU_RAYS_PER_THREAD,
     INTERLEAVE_FACTORS,
     SORT_MIN_RAYS,
+    SORT_ORIGIN_BITS,
     TRACE_MODULE_OPTIONS,
     KdBuildConfig,
     KdTree,
@@ -209,13 +210,21 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
         for threads in (1, 3):
             assert _hits_equal(tree.intersect(o, d, device="cpu", threads=threads, sort=True), plain), threads
             assert np.array_equal(tree.occluded(o, d, 1.5, device="cpu", threads=threads, sort=True), occ), threads
-    # the order is a permutation, grouped by the direction's octant first
+    # the order is a permutation, grouped by the origin's cell first, then by the direction's octant
     order = ray_order(data.box_lo, data.box_hi, wp.array(o2, dtype=wp.vec3, device="cpu"),
                       wp.array(d2, dtype=wp.vec3, device="cpu"), len(o2),
                       True, "cpu").numpy()
     assert np.array_equal(np.sort(order), np.arange(len(o2)))
+    lo, hi = np.array(data.box_lo), np.array(data.box_hi)
+    cells = 1 << SORT_ORIGIN_BITS
+    q = np.clip(np.floor((o2[order] - lo) / (hi - lo) * cells), 0, cells - 1).astype(np.int64)
+    cell = (q[:, 0] * cells + q[:, 1]) * cells + q[:, 2]
     octant = (d2[order] < 0) @ np.array([1, 2, 4])
-    assert np.all(np.diff(octant) >= 0)
+    runs = np.flatnonzero(np.diff(cell) != 0)  # where the origin's cell changes along the order
+    assert len(np.unique(cell[np.r_[0, runs + 1]])) == len(runs) + 1  # each cell is one run
+    within = np.ones(len(order) - 1, bool)
+    within[runs] = False
+    assert np.all(np.diff(octant)[within] >= 0)  # and sorted by octant inside its run
 
 
 
