@@ -1,6 +1,6 @@
 """kd-tree speed against Embree and Warp's own ``wp.Mesh`` BVH, measured in the same run (paper §9).
 
-    python benchmarks/bench_kdtree.py --json FILE [--size 1280x720] [--subdivisions 6] [--repeats 5]
+    python benchmarks/bench_kdtree.py --json FILE [--size 1280x720] [--subdivisions 6] [--repeats 11]
                                       [--build-sizes 10000,40000,160000,640000,1000000] [--charts PREFIX]
 
 Scene: a displaced icosphere on a wavy terrain grid (``--subdivisions 6``: 164k triangles, 7: 655k).
@@ -17,14 +17,18 @@ Embree (``embreex``, closest hit, one ``run`` call over all rays) and Warp's BVH
 (``wp.mesh_query_ray``, SAH constructor; both take the rays as they come). Ours and Warp's run on
 1, 2, ... all threads (through ``serenity.kernels.launch``); Embree on 1 thread, and its calls
 split over all threads as Python threads (embreex holds the GIL, so that is shown only as it
-measures). Times are medians of ``--repeats`` runs after a warm-up (compilation, first
-touch) outside the timed region.
+measures). Every tracer and thread count runs once per round, in turn, for ``--repeats`` rounds
+after one warm-up each (compilation, first touch) outside the timed region; rates are medians over
+the rounds. The host's speed drifts by 30-50 % within minutes on the shared CI-class machine, so
+the ratios below are **paired**: the median over rounds of the two wall times' ratio within a round
+(seconds apart), not a ratio of medians taken minutes apart; each ray set's
+``paired_ratios_per_round`` keeps the rounds' values (other tracer's time / ours).
 
 Figures (ratios of this run's own measurements; incoherent rays unless ``_coherent``):
-- ``ratio_vs_embree_1t``: ours / Embree, 1 thread each; ``ratio_vs_embree_all_threads``: ours on
-  all threads / Embree's best;
-- ``speedup_vs_warp_bvh_1t``: ours / Warp's BVH, 1 thread each;
-- ``thread_scaling``: ours on 2 threads / ours on 1, the worse of coherent and incoherent. Wall
+- ``ratio_vs_embree_1t``: ours / Embree, 1 thread each (paired); ``ratio_vs_embree_all_threads``:
+  ours on all threads / Embree's best (medians);
+- ``speedup_vs_warp_bvh_1t``: ours / Warp's BVH, 1 thread each (paired);
+- ``thread_scaling``: ours on 2 threads / ours on 1 (paired), the worse of coherent and incoherent. Wall
   time: on a machine shared with other busy sessions (Linux groups each session's threads and
   shares the CPUs equally between groups: ``sched_autogroup``) a second thread gets no more CPU, so
   this reads ~1 there; ``machine.load_average`` says how busy the machine was.
@@ -146,25 +150,45 @@ def _warp_bvh_kernel(wp):
 
 
 def measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts: list[int], repeats: int):
-    """Mrays/s (wall) of ours and Warp's BVH on each thread count, Embree on 1 and on all; and
-    Mrays per CPU-second of the process for the same runs (one thread: immune to time-sharing)."""
+    """Mrays/s (wall) of ours and Warp's BVH on each thread count, Embree on 1 and on all; Mrays per
+    CPU-second of the process for the same runs (one thread: immune to time-sharing); and the
+    per-round ratios of each tracer's wall time to ours on the same thread count. Every tracer and
+    thread count runs once per round, in turn (after one warm-up each), so a round's runs are
+    seconds apart and a ratio within a round is not moved by the host's drift between rounds (it
+    drifts by 30-50 % within minutes on the shared CI-class machine)."""
     n = len(o)
     wo, wd = wp.array(o, dtype=wp.vec3, device="cpu"), wp.array(d, dtype=wp.vec3, device="cpu")
     wt, wpr = wp.empty(n, dtype=float, device="cpu"), wp.empty(n, dtype=wp.int32, device="cpu")
-    rates, cpu = {}, {}
-    for nt in thread_counts:
-        say(f"  {n:,} rays, {nt} thread(s): ours, Warp BVH")
-        rates[f"ours_{nt}t"] = n / median_time(lambda nt=nt: tree.intersect(o, d, device="cpu", threads=nt),
-                                               repeats, cpu, f"ours_{nt}t") / 1e6
-        rates[f"warp_bvh_{nt}t"] = n / median_time(
-            lambda nt=nt: launch(query_rays, n, [mesh.id, wo, wd, wt, wpr], device="cpu", threads=nt,
-                                 chunks_per_thread=16), repeats, cpu, f"warp_bvh_{nt}t") / 1e6
     top = max(thread_counts)
-    say(f"  {n:,} rays: Embree on 1 and {top} thread(s)")
-    rates["embree_1t"] = n / median_time(lambda: embree(o, d, 1), repeats, cpu, "embree_1t") / 1e6
+    runs = {}  # name -> callable
+    for nt in thread_counts:
+        runs[f"ours_{nt}t"] = lambda nt=nt: tree.intersect(o, d, device="cpu", threads=nt)
+        runs[f"warp_bvh_{nt}t"] = lambda nt=nt: launch(query_rays, n, [mesh.id, wo, wd, wt, wpr], device="cpu",
+                                                       threads=nt, chunks_per_thread=16)
+    runs["embree_1t"] = lambda: embree(o, d, 1)
     if top > 1:
-        rates[f"embree_{top}t"] = n / median_time(lambda: embree(o, d, top), repeats) / 1e6
-    return rates, {k: n / c / 1e6 for k, c in cpu.items()}
+        runs[f"embree_{top}t"] = lambda: embree(o, d, top)
+    say(f"  {n:,} rays: {', '.join(runs)}, {repeats} rounds")
+    for fn in runs.values():
+        fn()  # warm-up: compile, first touch
+    wall = {k: [] for k in runs}
+    cpu = {k: [] for k in runs}
+    for _ in range(repeats):
+        for k, fn in runs.items():
+            c0, t0 = time.process_time(), time.perf_counter()
+            fn()
+            wall[k].append(time.perf_counter() - t0)
+            cpu[k].append(time.process_time() - c0)
+    rates = {k: n / statistics.median(v) / 1e6 for k, v in wall.items()}
+    cpu_rates = {k: n / statistics.median(v) / 1e6 for k, v in cpu.items() if k != f"embree_{top}t" or top == 1}
+    paired = {}  # other's time / ours, per round (> 1: ours is faster)
+    for k in runs:
+        nt = k.rsplit("_", 1)[1]
+        if not k.startswith("ours_") and f"ours_{nt}" in wall:
+            paired[f"{k}_over_ours"] = [a / b for a, b in zip(wall[k], wall[f"ours_{nt}"], strict=True)]
+    if top > 1:
+        paired["ours_1t_over_ours_2t"] = [a / b for a, b in zip(wall["ours_1t"], wall["ours_2t"], strict=True)]
+    return rates, cpu_rates, paired
 
 
 def build_sweep(sizes: list[int], repeats: int) -> list[dict]:
@@ -243,7 +267,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--json", required=True, help="write the figures here")
     ap.add_argument("--size", default="1280x720", help="camera rays WxH (default 1280x720)")
     ap.add_argument("--subdivisions", type=int, default=6, help="icosphere subdivisions (6: 164k tris, 7: 655k)")
-    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=11, help="rounds (each runs every tracer once)")
     ap.add_argument("--build-sizes", default="10000,40000,160000,640000,1000000",
                     help="triangle counts of the build sweep ('' = none; 1000000 gives build_1m_s)")
     ap.add_argument("--charts", default=None, help="chart path prefix (default: the JSON path without .json)")
@@ -297,7 +321,8 @@ def main(argv=None) -> dict:
     for name, (o, d) in ray_sets.items():
         say(f"{name} rays")
         n = len(o)
-        rates, cpu_rates = measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts, args.repeats)
+        rates, cpu_rates, paired = measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts,
+                                                 args.repeats)
         cpu_bound = thread_cpu_split(wp, lambda o=o, d=d: tree.intersect(o, d, device="cpu", threads=2))
         # the same with one contiguous chunk per thread (the split before chunks_per_thread)
         args_1 = [tree.device_data("cpu"), wp.array(o, dtype=wp.vec3, device="cpu"),
@@ -328,17 +353,18 @@ def main(argv=None) -> dict:
                          "rays_per_thread": CPU_RAYS_PER_THREAD if reordered else 1,  # interleaved slots
                          "hit_fraction": float(ours.hit.mean()),
                          "mrays_per_s": rates,
-                         "mrays_per_cpu_s": cpu_rates, "thread_cpu_efficiency": efficiency,
+                         "mrays_per_cpu_s": cpu_rates, "paired_ratios_per_round": paired,
+                         "thread_cpu_efficiency": efficiency,
                          "thread_scaling_projected": cpu_bound * efficiency,
                          "agreement_with_embree": agree, "thread_scaling_cpu_bound": cpu_bound,
                          "thread_scaling_cpu_bound_one_chunk_per_thread": cpu_bound_halves}
-        figures[f"ratio_vs_embree_1t{suffix}"] = rates["ours_1t"] / rates["embree_1t"]
+        figures[f"ratio_vs_embree_1t{suffix}"] = statistics.median(paired["embree_1t_over_ours"])
         figures[f"ratio_vs_embree_1t_cpu{suffix}"] = cpu_rates["ours_1t"] / cpu_rates["embree_1t"]
         figures[f"speedup_vs_warp_bvh_1t_cpu{suffix}"] = cpu_rates["ours_1t"] / cpu_rates["warp_bvh_1t"]
         figures[f"ratio_vs_embree_all_threads{suffix}"] = rates[f"ours_{threads}t"] / embree_best
-        figures[f"speedup_vs_warp_bvh_1t{suffix}"] = rates["ours_1t"] / rates["warp_bvh_1t"]
+        figures[f"speedup_vs_warp_bvh_1t{suffix}"] = statistics.median(paired["warp_bvh_1t_over_ours"])
         figures[f"speedup_vs_warp_bvh_all_threads{suffix}"] = rates[f"ours_{threads}t"] / rates[f"warp_bvh_{threads}t"]
-        scaling.append(rates["ours_2t"] / rates["ours_1t"])
+        scaling.append(statistics.median(paired["ours_1t_over_ours_2t"]))
         scaling_cpu.append(cpu_bound)
         scaling_projected.append(cpu_bound * efficiency)
         for k, r in rates.items():
