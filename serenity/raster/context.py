@@ -171,6 +171,14 @@ def compile_program(ctx, body: str, name: str, defines: dict | None = None,
         raise SerenityError(f"shader {name} failed to compile: {e}") from None
 
 
+def uniform(program, name: str):
+    """``program``'s uniform (or attribute) ``name``, or None where the variant has none (the
+    compiler drops what a program never reads). Use this, not ``name in program``: moderngl's
+    ``Program`` has no ``__contains__``, so ``in`` walks every member through ``__iter__`` — a few
+    hundred such tests per frame were ~0.5 ms of the main thread's Python at 320×180."""
+    return program.get(name, None)
+
+
 def fullscreen_vao(ctx, program):
     """A VAO with no buffers: fullscreen passes draw one triangle from gl_VertexID."""
     return ctx.vertex_array(program, [])
@@ -279,8 +287,8 @@ class LowResLayout:
     def set_uniforms(self, program) -> None:
         """``u_lowres_origin`` / ``u_lowres_size`` (``glsl/lowres.glsl``) of ``program``, where it has them."""
         for name, value in (("u_lowres_origin", self.origin), ("u_lowres_size", self.size)):
-            if name in program:
-                program[name].value = value
+            if (u := uniform(program, name)) is not None:
+                u.value = value
 
     def crop(self, image):
         """The image's texels of a read-back of the targets ((rows, cols, ...), top row first)."""

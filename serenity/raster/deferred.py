@@ -10,7 +10,14 @@ import moderngl
 import numpy as np
 
 from serenity.config import ShadowConfig
-from serenity.raster.context import FullscreenPass, draw_fullscreen, fullscreen_vao, load_program, low_res_size
+from serenity.raster.context import (
+    FullscreenPass,
+    draw_fullscreen,
+    fullscreen_vao,
+    load_program,
+    low_res_size,
+    uniform,
+)
 from serenity.raster.shadow import disc_defines
 
 UPSAMPLE_UNIT = 16
@@ -235,10 +242,10 @@ class DeferredPass(FullscreenPass):
         self._set(p, "u_use_sky_map", sky is not None)
         if sky is not None:
             sky.bind(p, 8)  # units 8..15: the sky map (and the volume, unused here)
-        if "u_inv_view_proj" in p:
-            p["u_inv_view_proj"].write(light.inv_view_proj.T.astype(np.float32).tobytes())
-        if contact and "u_view_proj" in p:
-            p["u_view_proj"].write(light.view_proj.T.astype(np.float32).tobytes())
+        if (u := uniform(p, "u_inv_view_proj")) is not None:
+            u.write(light.inv_view_proj.T.astype(np.float32).tobytes())
+        if contact and (u := uniform(p, "u_view_proj")) is not None:
+            u.write(light.view_proj.T.astype(np.float32).tobytes())
         self._set(p, "u_contact_pixels", light.shadow.contact_pixels)
         self._set(p, "u_contact_texels", light.shadow.contact_texels)
         self._set(p, "u_sun_dir", light.sun_direction)
@@ -251,7 +258,7 @@ class DeferredPass(FullscreenPass):
         self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
 
     def _set_shadow_uniforms(self, p, shadow, light: LightingInputs) -> None:
-        if "u_cascade_vp" not in p:  # a variant that samples no shadow map (the sky's half)
+        if uniform(p, "u_cascade_vp") is None:  # a variant that samples no shadow map (the sky's half)
             return
         cfg = light.shadow
         cs = shadow.cascades
@@ -263,8 +270,8 @@ class DeferredPass(FullscreenPass):
             # a normal's image under the linear part L is L^-T n; GL reads a mat3 column by column
             planes[i] = np.linalg.inv(c.view_proj[:3, :3])  # (L^-T)^T, row-major = L^-T column-major
         p["u_cascade_vp"].write(mats.tobytes())
-        if "u_cascade_plane" in p:
-            p["u_cascade_plane"].write(planes.tobytes())
+        if (u := uniform(p, "u_cascade_plane")) is not None:
+            u.write(planes.tobytes())
 
         def vec4(vals):
             return tuple(float(v) for v in list(vals) + [vals[-1]] * (4 - len(vals)))
@@ -284,11 +291,12 @@ class DeferredPass(FullscreenPass):
         """Set uniform ``name`` if this variant has it (a variant leaves out what it never reads):
         bools and ints as they are (switches, texture units), other scalars as float, arrays as a
         tuple of floats."""
-        if name not in p:
+        u = uniform(p, name)
+        if u is None:
             return
         if isinstance(value, (bool, int)):
-            p[name].value = value
+            u.value = value
         elif np.ndim(value) == 0:
-            p[name].value = float(value)
+            u.value = float(value)
         else:
-            p[name].value = tuple(float(x) for x in np.asarray(value).reshape(-1))
+            u.value = tuple(float(x) for x in np.asarray(value).reshape(-1))

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from serenity.raster.context import load_program
+from serenity.raster.context import load_program, uniform
 
 
 @dataclass
@@ -82,8 +82,8 @@ class GBufferPass:
             for p in (self.program, self.program_textured):
                 if p is not None:
                     p["u_view_proj"].write(vp)
-                    if "u_camera_pos" in p:
-                        p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
+                    if (u := uniform(p, "u_camera_pos")) is not None:
+                        u.value = tuple(float(x) for x in camera_pos)
             for r in self.scene_gl.ranges:
                 m = self.scene_gl.materials[r.material]
                 tex = self.scene_gl.textures.get(r.material)

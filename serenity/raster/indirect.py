@@ -19,7 +19,14 @@ from __future__ import annotations
 
 import moderngl
 
-from serenity.raster.context import BlendedTargets, draw_fullscreen, fullscreen_vao, load_program, low_res_layout
+from serenity.raster.context import (
+    BlendedTargets,
+    draw_fullscreen,
+    fullscreen_vao,
+    load_program,
+    low_res_layout,
+    uniform,
+)
 
 TECHNIQUES = {"sky": 1, "lpv": 2}
 #: texture units 0..5 are the G-buffer, eye and AO; the volume's own textures start here
@@ -90,17 +97,17 @@ class IndirectPass:
             p["u_scale"].value = target.scale
             target.layout.set_uniforms(p)
         for loc, name in enumerate(("g_albedo", "g_normal", "g_position", "g_material")):
-            if name in p:
-                p[name].value = loc
-        if rt_view is not None and "g_eye" in p:
-            p["g_eye"].value = 4
-        if ao is not None and rt_view is None and "u_ao" in p:
-            p["u_ao"].value = 5
+            if (u := uniform(p, name)) is not None:
+                u.value = loc
+        if rt_view is not None and (u := uniform(p, "g_eye")) is not None:
+            u.value = 4
+        if ao is not None and rt_view is None and (u := uniform(p, "u_ao")) is not None:
+            u.value = 5
         for name, value in (("u_use_ao", ao is not None and rt_view is None), ("u_rt_view", rt_view is not None),
                             ("u_camera_pos", tuple(float(x) for x in camera_pos)),
                             ("u_diffuse", bool(diffuse)), ("u_glossy", bool(glossy))):
-            if name in p:
-                p[name].value = value
+            if (u := uniform(p, name)) is not None:
+                u.value = value
         bind(p, FIRST_VOLUME_UNIT)
 
 

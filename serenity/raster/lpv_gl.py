@@ -16,7 +16,7 @@ import moderngl
 import numpy as np
 
 from serenity.config import LPV_MAX_CASCADES
-from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.context import fullscreen_vao, load_program, uniform
 from serenity.raster.interop import upload_texture3d
 
 MAX_CASCADES = LPV_MAX_CASCADES
@@ -106,9 +106,8 @@ class LPVTexturesGL:
             for k, ch in enumerate((*CHANNELS, "o")):
                 unit = first_unit + 4 * c + k
                 self.textures[c][k].use(location=unit)
-                name = f"u_lpv_{ch}{c}"
-                if name in program:
-                    program[name].value = unit
+                if (u := uniform(program, f"u_lpv_{ch}{c}")) is not None:
+                    u.value = unit
         self._write(program, "u_lpv_geom", self.geom, 4)
         self._write(program, "u_lpv_res", self.res, 1)
         for name, value in (("u_lpv_count", int(self.count)), ("u_lpv_leak_guard", self.leak_guard),
@@ -117,15 +116,16 @@ class LPVTexturesGL:
                             ("u_lpv_lookup_offset", self.lookup_offset), ("u_lpv_margin", self.margin),
                             ("u_lpv_band", self.band), ("u_lpv_glossy_step", self.glossy_step),
                             ("u_lpv_damp_dist", self.damp_dist), ("u_lpv_damp_pow", self.damp_pow)):
-            if name in program:
-                program[name].value = value
+            if (u := uniform(program, name)) is not None:
+                u.value = value
 
     @staticmethod
     def _write(program, name: str, values: np.ndarray, width: int) -> None:
-        if name not in program:
+        u = uniform(program, name)
+        if u is None:
             return
-        n = max(1, int(program[name].array_length))
-        program[name].write(np.ascontiguousarray(values.reshape(-1)[: n * width]).tobytes())
+        n = max(1, int(u.array_length))
+        u.write(np.ascontiguousarray(values.reshape(-1)[: n * width]).tobytes())
 
     def release(self) -> None:
         for c in range(MAX_CASCADES):

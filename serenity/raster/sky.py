@@ -26,7 +26,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from serenity.raster.context import fullscreen_vao, load_program
+from serenity.raster.context import fullscreen_vao, load_program, uniform
 from serenity.raster.interop import upload_texture3d
 
 VOLUME_TEXTURES = 7
@@ -140,8 +140,8 @@ class SkyTexturesGL:
             "u_sky_probe_offset": vis_unit + 1,
         }
         for name, value in values.items():
-            if name in program:
-                program[name].value = value
+            if (u := uniform(program, name)) is not None:
+                u.value = value
         return vis_unit + 2
 
     # -- evaluation on the GPU (tests, debugging)
@@ -189,10 +189,10 @@ class SkyTexturesGL:
                 tc.use(location=unit + 2)
                 prog["u_in_a"].value = unit
                 for name, u in (("u_in_b", unit + 1), ("u_in_c", unit + 2)):
-                    if name in prog:
-                        prog[name].value = u
-                if "u_shininess" in prog:
-                    prog["u_shininess"].value = float(shininess)
+                    if (m := uniform(prog, name)) is not None:
+                        m.value = u
+                if (m := uniform(prog, "u_shininess")) is not None:
+                    m.value = float(shininess)
                 prog["u_mode"].value = mode
                 vao.render(vertices=3)
             res = np.frombuffer(out.read(), np.float32).reshape(w * h, 4)[:n, :3].copy()
