@@ -109,6 +109,7 @@ from serenity.kernels.atmosphere_ref import (
     make_sun,
     paraboloid_direction,
     sample_sky_map_np,
+    sampling_operator,
     scene_sun_irradiance,
     sky_map_directions,
     sky_map_solid_angles,
@@ -562,7 +563,7 @@ __all__ = [
     "MIE_SCATTERING", "NIGHT_SKY_RADIANCE", "OBSERVER_ALTITUDE_KM", "RAYLEIGH_SCALE_HEIGHT_KM",
     "RAYLEIGH_SCATTERING", "SOLAR_IRRADIANCE", "SUN_ANGULAR_DIAMETER_DEG", "SKY_MAP_SIZE", "angle_between_deg",
     "direction_to_paraboloid", "equirect_directions", "horizontal_irradiance", "make_sun", "paraboloid_direction",
-    "sample_sky_map_np", "scene_sun_irradiance", "sky_map_directions", "sky_map_solid_angles",
+    "sample_sky_map_np", "sampling_operator", "scene_sun_irradiance", "sky_map_directions", "sky_map_solid_angles",
     "sky_radiance_reference", "sun_disc_fraction", "sun_irradiance", "sun_radiance", "sun_transmittance",
     # the Warp model
     "SKY_VIEW_TABLE_MIN_ELEVATION_DEG", "SkyMapCache", "bake_sky_map", "bake_sky_map_wp",

@@ -90,10 +90,9 @@ def sky_map_solid_angles(size: int = SKY_MAP_SIZE) -> np.ndarray:
     return np.where(r2 <= 1.0, 4.0 / (1.0 + r2) ** 2 * (2.0 / size) ** 2, 0.0)
 
 
-def sample_sky_map_np(sky_map: np.ndarray, directions) -> np.ndarray:
-    """(N,3) float64 bilinear clamp-to-edge lookup (twin of :func:`sample_sky_map`)."""
-    m = np.asarray(sky_map, np.float64)
-    size = m.shape[0]
+def bilinear_texels(size: int, directions):
+    """The bilinear clamp-to-edge taps of :func:`sample_sky_map` in a size² map: columns xa, xb and
+    rows ya, yb (N,) int64, and the fractions ax, ay (N, 1) float64."""
     uv = direction_to_paraboloid(np.asarray(directions, np.float64).reshape(-1, 3))
     fx, fy = uv[:, 0] * size - 0.5, uv[:, 1] * size - 0.5
     x0, y0 = np.floor(fx), np.floor(fy)
@@ -101,9 +100,30 @@ def sample_sky_map_np(sky_map: np.ndarray, directions) -> np.ndarray:
     x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
     xa, xb = np.clip(x0, 0, size - 1), np.clip(x0 + 1, 0, size - 1)
     ya, yb = np.clip(y0, 0, size - 1), np.clip(y0 + 1, 0, size - 1)
+    return xa, xb, ya, yb, ax, ay
+
+
+def sample_sky_map_np(sky_map: np.ndarray, directions) -> np.ndarray:
+    """(N,3) float64 bilinear clamp-to-edge lookup (twin of :func:`sample_sky_map`)."""
+    m = np.asarray(sky_map, np.float64)
+    xa, xb, ya, yb, ax, ay = bilinear_texels(m.shape[0], directions)
     top = m[ya, xa] * (1 - ax) + m[ya, xb] * ax
     bot = m[yb, xa] * (1 - ax) + m[yb, xb] * ax
     return top * (1 - ay) + bot * ay
+
+
+def sampling_operator(size: int, directions, basis: np.ndarray) -> np.ndarray:
+    """(K, size²) float64 M with M @ map.reshape(-1, C) = basisᵀ @ sample_sky_map_np(map, directions)
+    for every size² map (the lookup at fixed directions is linear in the map): ``basis`` (N, K) the
+    functions the samples are projected on (e.g. SH at the directions). Build it once, apply it for
+    each map: K·size² multiply-adds instead of N bilinear lookups and an N×K product."""
+    xa, xb, ya, yb, ax, ay = bilinear_texels(size, directions)
+    b = np.asarray(basis, np.float64)
+    out = np.zeros((size * size, b.shape[1]))
+    for row, col, w in ((ya, xa, (1 - ax) * (1 - ay)), (ya, xb, ax * (1 - ay)), (yb, xa, (1 - ax) * ay),
+                        (yb, xb, ax * ay)):
+        np.add.at(out, row * size + col, b * w)
+    return out.T
 
 
 @functools.lru_cache(maxsize=8)

@@ -68,7 +68,11 @@ from serenity.kernels.atmosphere import (
     horizontal_irradiance,
     sample_sky_map,
 )
-from serenity.kernels.atmosphere_ref import angle_between_deg, sample_sky_map_np, scene_sun_irradiance
+from serenity.kernels.atmosphere_ref import (
+    angle_between_deg,
+    sampling_operator,
+    scene_sun_irradiance,
+)
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
@@ -414,6 +418,7 @@ class SkyVolume:
         self._open_host = np.zeros((9, 3))
         self._open_version = -1
         self._open_dirs = direction_sets(OPEN_SKY_DIRECTIONS, 1)[0]
+        self._open_operator = None  # (sky map size, its sampling operator, the lower directions' Σ Y)
         #: "gather" with ``gather_visibility``: (atlas (Z·T, Y, X·T, 2), offsets (P, 3)) of the probes'
         #: depth moments and relocations, weighing each probe by whether it sees the point; else None
         self.visibility = None
@@ -472,12 +477,20 @@ class SkyVolume:
             return self._open_host
         if self._open_version != self.sky_version:
             d = self._open_dirs
-            radiance = np.empty((len(d), 3))
-            up = d[:, 1] >= 0
-            radiance[up] = sample_sky_map_np(self.sky_map(), d[up])
-            radiance[~up] = self.ground_radiance
+            sky_map = self.sky_map()
+            size = sky_map.shape[0]
+            if self._open_operator is None or self._open_operator[0] != size:
+                # Σ_i Y(d_i) L(d_i): the sky map's bilinear samples at the upper directions and the
+                # ground radiance at the lower ones, as one linear map of the sky map per map size
+                # (the sky map is rebaked every frame while the sun moves: this is ~50 µs, the
+                # samples and their projection were ~1 ms)
+                basis = sh_basis(d)
+                up = d[:, 1] >= 0
+                self._open_operator = (size, sampling_operator(size, d[up], basis[up]), basis[~up].sum(axis=0))
+            _, op, ground = self._open_operator
+            summed = op @ np.asarray(sky_map, np.float64).reshape(-1, 3) + np.outer(ground, self.ground_radiance)
             scale = irradiance_scale(self.config.window, self.config.window_size)
-            self._open_host = scale[:, None] * (4.0 * math.pi / len(d)) * (sh_basis(d).T @ radiance)
+            self._open_host = scale[:, None] * (4.0 * math.pi / len(d)) * summed
             self._open.assign(self._open_host.reshape(-1).astype(np.float32))
             self._open_version = self.sky_version
         return self._open_host

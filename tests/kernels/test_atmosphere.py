@@ -109,6 +109,22 @@ def test_warp_lookup_matches_numpy(device):
     assert np.allclose(A.sample_sky_map_wp(sky, d, device=device), A.sample_sky_map_np(sky, d), atol=2e-5)
 
 
+def test_sampling_operator_is_the_lookup_projected():
+    """sampling_operator(size, d, B) @ map = Bᵀ @ sample_sky_map_np(map, d) for any map: the open
+    sky's coefficients are computed that way, once per map size, instead of sampling each frame."""
+    rng = np.random.default_rng(4)
+    d = rng.normal(size=(700, 3))
+    d[:5] = [[0, 1, 0], [1, 0, 0], [0, 0, -1], [1, 1e-9, 0], [0.3, 0.2, 0.9]]  # zenith, horizon, edges
+    basis = rng.normal(size=(700, 9))
+    for size in (2, 17, 64):
+        op = A.sampling_operator(size, d, basis)
+        assert op.shape == (9, size * size)
+        for _ in range(2):
+            sky = rng.random((size, size, 3)).astype(np.float32)
+            direct = basis.T @ A.sample_sky_map_np(sky, d)
+            assert np.allclose(op @ sky.reshape(-1, 3).astype(np.float64), direct, rtol=1e-12, atol=1e-12)
+
+
 def test_sun_units_and_default_scale():
     e = A.sun_irradiance([0, 1, 0])
     assert 900 < e[1] < 1100  # noon sun on the order of 1000 W/m² (Sun model default (1000, 960, 900))

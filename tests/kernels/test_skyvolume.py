@@ -331,3 +331,25 @@ def test_content_fit_covers_the_buildings_and_the_open_ground_sees_the_open_sky(
     vol._open_version = vol.sky_version
     assert np.allclose(vol.irradiance(edge, up), inside_only)
     assert coeffs.shape[:3] == tuple(vol.resolution[::-1])
+
+
+def test_open_sky_coefficients_are_the_sampled_projection(device, courtyard):
+    """The open sky's coefficients (applied once per map size as one linear map of the sky map) are
+    the SH projection of the sky map's samples at the open-sky directions, and of the ground
+    radiance below the horizon, and follow a rebaked sky."""
+    from serenity.kernels.probegather import direction_sets
+    from serenity.kernels.skyvolume import OPEN_SKY_DIRECTIONS
+
+    vol = SkyVolume(courtyard, SkyConfig(rays_per_probe=32, cell_size=8.0), device=device)
+    d = direction_sets(OPEN_SKY_DIRECTIONS, 1)[0]
+    scale = S.irradiance_scale(vol.config.window, vol.config.window_size)
+    sun = courtyard.sun.direction.copy()  # the module's scene: put back afterwards
+    try:
+        for elevation in (40.0, 7.0):
+            courtyard.sun.direction = direction_from_angles(elevation, 120.0)
+            vol.update(layers=1)
+            rad = np.where((d[:, 1] >= 0)[:, None], A.sample_sky_map_np(vol.sky_map(), d), vol.ground_radiance[None])
+            expected = scale[:, None] * (4 * math.pi / len(d)) * (S.sh_basis(d).T @ rad)
+            assert np.allclose(vol.open_coefficients(), expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+    finally:
+        courtyard.sun.direction = sun
