@@ -53,8 +53,9 @@ def f1(x: float) -> str:
     return f"{x:.1f}"
 
 
-def stage(sched: dict, keys) -> float:
-    return sum(sched["stages_ms"].get(k, 0.0) for k in keys)
+def stage(stages_ms: dict, keys) -> float:
+    """The sum of the named stages' ms (a stage a run lacks counts 0)."""
+    return sum(stages_ms.get(k, 0.0) for k in keys)
 
 
 def table1(bench: dict) -> str:
@@ -64,7 +65,7 @@ def table1(bench: dict) -> str:
         if isinstance(keys, str):
             o, s = over[keys], ser[keys]
         else:
-            o, s = stage(over, keys), stage(ser, keys)
+            o, s = stage(over["stages_ms"], keys), stage(ser["stages_ms"], keys)
         p = "—" if pkey is None else f"{paper[pkey]:g}"
         rows.append(f"| {label} | {f1(o)} | {f1(s)} | {p} |")
     rt = lambda sch: " / ".join(f1(sch["stages_ms"].get(k, 0.0)) for k in RT_STAGES)  # noqa: E731
@@ -101,8 +102,7 @@ def tiles_table() -> str:
                           ("overlapped, 640×360", "640x360")):
         d = load(f"pass_ab_round15_tiles_{suffix}.json")
         a, b = d["variants"]["a"], d["variants"]["b"]
-        sa = sum(a["stages_ms_median"].get(k, 0.0) for k in LOWRES_PASSES)
-        sb = sum(b["stages_ms_median"].get(k, 0.0) for k in LOWRES_PASSES)
+        sa, sb = stage(a["stages_ms_median"], LOWRES_PASSES), stage(b["stages_ms_median"], LOWRES_PASSES)
         ident = "" if d["images_identical"] else " (images differ!)"
         rows.append(f"| {label} (`{suffix}`){ident} | {sa:.2f} → {sb:.2f} | {f1(a['frame_ms_median'])} → "
                     f"{f1(b['frame_ms_median'])} |")
@@ -118,31 +118,19 @@ def ab_line(name: str) -> str:
             f"{b['rel_mse']:.4f}, relMSE* {a['rel_mse_trimmed']:.3f} vs {b['rel_mse_trimmed']:.3f}")
 
 
-def render_block() -> str:
-    """What ``serenity render --json`` printed, rebuilt from ``render_output.json`` in its own format."""
-    from serenity.frame import format_timings  # the same table the command prints
-
-    d = load("render_output.json")
-    w, h = d["size"]
-    return "\n".join([
-        f"scene {d['scene']}: {d['triangles']} triangles, {w}x{h}, device {d['device']}, sun elevation "
-        f"{d['sun']['elevation_deg']:.1f} deg azimuth {d['sun']['azimuth_deg']:.1f} deg",
-        f"quality {d['quality']}; loaded in {d['load_ms']:.0f} ms",
-        format_timings(d["stages_ms"], d["frame_ms"]),
-        f"wrote {d['png']}", f"wrote {d['exr']} (layers: {', '.join(d['layers'])})"])
-
-
 def main() -> None:
     if "--render" in sys.argv[1:]:
-        print(render_block())
+        from serenity.commands.render import format_report  # what the command printed, as it printed it
+
+        print(format_report(load("render_output.json")))
         return
-    b640, b320 = load("frame_bench.json"), load("frame_bench_320.json")
+    benches = {name: load(name) for name in ("frame_bench.json", "frame_bench_320.json", "frame_bench_run1.json",
+                                             "frame_bench_320_run1.json", "frame_bench_low.json",
+                                             "frame_bench_320_low.json")}
     print("## Table 1: `frame_bench.json` (640x360, medium)\n")
-    print(table1(b640))
+    print(table1(benches["frame_bench.json"]))
     print("\n## The frame, run by run\n")
-    for name in ("frame_bench.json", "frame_bench_320.json", "frame_bench_run1.json", "frame_bench_320_run1.json",
-                 "frame_bench_low.json", "frame_bench_320_low.json"):
-        d = load(name)
+    for name, d in benches.items():
         size = d["size"] if isinstance(d["size"], str) else "x".join(map(str, d["size"]))
         print(f"- `{name}` ({d['quality']}, {size}): {pair(d)}")
     rep = load("frame_repeat_320.json")
@@ -152,7 +140,7 @@ def main() -> None:
           f"{f1(s['serial_ms']['min'])}–{f1(s['serial_ms']['max'])} (median {f1(s['serial_ms']['median'])}), "
           f"ratio {s['overlap_ratio']['min']:.2f}–{s['overlap_ratio']['max']:.2f} (median "
           f"{s['overlap_ratio']['median']:.2f}), wait for volumes median {s['wait_for_volumes_ms']['median']:.2f} ms")
-    runs_320 = [b320["overlapped"]["frame_ms"], load("frame_bench_320_run1.json")["overlapped"]["frame_ms"]]
+    runs_320 = [benches[n]["overlapped"]["frame_ms"] for n in ("frame_bench_320.json", "frame_bench_320_run1.json")]
     runs_320 += [r["overlapped_ms"] for r in rep["runs"]]
     print(f"- 320×180 medium, overlapped, every run above: {len(runs_320)} runs, "
           f"{sum(v <= 30.0 for v in runs_320)} of them ≤ 30 ms (the goal), best {f1(min(runs_320))} ms")

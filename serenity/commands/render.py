@@ -42,9 +42,24 @@ def register(subparsers) -> None:
     r.set_defaults(func=run)
 
 
+def format_report(report: dict) -> str:
+    """What ``serenity render`` prints, from the dict its ``--json`` writes (so that a README can print
+    a recorded run exactly as the command printed it: ``benchmarks/frame_tables.py --render``)."""
+    from serenity.frame import format_timings
+
+    (w, h), sun = report["size"], report["sun"]
+    return "\n".join([
+        f"scene {report['scene']}: {report['triangles']} triangles, {w}x{h}, device {report['device']}, "
+        f"sun elevation {sun['elevation_deg']:.1f} deg azimuth {sun['azimuth_deg']:.1f} deg",
+        f"quality {report['quality']}; loaded in {report['load_ms']:.0f} ms",
+        format_timings(report["stages_ms"], report["frame_ms"]),
+        f"wrote {report['png']}",
+        f"wrote {report['exr']} (layers: {', '.join(report['layers'])})"])
+
+
 def run(args) -> int:
     from serenity.config import RenderConfig
-    from serenity.frame import Renderer, format_timings
+    from serenity.frame import Renderer
     from serenity.io.exr import write_exr
     from serenity.io.png import write_png
     from serenity.scene import load
@@ -67,23 +82,19 @@ def run(args) -> int:
     layers = {"beauty": frame.hdr, **frame.aovs}
     write_exr(exr, layers)
     sun = scene.sun
-    print(f"scene {scene.name}: {scene.triangle_count} triangles, {width}x{height}, device {renderer.device}, "
-          f"sun elevation {sun.elevation_deg:.1f} deg azimuth {sun.azimuth_deg:.1f} deg")
-    print(f"quality {args.quality}; loaded in {load_ms:.0f} ms")
-    print(format_timings(frame.timings, frame.wall_ms))
-    print(f"wrote {png}")
-    print(f"wrote {exr} (layers: {', '.join(layers)})")
+    report = {
+        "arguments": {k: v for k, v in vars(args).items() if k != "func"}, "scene": scene.name,
+        "triangles": int(scene.triangle_count), "size": [width, height], "device": str(renderer.device),
+        "quality": args.quality, "frames": max(1, args.frames), "load_ms": load_ms,
+        "sun": {"elevation_deg": float(sun.elevation_deg), "azimuth_deg": float(sun.azimuth_deg)},
+        "stages_ms": {k: float(v) for k, v in frame.timings.items()}, "frame_ms": float(frame.wall_ms),
+        "nonfinite_pixels": int(frame.nonfinite_pixels), "png": png, "exr": exr, "layers": list(layers)}
+    print(format_report(report))
     if frame.nonfinite_pixels:  # counted by the tone-mapping pass (Frame.nonfinite_pixels)
         print(f"serenity: warning: {frame.nonfinite_pixels} of {width * height} pixels are NaN or infinite "
               f"(the EXR keeps them as they are)", file=sys.stderr)
     if args.json:
         from serenity.io.results import write_results
 
-        write_results(args.json, {
-            "arguments": {k: v for k, v in vars(args).items() if k != "func"}, "scene": scene.name,
-            "triangles": int(scene.triangle_count), "size": [width, height], "device": str(renderer.device),
-            "quality": args.quality, "frames": max(1, args.frames), "load_ms": load_ms,
-            "sun": {"elevation_deg": float(sun.elevation_deg), "azimuth_deg": float(sun.azimuth_deg)},
-            "stages_ms": {k: float(v) for k, v in frame.timings.items()}, "frame_ms": float(frame.wall_ms),
-            "nonfinite_pixels": int(frame.nonfinite_pixels), "png": png, "exr": exr, "layers": list(layers)})
+        write_results(args.json, report)
     return 0
