@@ -484,6 +484,11 @@ class RenderConfig:
     thread while the main thread issues the GL passes that do not need them (G-buffer, ray-casting
     buffer, shadow cascades, SSAO), as on a GPU they would queue beside them. False: on the main
     thread between those passes (the serial schedule always does)."""
+    tracer_nice: int = 19
+    """The niceness (0..19) of the tracer process that the overlapped schedule on the CPU traces in
+    (``kernels/tracer_process``): 19 = the lowest priority, so that it takes a core only where the
+    frame's own threads leave one idle; 0 = the frame's. ``benchmarks/bench_tracer_nice.py`` measures
+    what each costs the frame and the tracer."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
     rt_sun_shadows: str = "traced"
@@ -521,6 +526,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.exposure must be positive, got {self.exposure}")
         if not (isinstance(self.transmissions, int) and 0 <= self.transmissions <= 16):
             raise ConfigError(f"RenderConfig.transmissions must be an int in 0..16, got {self.transmissions!r}")
+        if not (isinstance(self.tracer_nice, int) and 0 <= self.tracer_nice <= 19):
+            raise ConfigError(f"RenderConfig.tracer_nice must be an int in 0..19, got {self.tracer_nice!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):
             raise ConfigError(f"RenderConfig.osm_size must be in 16..{MAX_IMAGE_SIZE}, got {self.osm_size}")
         if self.rt_sun_shadows not in ("traced", "osm"):

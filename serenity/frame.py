@@ -714,7 +714,7 @@ class Renderer:
         calls that hold the GIL); built on the first frame that shows a traced pixel."""
         if self.config.overlap and str(self.device).startswith("cpu"):
             if self._tracer_proc is None:
-                self._tracer_proc = TracerProcess(self.scene, self.device)
+                self._tracer_proc = TracerProcess(self.scene, self.device, nice=self.config.tracer_nice)
             return self._tracer_proc
         if self.tracer is None:
             t0 = time.perf_counter()

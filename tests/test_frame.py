@@ -4,6 +4,7 @@ the two schedules (ray tracing in a process beside the GL work, or inline) agree
 from __future__ import annotations
 
 import copy
+import os
 
 import numpy as np
 import pytest
@@ -142,6 +143,21 @@ def test_overlapped_and_serial_schedules_agree(scene_name, device):
             r.close()
     a, b = images
     assert np.abs(a - b).max() <= 1e-4 * a.max()
+
+
+@pytest.mark.skipif(not hasattr(os, "getpriority"), reason="POSIX priorities")
+@pytest.mark.parametrize("nice", [0, 7])
+def test_tracer_process_runs_at_the_configured_niceness(nice):
+    """``RenderConfig.tracer_nice`` is the tracer process's niceness above this process's own, and
+    its frames trace as at any other."""
+    r = Renderer(load("glass"), *SIZE, config=RenderConfig(tracer_nice=nice))
+    try:
+        assert r.render(read_back=False).rays > 0
+        child = r._tracer_proc._proc.pid
+        own = os.getpriority(os.PRIO_PROCESS, 0)
+        assert os.getpriority(os.PRIO_PROCESS, child) == min(19, own + nice)
+    finally:
+        r.close()
 
 
 def test_sync_modes_give_the_same_frames(courtyard):

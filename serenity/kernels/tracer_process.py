@@ -9,8 +9,8 @@ comes back too (``cpu_seconds``), so a frame's CPU cost counts both processes. T
 the lowest priority (``NICE``), in the cores' idle gaps, and its pipes are widened (``PIPE_BYTES``)
 so that neither side blocks halfway through a frame's message.
 
-Protocol (private): the child is ``python -m serenity.kernels.tracer_process IN OUT`` with two pipe
-file descriptors; messages are length-prefixed pickles. First message in: (scene, device); the child
+Protocol (private): the child is ``python -m serenity.kernels.tracer_process IN OUT NICE`` with two pipe
+file descriptors and its niceness; messages are length-prefixed pickles. First message in: (scene, device); the child
 builds its :class:`~serenity.kernels.raytrace.RayTracer` (the kd-tree comes from the disk cache when
 the parent built it before) and answers ("ready", build seconds). Then per frame: a list of ray
 batches ``(origins, directions, cone_width, cone_spread, transmissions, sun_direction)`` in, ("ok",
@@ -47,7 +47,8 @@ _HEADER = struct.Struct("<Q")
 #: they would keep busy. Measured on the 2-core machine (``serenity bench courtyard --size
 #: 640x360``, the schedules interleaved, wide pipes, 3 runs each): overlapped / serial 0.96-0.99 at
 #: nice 19 (0.95-1.00 with the tracer on one thread), 1.01-1.02 at nice 0 (one thread). The wait
-#: at sync 2 stays short: there the main thread waits and a core is free.
+#: at sync 2 stays short: there the main thread waits and a core is free. ``RenderConfig.tracer_nice``
+#: overrides it; ``benchmarks/bench_tracer_nice.py`` sweeps it (results/tracer_nice.json).
 NICE = 19
 
 #: bytes a pipe holds (Linux' F_SETPIPE_SZ; its default is 64 KiB): a frame's rays (~0.24 MB for
@@ -96,11 +97,12 @@ class TracerProcess:
     ``submit(batches)`` sends one frame's ray batches and returns at once; ``result()`` waits for
     them and returns (results, t0, t1). One frame in flight at a time."""
 
-    def __init__(self, scene, device: str = "cpu"):
+    def __init__(self, scene, device: str = "cpu", nice: int = NICE):
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
         self._proc = subprocess.Popen(
-            [sys.executable, "-m", "serenity.kernels.tracer_process", str(to_child_r), str(from_child_w)],
+            [sys.executable, "-m", "serenity.kernels.tracer_process", str(to_child_r), str(from_child_w),
+             str(int(nice))],
             pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
         os.close(to_child_r)
         os.close(from_child_w)
@@ -154,9 +156,10 @@ class TracerProcess:
                 pass
 
 
-def _serve(fd_in: int, fd_out: int) -> None:
+def _serve(fd_in: int, fd_out: int, nice: int = NICE) -> None:
     try:
-        os.nice(NICE)
+        if nice:
+            os.nice(nice)
     except OSError:  # pragma: no cover - not allowed here: the tracer runs at the parent's priority
         pass
     try:
@@ -190,4 +193,4 @@ def _serve_frames(fd_in: int, fd_out: int) -> None:
 
 
 if __name__ == "__main__":
-    _serve(int(sys.argv[1]), int(sys.argv[2]))
+    _serve(int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]) if len(sys.argv) > 3 else NICE)
