@@ -67,6 +67,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from serenity.device import cpu_threads, init_warp
+from serenity.io.results import machine_info
 from serenity.kernels.kdtree import CPU_RAYS_PER_THREAD, KdTree, intersect_rays, ray_order
 from serenity.kernels.launch import launch
 from serenity.scene.procedural import lumpy_mesh
@@ -390,7 +391,9 @@ def main(argv=None) -> dict:
                     "cpus": os.cpu_count(), "threads": threads, "python": platform.python_version(),
                     "warp": wp.__version__,
                     "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
-                    "sched_autogroup": _read("/proc/sys/kernel/sched_autogroup_enabled"), **_cpu_model()},
+                    "sched_autogroup": _read("/proc/sys/kernel/sched_autogroup_enabled"),
+                    **{k: v for k, v in machine_info().items()
+                       if k in ("cpu_model", "cpu_family_model", "avx512f", "cache")}},
         "device": "cpu",
         "scene": {"name": f"lumpy icosphere + terrain (subdivisions {args.subdivisions})", "triangles": len(f)},
         "settings": {"size": [width, height], "repeats": args.repeats, "thread_counts": thread_counts},
@@ -425,21 +428,6 @@ def main(argv=None) -> dict:
               f"{figures['build_1m_cpu_s']:.2f} CPU-s")
     print(f"wrote {args.json}, {', '.join(charts)}")
     return out
-
-
-def _cpu_model() -> dict:
-    """The CPU's model, caches and whether it has AVX-512 (/proc/cpuinfo, sysfs): runs on different
-    hosts of the same virtual machine type differ by more than a traversal change does."""
-    first = (_read("/proc/cpuinfo") or "").split("\n\n")[0]
-    info = {k.strip(): v.strip() for k, _, v in (ln.partition(":") for ln in first.splitlines())}
-    cache = {}
-    for idx in range(4):
-        base = f"/sys/devices/system/cpu/cpu0/cache/index{idx}"
-        level, size = _read(f"{base}/level"), _read(f"{base}/size")
-        if level and size and _read(f"{base}/type") != "Instruction":
-            cache[f"l{level}"] = size
-    return {"cpu_model": info.get("model name"), "cpu_family_model": [info.get("cpu family"), info.get("model")],
-            "avx512f": "avx512f" in info.get("flags", "").split(), "cache": cache}
 
 
 def _read(path: str) -> str | None:

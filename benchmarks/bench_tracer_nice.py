@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import copy
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -29,20 +28,9 @@ from tqdm import tqdm
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from serenity.io.results import write_results  # noqa: E402
+from serenity.io.results import machine_info, write_results  # noqa: E402
 
 RT, WAIT = "cpu ray tracing", "wait for ray tracing"
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def run_size(scene_name: str, w: int, h: int, nices: list[int], frames: int, passes: int, quality: str) -> dict:
@@ -155,8 +143,7 @@ def main(argv=None) -> int:
     result = {"benchmark": "tracer_nice", "command": "python benchmarks/bench_tracer_nice.py " + " ".join(cli),
               "scene": args.scene, "quality": args.quality, "nices": nices,
               "frames_per_variant": args.passes * (args.frames - 2),
-              "machine": {"cpu": cpu_model(), "cpus": os.cpu_count(), "platform": platform.platform()},
-              "load_average_before": list(os.getloadavg()), "sizes": {}}
+              "machine": machine_info(), "sizes": {}}
     for size in args.sizes.split(","):
         w, h = (int(x) for x in size.lower().split("x"))
         r = result["sizes"][size] = run_size(args.scene, w, h, nices, args.frames, args.passes, args.quality)

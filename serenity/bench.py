@@ -16,7 +16,6 @@ import copy
 import json
 import math
 import os
-import platform
 import time
 
 import numpy as np
@@ -25,6 +24,7 @@ from tqdm import tqdm
 from serenity.config import BENCH_QUALITY, RenderConfig
 from serenity.device import resolve_device
 from serenity.frame import LPV_UPDATE_STAGES, MAIN_LANE, SKY_UPDATE_STAGES, STAGES, Renderer
+from serenity.io.results import machine_info
 from serenity.optional import pyplot
 from serenity.scene import load
 from serenity.scene.model import Camera, direction_from_angles
@@ -194,7 +194,7 @@ def bench(scene_name: str, width: int, height: int, frames: int, device=None, js
     rss = [r["rss_mb"] for r in over_recs]
     result = {
         "scene": scene.name, "size": [width, height], "frames": frames, "device": device, "quality": quality,
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version()},
+        "machine": machine_info(),
         "overlapped": over, "serial": serial,
         "overlap_ratio": over["frame_ms"] / serial["frame_ms"] if serial["frame_ms"] else None,
         "rss_mb": {"frame_20": rss[min(19, len(rss) - 1)], "last": rss[-1], "max": max(rss)},
