@@ -5,8 +5,9 @@
 # Mitsuba references cached (~/.cache/serenity/reference), longer without.
 #
 #   bash benchmarks/regenerate.sh            # everything below
-#   bash benchmarks/regenerate.sh frame      # only the Table-1 benches (serenity bench)
-#   bash benchmarks/regenerate.sh ab         # round 14-15's A/Bs, the GIL-free finish, the 320x180 spread
+#   bash benchmarks/regenerate.sh frame      # the Table-1 benches (serenity bench), the 320x180 spread,
+#                                            # the tracer-niceness sweep
+#   bash benchmarks/regenerate.sh ab         # round 14-15's A/Bs, the GIL-free finish
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=.venv/bin/python
@@ -27,11 +28,14 @@ frame() {
         --chart serenity_out/timeline_low.png
     $SER bench courtyard --frames 24 --size 320x180 --quality low --json $R/frame_bench_320_low.json \
         --chart serenity_out/timeline_320_low.png
+    # the 320x180 bench five times (its spread), and what the tracer process's priority costs
+    $PY benchmarks/bench_frame_repeat.py --runs 5 --size 320x180
+    $PY benchmarks/bench_tracer_nice.py --frames 24 --passes 4 --json $R/tracer_nice.json --chart $R/tracer_nice.png
 }
 
 ab() {
     # round 14's medium settings against the ones before (the README's Table-1 section), and what the
-    # frame's GIL-free finish lets a worker thread do; then the 320x180 bench five times (its spread)
+    # frame's GIL-free finish lets a worker thread do
     local P="$PY benchmarks/bench_pass_ab.py --moving --reference --frames 24"
     for sc in courtyard cornell; do
         $P --scene $sc --stage "direct lighting" --b-config shadow.contact_steps=6 \
@@ -49,7 +53,6 @@ ab() {
     $PY benchmarks/bench_pass_ab.py --moving --frames 40 --size 320x180 --stage "lpv lighting" \
         --a-config lowres_tile_balance=false --a-config overlap=false --b-config overlap=false \
         --json $R/pass_ab_round15_tiles_serial_320x180.json
-    $PY benchmarks/bench_frame_repeat.py --runs 5 --size 320x180
 }
 
 accuracy() {
