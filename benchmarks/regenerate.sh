@@ -30,7 +30,7 @@ frame() {
         --chart serenity_out/timeline_320_low.png
     # the 320x180 bench five times (its spread), and what the tracer process's priority costs
     $PY benchmarks/bench_frame_repeat.py --runs 5 --size 320x180
-    $PY benchmarks/bench_tracer_nice.py --frames 24 --passes 4 --json $R/tracer_nice.json --chart $R/tracer_nice.png
+    $PY benchmarks/bench_tracer_nice.py --frames 24 --passes 10 --json $R/tracer_nice.json --chart $R/tracer_nice.png
 }
 
 ab() {

@@ -485,10 +485,12 @@ class RenderConfig:
     buffer, shadow cascades, SSAO), as on a GPU they would queue beside them. False: on the main
     thread between those passes (the serial schedule always does)."""
     tracer_nice: int = 19
-    """The niceness (0..19) of the tracer process that the overlapped schedule on the CPU traces in
-    (``kernels/tracer_process``): 19 = the lowest priority, so that it takes a core only where the
-    frame's own threads leave one idle; 0 = the frame's. ``benchmarks/bench_tracer_nice.py`` measures
-    what each costs the frame and the tracer."""
+    """The niceness (-20..19), relative to this process's, of the tracer process that the overlapped
+    schedule on the CPU traces in (``kernels/tracer_process``): 19 = the lowest priority, so that it
+    takes a core only where the frame's own threads leave one idle; 0 = the frame's; below 0 it
+    preempts the frame's threads (allowed only with CAP_SYS_NICE, e.g. as root; elsewhere it runs at
+    0). ``benchmarks/bench_tracer_nice.py`` measures the trade: the lower, the shorter the tracer's
+    stage and the slower the frame (``benchmarks/results/tracer_nice.json``)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
     rt_sun_shadows: str = "traced"
@@ -526,8 +528,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.exposure must be positive, got {self.exposure}")
         if not (isinstance(self.transmissions, int) and 0 <= self.transmissions <= 16):
             raise ConfigError(f"RenderConfig.transmissions must be an int in 0..16, got {self.transmissions!r}")
-        if not (isinstance(self.tracer_nice, int) and 0 <= self.tracer_nice <= 19):
-            raise ConfigError(f"RenderConfig.tracer_nice must be an int in 0..19, got {self.tracer_nice!r}")
+        if not (isinstance(self.tracer_nice, int) and -20 <= self.tracer_nice <= 19):
+            raise ConfigError(f"RenderConfig.tracer_nice must be an int in -20..19, got {self.tracer_nice!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):
             raise ConfigError(f"RenderConfig.osm_size must be in 16..{MAX_IMAGE_SIZE}, got {self.osm_size}")
         if self.rt_sun_shadows not in ("traced", "osm"):

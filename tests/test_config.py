@@ -27,7 +27,7 @@ from serenity.errors import SerenityError
     (ShadowConfig, {"contact_texels": -1.0}, "ShadowConfig.contact_texels"),
     (RenderConfig, {"rt_sun_shadows": "pcss"}, "RenderConfig.rt_sun_shadows"),
     (RenderConfig, {"tracer_nice": 20}, "RenderConfig.tracer_nice"),
-    (RenderConfig, {"tracer_nice": -1}, "RenderConfig.tracer_nice"),
+    (RenderConfig, {"tracer_nice": -21}, "RenderConfig.tracer_nice"),
     (SSAOConfig, {"steps": 0}, "SSAOConfig.steps"),
     (SkyConfig, {"window": "box"}, "SkyConfig.window"),
     (SkyConfig, {"rays_per_probe": 0}, "SkyConfig.rays_per_probe"),

@@ -116,6 +116,15 @@ class TracerProcess:
         """CPU seconds the child spent on the last frame's rays (all its threads)."""
         _write(self._out, (scene, device))
 
+    @property
+    def niceness(self) -> int | None:
+        """The child's niceness now, relative to this process's (``RenderConfig.tracer_nice`` when the
+        OS allowed it: a negative one needs CAP_SYS_NICE, e.g. root); None where unknown."""
+        try:
+            return os.getpriority(os.PRIO_PROCESS, self._proc.pid) - os.getpriority(os.PRIO_PROCESS, 0)
+        except (AttributeError, OSError):  # pragma: no cover - not POSIX, or the child is gone
+            return None
+
     def _wait_ready(self) -> None:
         if self.build_seconds is None:
             self.build_seconds = self._receive()[1]
@@ -160,7 +169,7 @@ def _serve(fd_in: int, fd_out: int, nice: int = NICE) -> None:
     try:
         if nice:
             os.nice(nice)
-    except OSError:  # pragma: no cover - not allowed here: the tracer runs at the parent's priority
+    except OSError:  # not allowed (a negative niceness without CAP_SYS_NICE): the parent's priority
         pass
     try:
         with single_threaded_blas():
