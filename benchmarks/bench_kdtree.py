@@ -391,9 +391,8 @@ def main(argv=None) -> dict:
                     "cpus": os.cpu_count(), "threads": threads, "python": platform.python_version(),
                     "warp": wp.__version__,
                     "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
-                    "sched_autogroup": _read("/proc/sys/kernel/sched_autogroup_enabled"),
                     **{k: v for k, v in machine_info().items()
-                       if k in ("cpu_model", "cpu_family_model", "avx512f", "cache")}},
+                       if k in ("sched_autogroup", "cpu_model", "cpu_family_model", "avx512f", "cache")}},
         "device": "cpu",
         "scene": {"name": f"lumpy icosphere + terrain (subdivisions {args.subdivisions})", "triangles": len(f)},
         "settings": {"size": [width, height], "repeats": args.repeats, "thread_counts": thread_counts},
@@ -428,14 +427,6 @@ def main(argv=None) -> dict:
               f"{figures['build_1m_cpu_s']:.2f} CPU-s")
     print(f"wrote {args.json}, {', '.join(charts)}")
     return out
-
-
-def _read(path: str) -> str | None:
-    try:
-        with open(path) as fh:
-            return fh.read().strip()
-    except OSError:
-        return None
 
 
 if __name__ == "__main__":

@@ -17,7 +17,8 @@ def write_results(path: str, results: dict) -> None:
 
 def machine_info() -> dict:
     """What a benchmark ran on: the platform, the CPU's model, caches and AVX-512 flag
-    (/proc/cpuinfo, sysfs), the core count and the load average when asked. Runs on different hosts
+    (/proc/cpuinfo, sysfs), the core count, the load average when asked and whether the scheduler
+groups sessions. Runs on different hosts
     of the same virtual machine type, and on one host minutes apart, differ by more than most
     changes do; a figure read without this cannot be compared with another."""
     first = (_read("/proc/cpuinfo") or "").split("\n\n")[0]
@@ -35,7 +36,9 @@ def machine_info() -> dict:
     return {"platform": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version(),
             "cpu_model": info.get("model name") or platform.processor() or platform.machine(),
             "cpu_family_model": [info.get("cpu family"), info.get("model")],
-            "avx512f": "avx512f" in info.get("flags", "").split(), "cache": cache, "load_average": load}
+            "avx512f": "avx512f" in info.get("flags", "").split(), "cache": cache, "load_average": load,
+            # 1: Linux shares the CPUs equally between sessions, so a busy neighbour halves a second thread
+            "sched_autogroup": _read("/proc/sys/kernel/sched_autogroup_enabled")}
 
 
 def _read(path: str) -> str | None:
