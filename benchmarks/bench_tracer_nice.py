@@ -20,7 +20,6 @@ import argparse
 import copy
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -48,17 +47,6 @@ def run_size(scene_name: str, w: int, h: int, nices: list[int], frames: int, pas
     renderers = {k: Renderer(scenes[k], w, h, config=c) for k, c in zip(names, configs, strict=True)}
     rec = {k: {"frame": [], "rt": [], "wait": [], "rt_cpu": []} for k in names}
     actual: dict[str, int | None] = {}
-    serial_cpu = [0.0]
-    inline_trace = renderers["serial"]._trace
-
-    def timed_trace(rcb):  # the inline tracer's CPU time (this process, all threads: GL is idle then)
-        c0 = time.process_time()
-        try:
-            return inline_trace(rcb)
-        finally:
-            serial_cpu[0] = (time.process_time() - c0) * 1e3
-
-    renderers["serial"]._trace = timed_trace
     bc, bs = base.camera, np.asarray(base.sun.direction, np.float64).copy()
     try:
         with tqdm(total=passes * frames, desc=f"tracer nice {w}x{h}", unit="frame") as bar:
@@ -75,10 +63,8 @@ def run_size(scene_name: str, w: int, h: int, nices: list[int], frames: int, pas
                             rec[k]["frame"].append(f.wall_ms)
                             rec[k]["rt"].append(f.timings.get(RT, 0.0))
                             rec[k]["wait"].append(f.timings.get(WAIT, 0.0))
-                            proc = renderers[k]._tracer_proc  # the child's CPU time for this frame's rays
-                            rec[k]["rt_cpu"].append(proc.cpu_seconds * 1e3 if proc is not None else serial_cpu[0])
-                            if proc is not None:
-                                actual[k] = proc.niceness
+                            rec[k]["rt_cpu"].append(f.tracer_cpu_ms)
+                            actual[k] = renderers[k].tracer_niceness
                     bar.update()
     finally:
         for r in renderers.values():

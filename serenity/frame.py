@@ -119,6 +119,10 @@ class Frame:
     time from below whatever the schedule (``serenity bench`` reports it).
     nonfinite_pixels: how many pixels of the HDR image are NaN or infinite, counted on the GL side
     by the tone-mapping pass (known without reading the image back).
+    tracer_cpu_ms: CPU time of the "cpu ray tracing" stage, ms: the tracer process's (overlapped, on
+    the CPU) or this process's while it traced inline (serial: no other work runs then); None when
+    nothing was traced or the trace ran on the CUDA worker thread. Beside the stage's wall time it
+    says whether the tracer waited for a core or did more work (``benchmarks/bench_tracer_nice.py``).
 
     With ``render(read_back=False)`` nothing leaves the GL context: hdr and ldr are None, aovs is
     empty, and the images stay in ``Renderer.outputs``.
@@ -134,6 +138,7 @@ class Frame:
     rays: int = 0
     cpu_ms: float = 0.0
     nonfinite_pixels: int = 0
+    tracer_cpu_ms: float | None = None
 
     @property
     def total_ms(self) -> float:
@@ -421,6 +426,7 @@ class Renderer:
         self._t_frame = time.perf_counter()
         self._cpu_frame = time.process_time()
         self._child_cpu_ms = 0.0
+        self._tracer_cpu_ms = None
         if self._first:
             self._timings["upload"] = self._upload_ms
             self._first = False
@@ -433,7 +439,7 @@ class Renderer:
         return Frame(hdr=hdr, ldr=ldr, aovs=aovs, timings=timings, exposure=self.config.exposure,
                      wall_ms=wall, events=sorted(self._events, key=lambda e: e[2]),
                      rays=0 if rcb is None else rcb.count, cpu_ms=cpu,
-                     nonfinite_pixels=nonfinite)
+                     nonfinite_pixels=nonfinite, tracer_cpu_ms=self._tracer_cpu_ms)
 
     def _start_ray_tracing(self, view_proj, gbuf):
         """The ray-casting buffer (which pixels reflect or refract, and their rays; drawn against the
@@ -452,7 +458,9 @@ class Renderer:
             return rcb, self._join_tracer_process
         if self._pool is not None:
             return rcb, self._pool.submit(self._trace, rcb).result
+        c0 = time.process_time()
         traced = self._trace(rcb)
+        self._tracer_cpu_ms = (time.process_time() - c0) * 1e3
         return rcb, lambda: traced
 
     def _main_view(self, view_proj, gbuf):
@@ -708,6 +716,12 @@ class Renderer:
 
     # ------------------------------------------------------------------------------ ray tracing
 
+    @property
+    def tracer_niceness(self) -> int | None:
+        """The tracer process's niceness relative to this process's, as the OS granted
+        ``RenderConfig.tracer_nice`` (None before the first traced frame, or without the process)."""
+        return None if self._tracer_proc is None else self._tracer_proc.niceness
+
     def _ensure_tracer(self):
         """The in-process tracer (serial schedule, or CUDA), or for the overlapped schedule on the
         CPU the tracer process (``kernels/tracer_process``: a thread would stall behind the GL
@@ -752,6 +766,7 @@ class Renderer:
         first = proc.build_seconds is None
         results, t0, t1 = proc.result()
         self._child_cpu_ms += proc.cpu_seconds * 1e3
+        self._tracer_cpu_ms = proc.cpu_seconds * 1e3
         if first:
             self._timings["kd-tree build"] = proc.build_seconds * 1e3
         self._record(RT_LANE, "cpu ray tracing", t0, t1)

@@ -138,6 +138,8 @@ def test_overlapped_and_serial_schedules_agree(scene_name, device):
             assert f.cpu_ms > 0.0
             if overlap and device == "cpu":
                 assert r._tracer_proc is not None and r._tracer_proc.cpu_seconds > 0.0
+            if device == "cpu":  # the tracer's own CPU time, inline or in its process
+                assert f.tracer_cpu_ms is not None and 0.0 < f.tracer_cpu_ms <= f.cpu_ms
             images.append(f.hdr)
         finally:
             r.close()
@@ -152,9 +154,10 @@ def test_tracer_process_runs_at_the_configured_niceness(nice):
     its frames trace as at any other."""
     r = Renderer(load("glass"), *SIZE, config=RenderConfig(tracer_nice=nice))
     try:
-        assert r.render(read_back=False).rays > 0
+        f = r.render(read_back=False)
+        assert f.rays > 0 and f.tracer_cpu_ms > 0.0
         own = os.getpriority(os.PRIO_PROCESS, 0)
-        assert r._tracer_proc.niceness == min(19, own + nice) - own
+        assert r.tracer_niceness == min(19, own + nice) - own
     finally:
         r.close()
 
