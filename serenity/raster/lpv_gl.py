@@ -4,10 +4,12 @@ arbitrary points (tests, debugging).
 
 ``LPVTexturesGL.upload(lpv)`` takes any object shaped like ``serenity.kernels.lpv
 .LightPropagationVolume`` (``grids``, ``textures(c)``, ``config``, ``glossy_step_length()``) — this
-module never imports a kernel module (docs/architecture.md, Layers). Per active cascade: three RGBA32F textures
-(R, G, B), RGBA = L1 SH (Y0, x, y, z) of intensity in W/sr, LINEAR, CLAMP_TO_EDGE, and one of face
+module never imports a kernel module (docs/architecture.md, Layers). Four RGBA32F 3-D textures, each an
+atlas of the active cascades stacked along z (cascade c from z texel ``zofs[c]`` on): R, G, B, RGBA =
+L1 SH (Y0, x, y, z) of intensity in W/sr, LINEAR (the shader clamps to a cascade's block), and face
 openness (``openness(c)``, the lookup occlusion; RGB = +x, +y, +z faces of each cell, A = where their
-blockers lie, packed).
+blockers lie, packed). One set of samplers for every cascade is what lets lpv.glsl loop over the
+cascades and stop once a point's weight is spent.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from serenity.raster.interop import upload_texture3d
 
 MAX_CASCADES = LPV_MAX_CASCADES
 CHANNELS = ("r", "g", "b")
-UNITS = MAX_CASCADES * (len(CHANNELS) + 1)  # texture units ``bind`` uses, from ``first_unit`` on
+UNITS = len(CHANNELS) + 1  # texture units ``bind`` uses, from ``first_unit`` on
 
 
 def lookup_switches(cfg) -> dict[str, bool]:
@@ -41,14 +43,16 @@ def lookup_defines(cfg) -> dict[str, int]:
 
 
 class LPVTexturesGL:
-    """The LPV's cascades as 12 sampler3D (3 cascades × RGB + openness) plus the lookup uniforms of lpv.glsl."""
+    """The LPV's cascades as 4 sampler3D atlases (RGB + openness, the cascades stacked along z) plus the
+    lookup uniforms of lpv.glsl."""
 
     def __init__(self, ctx):
         self.ctx = ctx
         zero = np.zeros((1, 1, 1, 4), np.float32)
         self._empty = upload_texture3d(ctx, zero)
-        self.textures: list[list] = [[self._empty] * 4 for _ in range(MAX_CASCADES)]
+        self.textures: list = [self._empty] * UNITS  # the atlases: R, G, B, openness
         self.count = 0
+        self.zofs = np.zeros(MAX_CASCADES, np.int32)  # cascade c's first z texel in the atlases
         self.geom = np.zeros((MAX_CASCADES, 4), np.float32)
         self.res = np.ones(MAX_CASCADES, np.int32)
         self.lookup_offset = 0.5
@@ -67,22 +71,34 @@ class LPVTexturesGL:
         cfg = lpv.config
         grids = list(lpv.grids)[:MAX_CASCADES]
         self.count = len(grids)
-        for c in range(MAX_CASCADES):
-            if c >= self.count:
-                self._drop(c)
-                continue
-            g = grids[c]
-            self.geom[c, :3], self.geom[c, 3] = g.origin, g.cell_size
-            self.res[c] = g.resolution
-            for k, arr in enumerate((*lpv.textures(c), lpv.openness(c))):
-                tex = self.textures[c][k]
-                shape = (arr.shape[2], arr.shape[1], arr.shape[0])
-                if tex is not self._empty and tex.size == shape:
-                    tex.write(np.ascontiguousarray(arr, np.float32).tobytes())
-                else:
+        if not grids:
+            self._drop()
+        else:
+            self.geom[:] = 0.0
+            self.res[:] = 1
+            self.zofs[:] = 0
+            for c, g in enumerate(grids):
+                self.geom[c, :3], self.geom[c, 3] = g.origin, g.cell_size
+                self.res[c] = g.resolution
+            side = int(self.res[:self.count].max())
+            self.zofs[1:self.count] = np.cumsum(self.res[:self.count - 1])
+            shape = (side, side, int(self.res[:self.count].sum()))  # (W, H, D)
+            blocks = [(*lpv.textures(c), lpv.openness(c)) for c in range(self.count)]
+            for k in range(UNITS):
+                tex = self.textures[k]
+                if tex is self._empty or tex.size != shape:
                     if tex is not self._empty:
                         tex.release()
-                    self.textures[c][k] = upload_texture3d(self.ctx, arr)
+                    atlas = np.zeros((shape[2], side, side, 4), np.float32)
+                    for c, b in enumerate(blocks):
+                        r = int(self.res[c])
+                        atlas[self.zofs[c]:self.zofs[c] + r, :r, :r] = b[k]
+                    self.textures[k] = upload_texture3d(self.ctx, atlas)
+                    continue
+                for c, b in enumerate(blocks):  # each cascade's block in place
+                    r = int(self.res[c])
+                    tex.write(np.ascontiguousarray(b[k], np.float32).tobytes(),
+                              viewport=(0, 0, int(self.zofs[c]), r, r, r))
         self.lookup_offset = float(cfg.lookup_offset)
         sw = lookup_switches(cfg)
         self.leak_guard, self.occlusion, self.planes = sw["leak_guard"], sw["occlusion"], sw["planes"]
@@ -93,23 +109,25 @@ class LPVTexturesGL:
         self.glossy_steps = int(cfg.glossy_steps)
         self.glossy_step = float(lpv.glossy_step_length())
 
-    def _drop(self, c: int) -> None:
-        for k in range(4):
-            if self.textures[c][k] is not self._empty:
-                self.textures[c][k].release()
-                self.textures[c][k] = self._empty
+    def _drop(self) -> None:
+        for k in range(UNITS):
+            if self.textures[k] is not self._empty:
+                self.textures[k].release()
+                self.textures[k] = self._empty
 
     def bind(self, program, first_unit: int = 8) -> None:
-        """Bind the 12 textures to units first_unit..first_unit+11 and set lpv.glsl's uniforms on
+        """Bind the 4 atlases to units first_unit..first_unit+3 and set lpv.glsl's uniforms on
         ``program`` (uniforms the compiler optimised away are skipped)."""
-        for c in range(MAX_CASCADES):
-            for k, ch in enumerate((*CHANNELS, "o")):
-                unit = first_unit + 4 * c + k
-                self.textures[c][k].use(location=unit)
-                if (u := uniform(program, f"u_lpv_{ch}{c}")) is not None:
-                    u.value = unit
+        for k, ch in enumerate((*CHANNELS, "o")):
+            unit = first_unit + k
+            self.textures[k].use(location=unit)
+            if (u := uniform(program, f"u_lpv_{ch}")) is not None:
+                u.value = unit
         self._write(program, "u_lpv_geom", self.geom, 4)
         self._write(program, "u_lpv_res", self.res, 1)
+        self._write(program, "u_lpv_zofs", self.zofs, 1)
+        if (u := uniform(program, "u_lpv_atlas")) is not None:
+            u.value = tuple(float(x) for x in self.textures[0].size)
         for name, value in (("u_lpv_count", int(self.count)), ("u_lpv_leak_guard", self.leak_guard),
                             ("u_lpv_occlusion", self.occlusion), ("u_lpv_planes", self.planes),
                             ("u_lpv_glossy_steps", int(self.glossy_steps)),
@@ -128,8 +146,7 @@ class LPVTexturesGL:
         u.write(np.ascontiguousarray(values.reshape(-1)[: n * width]).tobytes())
 
     def release(self) -> None:
-        for c in range(MAX_CASCADES):
-            self._drop(c)
+        self._drop()
         self._empty.release()
 
 

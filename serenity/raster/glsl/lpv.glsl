@@ -6,10 +6,16 @@
 //                                                 // prefiltered by a normalised Phong lobe cos^m
 // Uniforms are set by serenity.raster.lpv_gl.LPVTexturesGL.bind.
 //
-// Per cascade c (finest first, u_lpv_count of them active) three RGBA32F 3-D textures, one per
-// colour channel: RGBA = L1 SH (Y0, x, y, z) of the accumulated radiant intensity in W/sr, texel
-// (x, y, z) = cell (x, y, z), LINEAR filtering, CLAMP_TO_EDGE. Cell of world point p:
-// u = (p - origin) / cell_size (in cells), texture coordinate u / res.
+// Three RGBA32F 3-D textures, one per colour channel, and one of face openness, each an atlas of
+// the active cascades (finest first, u_lpv_count of them) stacked along z: RGBA = L1 SH (Y0, x, y, z)
+// of the accumulated radiant intensity in W/sr, texel (x, y, z + u_lpv_zofs[c]) = cell (x, y, z) of
+// cascade c, LINEAR filtering, clamped to the cascade's block as CLAMP_TO_EDGE would. Cell of world
+// point p: u = (p - origin) / cell_size (in cells).
+// One set of samplers for every cascade lets the lookups loop over the cascades from the first one
+// that covers the point and leave the loop once the point's weight is spent: llvmpipe runs every
+// side of a branch for a block of pixels, but leaves a loop once every pixel of the block has, so
+// a pixel deep inside cascade 0 no longer pays for cascades 1 and 2 (the unrolled form, one block
+// per cascade with its own samplers, ran all three everywhere: ~half of the LPV lighting passes).
 #ifndef SERENITY_LPV_GLSL
 #define SERENITY_LPV_GLSL
 #include "common.glsl"
@@ -37,18 +43,13 @@
 #define LPV_DAMPING 1
 #endif
 
-uniform sampler3D u_lpv_r0;
-uniform sampler3D u_lpv_g0;
-uniform sampler3D u_lpv_b0;
-uniform sampler3D u_lpv_r1;
-uniform sampler3D u_lpv_g1;
-uniform sampler3D u_lpv_b1;
-uniform sampler3D u_lpv_r2;
-uniform sampler3D u_lpv_g2;
-uniform sampler3D u_lpv_b2;
-uniform sampler3D u_lpv_o0;           // per cascade: RGB = openness of the cell's +x, +y, +z faces
-uniform sampler3D u_lpv_o1;           // (1 - the geometry volume's blocking; lookup occlusion)
-uniform sampler3D u_lpv_o2;
+uniform sampler3D u_lpv_r;            // the cascades' SH of red, green, blue (atlases along z)
+uniform sampler3D u_lpv_g;
+uniform sampler3D u_lpv_b;
+uniform sampler3D u_lpv_o;            // RGB = openness of each cell's +x, +y, +z faces (1 - the
+                                      // geometry volume's blocking; lookup occlusion), A = planes
+uniform int u_lpv_zofs[3];            // cascade c's first z texel in the atlases
+uniform vec3 u_lpv_atlas;             // the atlases' size, texels (the largest cascade's res², Σ res)
 uniform bool u_lpv_occlusion;         // the leak guard also drops cells across a blocking face
 uniform bool u_lpv_planes;            // the home cell crosses a blocker inside it (A of u_lpv_o*)
 uniform vec4 u_lpv_geom[3];           // xyz: grid min corner (m), w: cell size (m)
@@ -81,31 +82,33 @@ float lpv_cascade_weight(vec3 u, int res, bool last) {
     return d > u_lpv_margin ? 1.0 : 0.0;
 }
 
-// Cascades are unrolled (one block per cascade, samplers passed as arguments) rather than looped
-// over with an index choosing the samplers: on llvmpipe the looped form cost ~80 ms per 640x360
-// pass even with no cascade active, and 3x the texture fetches (every branch's fetches ran).
+// Cascade c's cell i in an atlas.
+vec4 lpv_texel(sampler3D t, int c, ivec3 i) { return texelFetch(t, i + ivec3(0, 0, u_lpv_zofs[c]), 0); }
 
-// R, G, B SH trilinear at grid coordinate u (cells) of a cascade of res cells.
+// R, G, B SH trilinear at grid coordinate u (cells) of cascade c, of res cells.
 // (EXACT_FILTER: by hand with float weights, as the texture unit's clamp-to-edge trilinear filter
-// would with exact weights; raster/context.py says why.)
-void lpv_fetch(sampler3D tr, sampler3D tg, sampler3D tb, int res, vec3 u, out vec4 sr, out vec4 sg, out vec4 sb) {
+// would with exact weights; raster/context.py says why. Else the texture unit's, the coordinate
+// clamped to the cascade's block of the atlas as clamp-to-edge would.)
+void lpv_fetch(int c, int res, vec3 u, out vec4 sr, out vec4 sg, out vec4 sb) {
 #ifdef EXACT_FILTER
     vec3 us = u - 0.5;
     vec3 f = floor(us);
     vec3 w = us - f;
-    ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1));
-    ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1));
-    sr = trilinear_texels(tr, i0, i1, w); sg = trilinear_texels(tg, i0, i1, w); sb = trilinear_texels(tb, i0, i1, w);
+    ivec3 z = ivec3(0, 0, u_lpv_zofs[c]);
+    ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1)) + z;
+    ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1)) + z;
+    sr = trilinear_texels(u_lpv_r, i0, i1, w); sg = trilinear_texels(u_lpv_g, i0, i1, w);
+    sb = trilinear_texels(u_lpv_b, i0, i1, w);
 #else
-    vec3 t = u / float(res);
-    sr = textureLod(tr, t, 0.0); sg = textureLod(tg, t, 0.0); sb = textureLod(tb, t, 0.0);
+    vec3 t = (clamp(u, vec3(0.5), vec3(float(res) - 0.5)) + vec3(0.0, 0.0, float(u_lpv_zofs[c]))) / u_lpv_atlas;
+    sr = textureLod(u_lpv_r, t, 0.0); sg = textureLod(u_lpv_g, t, 0.0); sb = textureLod(u_lpv_b, t, 0.0);
 #endif
 }
 
 // Where the blockers of cell i's +x, +y, +z faces lie, in cells from the face (0: on it): the openness
 // texel's A, qx + 256 qy + 65536 qz with q = round((t + 1/2) 254) (LightPropagationVolume.openness).
-vec3 lpv_planes(sampler3D to, ivec3 i) {
-    float a = texelFetch(to, i, 0).a;
+vec3 lpv_planes(int c, ivec3 i) {
+    float a = lpv_texel(u_lpv_o, c, i).a;
     float qz = floor(a * (1.0 / 65536.0));
     a -= qz * 65536.0;
     float qy = floor(a * (1.0 / 256.0));
@@ -115,21 +118,21 @@ vec3 lpv_planes(sampler3D to, ivec3 i) {
 
 // The home cell (the twin of kernels.home_cell): h = floor(q), q = us + n/4, moved down an axis when
 // h's low face there is blocked and its blocker lies inside h beyond q, up when the high face's does.
-ivec3 lpv_home(sampler3D to, int res, vec3 us, vec3 n) {
+ivec3 lpv_home(int c, int res, vec3 us, vec3 n) {
     vec3 q = us + 0.25 * n;
     ivec3 h = clamp(ivec3(floor(q)), ivec3(0), ivec3(res - 1));
     if (!LPV_PLANE) return h;
     ivec3 h0 = h;
-    vec4 oh = texelFetch(to, h0, 0);
-    vec3 thi = lpv_planes(to, h0);
+    vec4 oh = lpv_texel(u_lpv_o, c, h0);
+    vec3 thi = lpv_planes(c, h0);
     for (int a = 0; a < 3; ++a) {
         float f = q[a] - float(h0[a]);
         bool moved = false;
         if (h0[a] > 0) {
             ivec3 lo = h0;
             lo[a] -= 1;
-            float t = lpv_planes(to, lo)[a];
-            if (t > 0.0 && f < t && texelFetch(to, lo, 0)[a] < 1.0) { h[a] -= 1; moved = true; }
+            float t = lpv_planes(c, lo)[a];
+            if (t > 0.0 && f < t && lpv_texel(u_lpv_o, c, lo)[a] < 1.0) { h[a] -= 1; moved = true; }
         }
         if (!moved && h0[a] < res - 1 && thi[a] < 0.0 && f > 1.0 + thi[a] && oh[a] < 1.0) h[a] += 1;
     }
@@ -140,23 +143,22 @@ ivec3 lpv_home(sampler3D to, int res, vec3 us, vec3 n) {
 // cells whose centre lies behind the surface point us (cells) do not light it; with u_lpv_occlusion
 // also by the openness of the faces between the home cell h (lpv_home) and the cell, one per
 // axis where they differ, taken in h's row (the twin of kernels.open_weight).
-void lpv_fetch_guarded(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D to, int res, vec3 u, vec3 us, vec3 n,
-                       out vec4 sr, out vec4 sg, out vec4 sb) {
+void lpv_fetch_guarded(int c, int res, vec3 u, vec3 us, vec3 n, out vec4 sr, out vec4 sg, out vec4 sb) {
     vec3 p = u - vec3(0.5);
     vec3 f = floor(p);
     vec3 t = p - f;
     ivec3 i0 = clamp(ivec3(f), ivec3(0), ivec3(res - 1));
     ivec3 i1 = clamp(ivec3(f) + 1, ivec3(0), ivec3(res - 1));
-    ivec3 h = LPV_OCCL ? lpv_home(to, res, us, n) : ivec3(0);
+    ivec3 h = LPV_OCCL ? lpv_home(c, res, us, n) : ivec3(0);
     // openness of the face between h and i0 / i1 on each axis (1 where they coincide)
     vec3 o0 = vec3(1.0), o1 = vec3(1.0);
     if (LPV_OCCL) {
-        if (i0.x != h.x) o0.x = texelFetch(to, ivec3(min(i0.x, h.x), h.y, h.z), 0).r;
-        if (i1.x != h.x) o1.x = texelFetch(to, ivec3(min(i1.x, h.x), h.y, h.z), 0).r;
-        if (i0.y != h.y) o0.y = texelFetch(to, ivec3(h.x, min(i0.y, h.y), h.z), 0).g;
-        if (i1.y != h.y) o1.y = texelFetch(to, ivec3(h.x, min(i1.y, h.y), h.z), 0).g;
-        if (i0.z != h.z) o0.z = texelFetch(to, ivec3(h.x, h.y, min(i0.z, h.z)), 0).b;
-        if (i1.z != h.z) o1.z = texelFetch(to, ivec3(h.x, h.y, min(i1.z, h.z)), 0).b;
+        if (i0.x != h.x) o0.x = lpv_texel(u_lpv_o, c, ivec3(min(i0.x, h.x), h.y, h.z)).r;
+        if (i1.x != h.x) o1.x = lpv_texel(u_lpv_o, c, ivec3(min(i1.x, h.x), h.y, h.z)).r;
+        if (i0.y != h.y) o0.y = lpv_texel(u_lpv_o, c, ivec3(h.x, min(i0.y, h.y), h.z)).g;
+        if (i1.y != h.y) o1.y = lpv_texel(u_lpv_o, c, ivec3(h.x, min(i1.y, h.y), h.z)).g;
+        if (i0.z != h.z) o0.z = lpv_texel(u_lpv_o, c, ivec3(h.x, h.y, min(i0.z, h.z))).b;
+        if (i1.z != h.z) o1.z = lpv_texel(u_lpv_o, c, ivec3(h.x, h.y, min(i1.z, h.z))).b;
     }
     sr = vec4(0.0); sg = vec4(0.0); sb = vec4(0.0);
     float wsum = 0.0;
@@ -166,11 +168,11 @@ void lpv_fetch_guarded(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D to, i
         float g = clamp(4.0 * dot(n, vec3(ii) + vec3(0.5) - us), 0.0, 1.0);
         g *= (bx ? o1.x : o0.x) * (by ? o1.y : o0.y) * (bz ? o1.z : o0.z);
         float w = (bx ? t.x : 1.0 - t.x) * (by ? t.y : 1.0 - t.y) * (bz ? t.z : 1.0 - t.z) * g;
-        sr += w * texelFetch(tr, ii, 0); sg += w * texelFetch(tg, ii, 0); sb += w * texelFetch(tb, ii, 0);
+        sr += w * lpv_texel(u_lpv_r, c, ii); sg += w * lpv_texel(u_lpv_g, c, ii); sb += w * lpv_texel(u_lpv_b, c, ii);
         wsum += w;
     }
     if (wsum < 1.0e-4) {
-        lpv_fetch(tr, tg, tb, res, u, sr, sg, sb);
+        lpv_fetch(c, res, u, sr, sg, sb);
         return;
     }
     sr /= wsum; sg /= wsum; sb /= wsum;
@@ -189,7 +191,7 @@ float lpv_self_damping(float near, float far) {
 
 // Product of the openness of the `steps` faces met going from the home cell h along the normal's
 // dominant axis, stopping at the grid's edge (the twin of kernels.open_ahead).
-float lpv_open_ahead(sampler3D to, int res, ivec3 h, vec3 n, int steps) {
+float lpv_open_ahead(int cascade, int res, ivec3 h, vec3 n, int steps) {
     int a = 0;
     if (abs(n.y) > abs(n[a])) a = 1;
     if (abs(n.z) > abs(n[a])) a = 2;
@@ -200,7 +202,7 @@ float lpv_open_ahead(sampler3D to, int res, ivec3 h, vec3 n, int steps) {
         if (c[a] + st >= 0 && c[a] + st <= res - 1) {
             ivec3 lo = c;
             lo[a] = min(c[a], c[a] + st);
-            o *= texelFetch(to, lo, 0)[a];
+            o *= lpv_texel(u_lpv_o, cascade, lo)[a];
             c[a] += st;
         }
     }
@@ -211,10 +213,19 @@ float lpv_eval_radiance(vec4 s, vec3 w, float a1, float inv_area) {
     return max((LPV_C0 * s.x + a1 * LPV_C1 * dot(s.yzw, w)) * inv_area, 0.0);
 }
 
-// Irradiance from cascade c (its samplers tr, tg, tb), weighted by its alpha times what the finer
-// cascades left (keep, updated).
-vec3 lpv_cascade_irradiance(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D to, int c, vec3 p, vec3 n,
-                            inout float keep) {
+// The first cascade whose weight at p (its grid coordinate plus ``offset`` cells) is above 0 (the
+// last if none): the finer ones would add nothing and leave the weight to spend as it was. No fetch.
+int lpv_first_cascade(vec3 p, vec3 offset) {
+    int c = 0;
+    for (; c < u_lpv_count - 1; ++c) {
+        vec3 u = (p - u_lpv_geom[c].xyz) / u_lpv_geom[c].w + offset;
+        if (lpv_cascade_weight(u, u_lpv_res[c], false) > 0.0) break;
+    }
+    return c;
+}
+
+// Irradiance from cascade c, weighted by its alpha times what the finer cascades left (keep, updated).
+vec3 lpv_cascade_irradiance(int c, vec3 p, vec3 n, inout float keep) {
     float cell = u_lpv_geom[c].w;
     int res = u_lpv_res[c];
     vec3 us = (p - u_lpv_geom[c].xyz) / cell;
@@ -222,14 +233,14 @@ vec3 lpv_cascade_irradiance(sampler3D tr, sampler3D tg, sampler3D tb, sampler3D 
     float alpha = lpv_cascade_weight(u, res, c == u_lpv_count - 1) * keep;
     if (alpha <= 0.0) return vec3(0.0);
     vec4 sr, sg, sb;
-    if (LPV_GUARD) lpv_fetch_guarded(tr, tg, tb, to, res, u, us, n, sr, sg, sb);
-    else lpv_fetch(tr, tg, tb, res, u, sr, sg, sb);
+    if (LPV_GUARD) lpv_fetch_guarded(c, res, u, us, n, sr, sg, sb);
+    else lpv_fetch(c, res, u, sr, sg, sb);
 #if LPV_DAMPING
     if (u_lpv_damp_dist > 0.0) {
         vec4 fr, fg, fb;
-        lpv_fetch(tr, tg, tb, res, u + n * u_lpv_damp_dist, fr, fg, fb);
+        lpv_fetch(c, res, u + n * u_lpv_damp_dist, fr, fg, fb);
         float o = LPV_GUARD && LPV_OCCL
-            ? lpv_open_ahead(to, res, lpv_home(to, res, us, n), n, int(ceil(u_lpv_damp_dist))) : 1.0;
+            ? lpv_open_ahead(c, res, lpv_home(c, res, us, n), n, int(ceil(u_lpv_damp_dist))) : 1.0;
         sr *= 1.0 - o * (1.0 - lpv_self_damping(sr.x, fr.x));
         sg *= 1.0 - o * (1.0 - lpv_self_damping(sg.x, fg.x));
         sb *= 1.0 - o * (1.0 - lpv_self_damping(sb.x, fb.x));
@@ -245,22 +256,22 @@ vec3 lpv_irradiance(vec3 p, vec3 n_in) {
     vec3 n = normalize(n_in);
     vec3 e = vec3(0.0);
     float keep = 1.0;
-    if (u_lpv_count > 0) e += lpv_cascade_irradiance(u_lpv_r0, u_lpv_g0, u_lpv_b0, u_lpv_o0, 0, p, n, keep);
-    if (u_lpv_count > 1 && keep > 0.0) e += lpv_cascade_irradiance(u_lpv_r1, u_lpv_g1, u_lpv_b1, u_lpv_o1, 1, p, n, keep);
-    if (u_lpv_count > 2 && keep > 0.0) e += lpv_cascade_irradiance(u_lpv_r2, u_lpv_g2, u_lpv_b2, u_lpv_o2, 2, p, n, keep);
+    for (int c = lpv_first_cascade(p, n * u_lpv_lookup_offset); c < u_lpv_count; ++c) {
+        e += lpv_cascade_irradiance(c, p, n, keep);
+        if (keep <= 0.0) break;
+    }
     return e;
 }
 
 // Radiance travelling along w at world point q from cascade c, weighted as in the irradiance.
-vec3 lpv_cascade_radiance(sampler3D tr, sampler3D tg, sampler3D tb, int c, vec3 q, vec3 w, float a1,
-                          inout float keep) {
+vec3 lpv_cascade_radiance(int c, vec3 q, vec3 w, float a1, inout float keep) {
     float cell = u_lpv_geom[c].w;
     int res = u_lpv_res[c];
     vec3 u = (q - u_lpv_geom[c].xyz) / cell;
     float alpha = lpv_cascade_weight(u, res, c == u_lpv_count - 1) * keep;
     if (alpha <= 0.0) return vec3(0.0);
     vec4 sr, sg, sb;
-    lpv_fetch(tr, tg, tb, res, u, sr, sg, sb);
+    lpv_fetch(c, res, u, sr, sg, sb);
     float inv_area = 1.0 / (cell * cell);
     keep -= alpha;
     return alpha * vec3(lpv_eval_radiance(sr, w, a1, inv_area), lpv_eval_radiance(sg, w, a1, inv_area),
@@ -276,9 +287,10 @@ vec3 lpv_glossy(vec3 p, vec3 r_in, float shininess) {
     for (int k = 0; k < u_lpv_glossy_steps; ++k) {
         vec3 q = p + r * (u_lpv_glossy_step * float(k + 1));
         float keep = 1.0;
-        acc += lpv_cascade_radiance(u_lpv_r0, u_lpv_g0, u_lpv_b0, 0, q, w, a1, keep);
-        if (u_lpv_count > 1 && keep > 0.0) acc += lpv_cascade_radiance(u_lpv_r1, u_lpv_g1, u_lpv_b1, 1, q, w, a1, keep);
-        if (u_lpv_count > 2 && keep > 0.0) acc += lpv_cascade_radiance(u_lpv_r2, u_lpv_g2, u_lpv_b2, 2, q, w, a1, keep);
+        for (int c = lpv_first_cascade(q, vec3(0.0)); c < u_lpv_count; ++c) {
+            acc += lpv_cascade_radiance(c, q, w, a1, keep);
+            if (keep <= 0.0) break;
+        }
     }
     return acc / float(u_lpv_glossy_steps);
 }
