@@ -8,9 +8,9 @@ every revision that does not already contain them, e.g. a change of the bench it
 revisions run the same benchmark), and ``python -m serenity bench courtyard --frames 24`` runs there
 with that worktree first on the path, the revisions in turn (the order reversed every pair), so
 that a shared machine's drifting load falls on all of them alike. Per revision and size: every
-run's overlapped and serial frame, CPU-ms, LPV update, sky stage and tracer stages, and their
-medians over the pairs. On a 2-core machine shared with other jobs one run of a frame varies by
-10–25 %; the CPU-ms vary less.
+run's overlapped and serial frame, CPU-ms, LPV update, sky stage, tracer stages and every stage of
+both schedules, and their medians over the pairs. On a 2-core machine shared with other jobs one
+run of a frame varies by 10–25 %; the CPU-ms vary less.
 """
 
 from __future__ import annotations
@@ -62,7 +62,8 @@ def bench_once(tree: Path, size: str, quality: str, out: Path) -> dict:
     return {"overlapped_ms": o["frame_ms"], "serial_ms": s["frame_ms"], "cpu_ms": o["cpu_ms"],
             "serial_cpu_ms": s["cpu_ms"], "lpv_update_ms": o["lpv_update_ms"], "sky_update_ms": o["sky_update_ms"],
             "tracer_overlapped_ms": o["stages_ms"].get(tracer, 0.0),
-            "tracer_serial_ms": s["stages_ms"].get(tracer, 0.0)}
+            "tracer_serial_ms": s["stages_ms"].get(tracer, 0.0),
+            "stages_overlapped_ms": o["stages_ms"], "stages_serial_ms": s["stages_ms"]}
 
 
 def main(argv=None) -> int:
@@ -100,7 +101,10 @@ def main(argv=None) -> int:
         result["medians"][rev] = {}
         for size in args.sizes.split(","):
             rs = runs[rev][size]
-            med = {key: statistics.median(r[key] for r in rs) for key in rs[0] if key != "pair"}
+            med = {key: statistics.median(r[key] for r in rs) for key in rs[0] if key != "pair"
+                   and not key.startswith("stages_")}
+            for key in ("stages_overlapped_ms", "stages_serial_ms"):  # each stage's median over the runs
+                med[key] = {st: statistics.median(r[key].get(st, 0.0) for r in rs) for st in rs[0][key]}
             med["tracer_ratio"] = statistics.median(r["tracer_overlapped_ms"] / max(r["tracer_serial_ms"], 1e-9)
                                                     for r in rs)
             result["medians"][rev][size] = med
