@@ -13,6 +13,7 @@ from serenity.config import ShadowConfig
 from serenity.raster.context import (
     FullscreenPass,
     draw_fullscreen,
+    finish,
     fullscreen_vao,
     load_program,
     low_res_size,
@@ -214,6 +215,7 @@ class DeferredPass(FullscreenPass):
             try:
                 for (_, vao), test in zip(draws, ("<=", ">"), strict=True):  # sky: depth 1; surfaces: < 1
                     ctx.depth_func = test
+                    finish(ctx)
                     vao.render(vertices=3)
             finally:
                 ctx.disable(moderngl.DEPTH_TEST)
