@@ -86,15 +86,10 @@ class LPVTexturesGL:
             blocks = [(*lpv.textures(c), lpv.openness(c)) for c in range(self.count)]
             for k in range(UNITS):
                 tex = self.textures[k]
-                if tex is self._empty or tex.size != shape:
+                if tex is self._empty or tex.size != shape:  # (re)allocated when the cascades' sizes change
                     if tex is not self._empty:
                         tex.release()
-                    atlas = np.zeros((shape[2], side, side, 4), np.float32)
-                    for c, b in enumerate(blocks):
-                        r = int(self.res[c])
-                        atlas[self.zofs[c]:self.zofs[c] + r, :r, :r] = b[k]
-                    self.textures[k] = upload_texture3d(self.ctx, atlas)
-                    continue
+                    tex = self.textures[k] = upload_texture3d(self.ctx, np.zeros((shape[2], side, side, 4), np.float32))
                 for c, b in enumerate(blocks):  # each cascade's block in place
                     r = int(self.res[c])
                     tex.write(np.ascontiguousarray(b[k], np.float32).tobytes(),
