@@ -59,6 +59,7 @@ def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: 
         sel = [p for p in pts if p["technique"] == t]
         ax.scatter([p["ms"] for p in sel], [p["error"] for p in sel], color=colour[t], s=36, zorder=3, label=t)
     on_front = set(front)
+    labels = []
     for i, p in enumerate(pts):
         if i in on_front:
             ax.scatter([p["ms"]], [p["error"]], facecolors="none", edgecolors="0.2", s=90, lw=1.0, zorder=4)
@@ -66,8 +67,8 @@ def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: 
             ax.scatter([p["ms"]], [p["error"]], marker="*", color="gold", edgecolors="black", s=260, lw=0.8,
                        zorder=5)
         if p["label"]:
-            ax.annotate(p["label"], (p["ms"], p["error"]), textcoords="offset points", xytext=(6, 5), fontsize=7.5,
-                        color=colour[p["technique"]], zorder=6)
+            labels.append(ax.annotate(p["label"], (p["ms"], p["error"]), textcoords="offset points", xytext=(6, 5),
+                                      fontsize=7.5, color=colour[p["technique"]], zorder=6))
     if any(p["paper"] for p in pts):
         ax.scatter([], [], marker="*", color="gold", edgecolors="black", s=160, label="paper's settings")
     ax.set_xscale("log")
@@ -82,7 +83,37 @@ def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: 
     if title:
         ax.set_title(title)
     fig.tight_layout()
+    _separate_labels(fig, labels)
     return fig
+
+
+def _separate_labels(fig, labels: list) -> None:
+    """Move point labels up, one line at a time, until none overlaps a label placed before it (the
+    lowest first): two points close in time and error otherwise print their names over each other.
+    Where the stack rises above the axes, the axes grow upwards and the labels are placed again."""
+    if not labels:
+        return
+    ax = labels[0].axes
+    for _ in range(3):
+        for a in labels:
+            a.xyann = (6, 5)
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        placed = []
+        for a in sorted(labels, key=lambda a: a.get_window_extent(renderer).y0):
+            for _ in range(len(labels)):
+                box = a.get_window_extent(renderer)
+                if not any(box.overlaps(b) for b in placed):
+                    break
+                dx, dy = a.xyann
+                a.xyann = (dx, dy + box.height * 72.0 / fig.dpi + 1.0)
+            placed.append(a.get_window_extent(renderer))
+        frame = ax.get_window_extent(renderer)
+        top = max(b.y1 for b in placed)
+        if top <= frame.y1:
+            return
+        lo, hi = ax.get_ylim()  # linear y: grow the range so that the stack's top fits, with a margin
+        ax.set_ylim(lo, lo + (hi - lo) * ((top - frame.y0) / frame.height) * 1.05)
 
 
 def save_speed_accuracy_chart(points: list[dict], path: str, error_name: str = "error",
