@@ -46,7 +46,6 @@ def run_size(scene_name: str, w: int, h: int, nices: list[int], frames: int, pas
     scenes = {k: copy.deepcopy(base) for k in names}
     renderers = {k: Renderer(scenes[k], w, h, config=c) for k, c in zip(names, configs, strict=True)}
     rec = {k: {"frame": [], "rt": [], "wait": [], "rt_cpu": []} for k in names}
-    actual: dict[str, int | None] = {}
     bc, bs = base.camera, np.asarray(base.sun.direction, np.float64).copy()
     try:
         with tqdm(total=passes * frames, desc=f"tracer nice {w}x{h}", unit="frame") as bar:
@@ -64,8 +63,8 @@ def run_size(scene_name: str, w: int, h: int, nices: list[int], frames: int, pas
                             rec[k]["rt"].append(f.timings.get(RT, 0.0))
                             rec[k]["wait"].append(f.timings.get(WAIT, 0.0))
                             rec[k]["rt_cpu"].append(f.tracer_cpu_ms)
-                            actual[k] = renderers[k].tracer_niceness
                     bar.update()
+        actual = {k: r.tracer_niceness for k, r in renderers.items()}  # what the OS granted
     finally:
         for r in renderers.values():
             r.close()

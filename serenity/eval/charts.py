@@ -43,6 +43,10 @@ def pareto_front(points: list[dict]) -> list[int]:
     return front
 
 
+LABEL_OFFSET = (6, 5)
+"""Where a point's label starts, points right of and above it."""
+
+
 def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: str | None = None):
     """A matplotlib Figure of the chart (Agg backend; the caller saves or closes it)."""
     plt = pyplot("speed-vs-accuracy charts")
@@ -67,8 +71,8 @@ def speed_accuracy_figure(points: list[dict], error_name: str = "error", title: 
             ax.scatter([p["ms"]], [p["error"]], marker="*", color="gold", edgecolors="black", s=260, lw=0.8,
                        zorder=5)
         if p["label"]:
-            labels.append(ax.annotate(p["label"], (p["ms"], p["error"]), textcoords="offset points", xytext=(6, 5),
-                                      fontsize=7.5, color=colour[p["technique"]], zorder=6))
+            labels.append(ax.annotate(p["label"], (p["ms"], p["error"]), textcoords="offset points",
+                                      xytext=LABEL_OFFSET, fontsize=7.5, color=colour[p["technique"]], zorder=6))
     if any(p["paper"] for p in pts):
         ax.scatter([], [], marker="*", color="gold", edgecolors="black", s=160, label="paper's settings")
     ax.set_xscale("log")
@@ -96,7 +100,7 @@ def _separate_labels(fig, labels: list) -> None:
     ax = labels[0].axes
     for _ in range(3):
         for a in labels:
-            a.xyann = (6, 5)
+            a.xyann = LABEL_OFFSET
         fig.canvas.draw()
         renderer = fig.canvas.get_renderer()
         placed = []

@@ -18,9 +18,9 @@ def write_results(path: str, results: dict) -> None:
 def machine_info() -> dict:
     """What a benchmark ran on: the platform, the CPU's model, caches and AVX-512 flag
     (/proc/cpuinfo, sysfs), the core count, the load average when asked and whether the scheduler
-groups sessions. Runs on different hosts
-    of the same virtual machine type, and on one host minutes apart, differ by more than most
-    changes do; a figure read without this cannot be compared with another."""
+    groups sessions. Runs on different hosts of the same virtual machine type, and on one host
+    minutes apart, differ by more than most changes do; a figure read without this cannot be
+    compared with another."""
     first = (_read("/proc/cpuinfo") or "").split("\n\n")[0]
     info = {k.strip(): v.strip() for k, _, v in (ln.partition(":") for ln in first.splitlines())}
     cache = {}

@@ -83,6 +83,9 @@ def finish(ctx) -> None:
     every pass. Measured on the 2-core machine (``benchmarks/bench_gil_finish.py``: a thread issuing
     small Warp launches beside a 15–20 ms fragment-bound pass): 73–76 launches/s through
     ``ctx.finish()``, 405–408 through this, 474 alone (``gil_finish.json``).
+    Call it also before a draw that reads what the draws before it rendered (the SSAO blur, the
+    deferred pass): llvmpipe would wait for them inside the draw call, with the GIL held
+    (``tools/profile_gl_calls.py`` shows where the main thread sits in GL).
     Other contexts (the viewer's window) wait through moderngl."""
     native = _native_finish
     if native is not None and native[0] is ctx:

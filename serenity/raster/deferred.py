@@ -215,7 +215,7 @@ class DeferredPass(FullscreenPass):
             try:
                 for (_, vao), test in zip(draws, ("<=", ">"), strict=True):  # sky: depth 1; surfaces: < 1
                     ctx.depth_func = test
-                    finish(ctx)
+                    finish(ctx)  # the inputs drawn before: wait with the GIL released (context.finish)
                     vao.render(vertices=3)
             finally:
                 ctx.disable(moderngl.DEPTH_TEST)

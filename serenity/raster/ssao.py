@@ -86,10 +86,7 @@ class SSAOPass:
                 r = max(1, round(cfg.blur_radius / self.scale))
                 passes = ((self.tex_a, self.fbo_b, (1.0, 0.0), r), (self.tex_b, self.fbo_out, (0.0, 1.0), r))
             for src, dst, axis, radius in passes:
-                # each pass reads what the one before drew: llvmpipe would wait for it inside the draw
-                # call, holding the GIL (the volume worker's Python stalled behind it); wait here
-                # instead, with the GIL released (context.finish)
-                finish(self.ctx)
+                finish(self.ctx)  # each pass reads the one before: wait with the GIL released
                 dst.use()
                 src.use(location=2)
                 b["u_axis"].value = axis
