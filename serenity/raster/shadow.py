@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from serenity.raster.context import load_program
+from serenity.raster.context import clear_depth_rect, load_program
 
 MAX_CASCADES = 4
 #: how much larger than its sphere a tile is fitted when tiles are staggered (fraction of the radius)
@@ -269,7 +269,7 @@ class ShadowPass:
             for i in sorted(draw):
                 c = cascades[i]
                 tile = ((i % 2) * self.size, (i // 2) * self.size, self.size, self.size)
-                self.fbo.clear(depth=1.0, viewport=tile)
+                clear_depth_rect(ctx, self.fbo, self.depth, tile)
                 self.fbo.viewport = tile
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
                 if self.caster_index_count:  # the casters: the bottom plane shadows nothing

@@ -273,3 +273,27 @@ def test_eave_shadow_on_a_wall_under_a_grazing_sun(gl_ctx):
     vis_offset, _ = _eave_shadow(1.0)
     assert np.any(vis_offset[umbra] > 0.5)
     assert float(np.mean(np.abs(vis_offset - exact))) > 3 * err
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_clear_depth_rect_clears_only_its_tile(gl_ctx, native, monkeypatch):
+    """The shadow atlas's tile clear (glClearTexSubImage on the headless context, else a scissored
+    framebuffer clear) sets its rectangle to the far plane and leaves the other tiles alone."""
+    from serenity.raster import context
+
+    assert context._native_clear is not None, "glClearTexSubImage did not resolve on the headless context"
+    if not native:
+        monkeypatch.setattr(context, "_native_clear", None)
+    depth = gl_ctx.depth_texture((64, 64))
+    fbo = gl_ctx.framebuffer(depth_attachment=depth)
+    before = gl_ctx.fbo
+    fbo.use()
+    fbo.clear(depth=0.25)
+    context.clear_depth_rect(gl_ctx, fbo, depth, (32, 0, 32, 32))
+    d = np.frombuffer(depth.read(alignment=1), np.float32).reshape(64, 64)  # rows from the bottom
+    np.testing.assert_array_equal(d[:32, 32:], 1.0)
+    np.testing.assert_allclose(d[32:, :], 0.25, atol=1e-6)
+    np.testing.assert_allclose(d[:32, :32], 0.25, atol=1e-6)
+    before.use()
+    fbo.release()
+    depth.release()
