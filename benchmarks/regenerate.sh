@@ -6,7 +6,7 @@
 #
 #   bash benchmarks/regenerate.sh            # everything below
 #   bash benchmarks/regenerate.sh frame      # the Table-1 benches (serenity bench), the 320x180 spread,
-#                                            # the tracer-niceness sweep
+#                                            # the tracer-niceness sweep, the per-thread CPU time
 #   bash benchmarks/regenerate.sh ab         # round 14-15's A/Bs, the GIL-free finish
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -31,6 +31,8 @@ frame() {
     # the 320x180 bench five times (its spread), and what the tracer process's priority costs
     $PY benchmarks/bench_frame_repeat.py --runs 5 --size 320x180
     $PY benchmarks/bench_tracer_nice.py --frames 24 --passes 10 --json $R/tracer_nice.json --chart $R/tracer_nice.png
+    # where the frame's CPU time goes, thread by thread (the bound on what overlap can buy)
+    $PY benchmarks/bench_frame_threads.py --frames 60 --json $R/frame_threads.json
 }
 
 ab() {
