@@ -67,6 +67,7 @@ def in_frame(width: int, height: int, frames: int) -> dict:
     native = context._native_clear
     stage = {True: [], False: []}
     wall = {True: [], False: []}
+    tiles = []  # tiles the CSM redrew per frame
     try:
         for i in range(frames):
             t = (i % 48) / 47
@@ -77,6 +78,7 @@ def in_frame(width: int, height: int, frames: int) -> dict:
             if i >= 8:
                 stage[way].append(f.timings["shadow maps (CSM)"])
                 wall[way].append(f.wall_ms)
+                tiles.append(r.shadow_pass.redrawn)
         alone = clear_alone(r.ctx, context, native, r.shadow_size)
     finally:
         context._native_clear = native
@@ -86,7 +88,7 @@ def in_frame(width: int, height: int, frames: int) -> dict:
                              "scissored_clear": float(np.median(stage[False]))},
             "frame_ms": {"clear_tex_sub_image": float(np.median(wall[True])),
                          "scissored_clear": float(np.median(wall[False]))},
-            "frames_each": len(stage[True])}
+            "frames_each": len(stage[True]), "tiles_redrawn_per_frame": float(np.mean(tiles))}
 
 
 def main(argv=None) -> int:
@@ -108,7 +110,8 @@ def main(argv=None) -> int:
         a, s = res["clear_alone_ms"], res["csm_stage_ms"]
         print(f"{size}: {res['tile']}² tile clear {a['scissored_clear']:.3f} -> {a['clear_tex_sub_image']:.3f} ms; "
               f"CSM stage {s['scissored_clear']:.2f} -> {s['clear_tex_sub_image']:.2f} ms; frame "
-              f"{res['frame_ms']['scissored_clear']:.1f} -> {res['frame_ms']['clear_tex_sub_image']:.1f} ms")
+              f"{res['frame_ms']['scissored_clear']:.1f} -> {res['frame_ms']['clear_tex_sub_image']:.1f} ms; "
+              f"{res['tiles_redrawn_per_frame']:.2f} tiles redrawn a frame")
     write_results(args.json, out)
     return 0
 
