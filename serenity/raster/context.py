@@ -58,7 +58,7 @@ def _create_context():
             f"no headless OpenGL 4.3 context via EGL ({str(e).splitlines()[0] if str(e) else type(e).__name__}). "
             f"On Debian/Ubuntu install the system packages: sudo apt-get install {_SYSTEM_PACKAGES}"
         ) from None
-    gl_finish = _egl_gl_finish()
+    gl_finish = _egl_proc(b"glFinish", ctypes.CFUNCTYPE(None))
     _native_finish = (ctx, gl_finish) if gl_finish is not None else None
     clear = _egl_proc(b"glClearTexSubImage", ctypes.CFUNCTYPE(None, *[ctypes.c_uint] + [ctypes.c_int] * 7,
                                                              ctypes.c_uint, ctypes.c_uint, ctypes.c_void_p))
@@ -78,11 +78,6 @@ def _egl_proc(name: bytes, prototype):
     except (OSError, AttributeError):
         return None
     return prototype(ptr) if ptr else None
-
-
-def _egl_gl_finish():
-    """glFinish through ctypes (``_egl_proc``), or None."""
-    return _egl_proc(b"glFinish", ctypes.CFUNCTYPE(None))
 
 
 def finish(ctx) -> None:
