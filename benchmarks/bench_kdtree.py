@@ -328,8 +328,7 @@ def main(argv=None) -> dict:
         # the same with one contiguous chunk per thread (the split before chunks_per_thread)
         args_1 = [tree.device_data("cpu"), wp.array(o, dtype=wp.vec3, device="cpu"),
                   wp.array(d, dtype=wp.vec3, device="cpu"), 0.0,
-                  wp.array(np.full(n, np.inf, np.float32), dtype=float, device="cpu"),
-                  wp.empty(0, dtype=wp.int32, device="cpu")]  # unsorted
+                  wp.array(np.full(n, np.inf, np.float32), dtype=float, device="cpu")]  # unsorted
         outs_1 = [wp.empty(n, dtype=t, device="cpu") for t in (float, wp.int32, float, float)]
         cpu_bound_halves = thread_cpu_split(
             wp, lambda n=n, a=[*args_1, *outs_1]: launch(intersect_rays, n, a, device="cpu", threads=2))

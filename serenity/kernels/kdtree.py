@@ -47,8 +47,12 @@ an 8³ grid over the root box, then the direction's octant, then its cell on a 4
 octant's octahedral map — so that consecutive rays on a thread start in the same cell and head the
 same way, and walk the same nodes and triangles while they are still in the caches. The keys are a Warp kernel,
 the sort numpy's radix sort of 16-bit keys; the rays are gathered into the sorted order (a
-separate pass: a random read per ray inside the traversal costs more than the pass), traced, and
-each result written back to the ray's own index, so the results do not depend on the order. Rays
+separate pass: a random read per ray inside the traversal costs more than the pass; tmax only when
+it differs between rays), traced with their results written in that order, and the results
+scattered back to each ray's own index by a pass of their own (:func:`scatter_hits`), so the results
+do not depend on the order. (Written back from inside the traversal, the four random stores per ray
+cost 60-90 ms of a 0.92 M-ray batch's ~470 ms on one thread, the separate scatter 10 ms: round 23,
+``benchmarks/results/kdtree_ab_scatter.json``.) Rays
 already in a coherent order (camera rays; the default ``sort=None`` looks at how often the key
 changes along the batch) and batches below ``SORT_MIN_RAYS`` are traced as they come. On the
 benchmark's incoherent rays: +14-18 % rays per CPU-second, sort and gather included
@@ -714,6 +718,46 @@ def gather_float(
 
 
 @wp.kernel(enable_backward=False)
+def scatter_hits(
+    # inputs
+    order: wp.array(dtype=wp.int32),
+    t: wp.array(dtype=float),
+    prim: wp.array(dtype=wp.int32),
+    u: wp.array(dtype=float),
+    v: wp.array(dtype=float),
+    # outputs
+    out_t: wp.array(dtype=float),
+    out_prim: wp.array(dtype=wp.int32),
+    out_u: wp.array(dtype=float),
+    out_v: wp.array(dtype=float),
+    offset: int,
+):
+    """Closest hits traced in the order of :func:`ray_order` back to the caller's: ``out[order[i]] =
+    in[i]`` (a separate pass: four random stores per ray inside the traversal cost more, module
+    docstring, "Ray reordering")."""
+    i = wp.tid() + offset
+    j = order[i]
+    out_t[j] = t[i]
+    out_prim[j] = prim[i]
+    out_u[j] = u[i]
+    out_v[j] = v[i]
+
+
+@wp.kernel(enable_backward=False)
+def scatter_int(
+    # inputs
+    order: wp.array(dtype=wp.int32),
+    src: wp.array(dtype=wp.int32),
+    # outputs
+    dst: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """``dst[order[i]] = src[i]``: occlusion results back in the caller's order."""
+    i = wp.tid() + offset
+    dst[order[i]] = src[i]
+
+
+@wp.kernel(enable_backward=False)
 def intersect_rays(
     # inputs
     tree: KdTreeData,
@@ -721,7 +765,6 @@ def intersect_rays(
     directions: wp.array(dtype=wp.vec3),
     tmin: float,
     tmax: wp.array(dtype=float),
-    order: wp.array(dtype=wp.int32),
     # outputs
     hit_t: wp.array(dtype=float),
     hit_prim: wp.array(dtype=wp.int32),
@@ -730,14 +773,11 @@ def intersect_rays(
     offset: int,
 ):
     i = wp.tid() + offset
-    j = i  # where the result goes: the caller's index of a reordered ray
-    if order.shape[0] > 0:
-        j = order[i]
     prim, t, u, v = trace_kd(tree, origins[i], directions[i], tmin, tmax[i], False)
-    hit_t[j] = t
-    hit_prim[j] = prim
-    hit_u[j] = u
-    hit_v[j] = v
+    hit_t[i] = t
+    hit_prim[i] = prim
+    hit_u[i] = u
+    hit_v[i] = v
 
 
 @wp.kernel(enable_backward=False)
@@ -748,17 +788,13 @@ def occlude_rays(
     directions: wp.array(dtype=wp.vec3),
     tmin: float,
     tmax: wp.array(dtype=float),
-    order: wp.array(dtype=wp.int32),
     # outputs
     occluded: wp.array(dtype=wp.int32),
     offset: int,
 ):
     i = wp.tid() + offset
-    j = i
-    if order.shape[0] > 0:
-        j = order[i]
     prim, t, u, v = trace_kd(tree, origins[i], directions[i], tmin, tmax[i], True)
-    occluded[j] = wp.where(prim >= 0, 1, 0)
+    occluded[i] = wp.where(prim >= 0, 1, 0)
 
 
 @kernel_factory(rays=INTERLEAVE_FACTORS, any_hit=(False, True))
@@ -784,7 +820,6 @@ def trace_rays_kernel(rays: int, any_hit: bool):
         directions: wp.array(dtype=wp.vec3),
         tmin: float,
         tmax: wp.array(dtype=float),
-        order: wp.array(dtype=wp.int32),
         first: int,
         end: int,
         hit_t: wp.array(dtype=float),
@@ -794,8 +829,8 @@ def trace_rays_kernel(rays: int, any_hit: bool):
         occluded: wp.array(dtype=wp.int32),
     ):
         """:func:`trace_kd` of rays first … end − 1 over the slots (the loops over slots are
-        unrolled: each slot's state lives in registers or at fixed places); writes each ray's
-        result at its index (``order[i]`` when reordered)."""
+        unrolled: each slot's state lives in registers or at fixed places); writes ray i's result
+        at index i."""
         o_m = mat_3()
         d_m = mat_3()
         inv_m = mat_3()
@@ -869,16 +904,13 @@ def trace_rays_kernel(rays: int, any_hit: bool):
                 elif ray[r] >= -1:
                     i = ray[r]
                     if i >= 0:
-                        j = i
-                        if order.shape[0] > 0:
-                            j = order[i]
                         if wp.static(any_hit):
-                            occluded[j] = wp.where(prim[r] >= 0, 1, 0)
+                            occluded[i] = wp.where(prim[r] >= 0, 1, 0)
                         else:
-                            hit_prim[j] = prim[r]
-                            hit_t[j] = wp.where(prim[r] >= 0, best_t[r], _INF)
-                            hit_u[j] = hu[r]
-                            hit_v[j] = hv[r]
+                            hit_prim[i] = prim[r]
+                            hit_t[i] = wp.where(prim[r] >= 0, best_t[r], _INF)
+                            hit_u[i] = hu[r]
+                            hit_v[i] = hv[r]
                     if nxt < end:
                         o = origins[nxt]
                         d = directions[nxt]
@@ -914,7 +946,6 @@ def trace_rays_kernel(rays: int, any_hit: bool):
         directions: wp.array(dtype=wp.vec3),
         tmin: float,
         tmax: wp.array(dtype=float),
-        order: wp.array(dtype=wp.int32),
         n: int,
         per_thread: int,
         # outputs
@@ -926,7 +957,7 @@ def trace_rays_kernel(rays: int, any_hit: bool):
         offset: int,
     ):
         first = (wp.tid() + offset) * per_thread
-        trace_range(tree, origins, directions, tmin, tmax, order, first, wp.min(first + per_thread, n),
+        trace_range(tree, origins, directions, tmin, tmax, first, wp.min(first + per_thread, n),
                     hit_t, hit_prim, hit_u, hit_v, occluded)
 
     return trace_rays
@@ -1005,31 +1036,39 @@ def _slot_rays(n: int, slots: int, threads: int | None) -> int:
     return max(1, min(RAYS_PER_SLOT, n // (slots * MIN_ITEMS_PER_CHUNK * workers * CHUNKS_PER_THREAD)))
 
 
-def _launch_query(any_hit: bool, n: int, inputs: list, outputs: list, device: str, threads: int | None,
-                  rays_per_thread: int | None) -> None:
+def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs: list, device: str,
+                  threads: int | None, rays_per_thread: int | None) -> None:
     """Launch the closest-hit (``any_hit=False``; outputs t, prim, u, v) or occlusion query (outputs
-    [occluded]) over ``n`` rays. ``inputs`` end with the trace order (empty: as given). On the CPU a
-    reordered batch goes to the interleaved kernel with ``CPU_RAYS_PER_THREAD`` slots
-    (:func:`trace_rays_kernel`), a batch in the caller's order (coherent: camera rays) to one ray
-    per kernel thread (``intersect_rays`` / ``occlude_rays``: faster there, module docstring);
-    ``rays_per_thread`` forces 1 (one ray) or a slot count of ``INTERLEAVE_FACTORS``. CUDA traces
-    one ray per thread (its parallelism is threads)."""
+    [occluded]) over ``n`` rays ``inputs`` (tree, origins, directions, tmin, tmax) given in the trace
+    order ``order`` (empty: the caller's; else ray i is the caller's ray ``order[i]``: the results
+    are traced into scratch arrays in that order and scattered back by :func:`scatter_hits` /
+    :func:`scatter_int`). On the CPU a reordered batch goes to the interleaved kernel with
+    ``CPU_RAYS_PER_THREAD`` slots (:func:`trace_rays_kernel`), a batch in the caller's order
+    (coherent: camera rays) to one ray per kernel thread (``intersect_rays`` / ``occlude_rays``:
+    faster there, module docstring); ``rays_per_thread`` forces 1 (one ray) or a slot count of
+    ``INTERLEAVE_FACTORS``. CUDA traces one ray per thread (its parallelism is threads)."""
     one_ray = occlude_rays if any_hit else intersect_rays
     on_cpu = device.startswith("cpu")
+    reordered = order.shape[0] > 0
     k = rays_per_thread
     if k is None:
-        k = CPU_RAYS_PER_THREAD if on_cpu and inputs[-1].shape[0] > 0 else 1
+        k = CPU_RAYS_PER_THREAD if on_cpu and reordered else 1
     if k != 1 and k not in INTERLEAVE_FACTORS:
         raise SerenityError(f"rays_per_thread={k}: 1 or one of {INTERLEAVE_FACTORS}")
+    traced = [wp.empty(n, dtype=a.dtype, device=device) for a in outputs] if reordered else outputs
     if k == 1 or not on_cpu:
-        launch(one_ray, n, [*inputs, *outputs], device=device, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
-        return
-    per = k * _slot_rays(n, k, threads)
-    none_f = wp.empty(0, dtype=float, device=device)
-    none_i = wp.empty(0, dtype=wp.int32, device=device)
-    outs = [none_f, none_i, none_f, none_f, *outputs] if any_hit else [*outputs, none_i]
-    launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device, threads=threads,
-           chunks_per_thread=CHUNKS_PER_THREAD)
+        launch(one_ray, n, [*inputs, *traced], device=device, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+    else:
+        per = k * _slot_rays(n, k, threads)
+        none_f = wp.empty(0, dtype=float, device=device)
+        none_i = wp.empty(0, dtype=wp.int32, device=device)
+        outs = [none_f, none_i, none_f, none_f, *traced] if any_hit else [*traced, none_i]
+        launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device,
+               threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+    if reordered:
+        launch(scatter_int if any_hit else scatter_hits, n, [order, *traced, *outputs], device=device,
+               threads=threads)
+
 
 class KdTree:
     """An SAH kd-tree over a static triangle mesh, traversed by Warp kernels.
@@ -1133,16 +1172,20 @@ class KdTree:
         tm = np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, np.float32), (len(o),)))
         return o, d, tm
 
-    def _query_inputs(self, o, d, tm, dev: str, tmin: float, sort: bool | None, threads: int | None) -> list:
-        """The query kernels' inputs: the tree, the rays (in their traced order) and that order
-        (empty: as given; else ray i of the kernel is the caller's ray ``order[i]``)."""
+    def _query_inputs(self, o, d, tm, dev: str, tmin: float, sort: bool | None, threads: int | None,
+                      uniform_tmax: bool = False) -> tuple[list, wp.array]:
+        """The query kernels' inputs (the tree, the rays in their traced order) and that order (empty:
+        as given; else ray i of the kernel is the caller's ray ``order[i]``). ``uniform_tmax``: every
+        ray has the same tmax (a scalar was given), which then needs no reordering."""
         data = self.device_data(dev)
         origins, directions, tmin, tmax = _ray_arrays(o, d, tm, dev, tmin)
         n = len(o)
         order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads)
         if order.shape[0]:
-            origins, directions, tmax = gather_in_order(order, [origins, directions, tmax], dev, threads)
-        return [data, origins, directions, tmin, tmax, order]
+            origins, directions = gather_in_order(order, [origins, directions], dev, threads)
+            if not uniform_tmax:
+                (tmax,) = gather_in_order(order, [tmax], dev, threads)
+        return [data, origins, directions, tmin, tmax], order
 
     def intersect(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
                   threads: int | None = None, sort: bool | None = None, rays_per_thread: int | None = None) -> Hits:
@@ -1160,8 +1203,8 @@ class KdTree:
         out_u = wp.empty(n, dtype=float, device=dev)
         out_v = wp.empty(n, dtype=float, device=dev)
         if n:
-            args = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
-            _launch_query(False, n, args, [out_t, out_p, out_u, out_v], dev, threads, rays_per_thread)
+            args, order = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
+            _launch_query(False, n, args, order, [out_t, out_p, out_u, out_v], dev, threads, rays_per_thread)
         return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
@@ -1174,8 +1217,8 @@ class KdTree:
         n = len(o)
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
-            args = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
-            _launch_query(True, n, args, [out], dev, threads, rays_per_thread)
+            args, order = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
+            _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread)
         return out.numpy().astype(bool)
 
 
@@ -1184,5 +1227,5 @@ __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "I
            "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_float",
            "gather_in_order", "gather_vec3", "inner_step_flat", "intersect_rays", "intersect_triangle",
            "intersect_triangle_fixed", "leaf_hits", "node_head", "node_split", "occlude_rays", "ray_order",
-           "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes", "setup_ray", "sort_keys",
-           "start_ray", "trace_kd", "trace_rays_kernel"]
+           "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes", "scatter_hits",
+           "scatter_int", "setup_ray", "sort_keys", "start_ray", "trace_kd", "trace_rays_kernel"]

@@ -359,7 +359,8 @@ def test_branch_free_step_makes_trace_kd_s_choices():
 
 def test_big_incoherent_batches_are_traced_interleaved_and_coherent_ones_one_by_one(monkeypatch):
     """The default CPU query: a reordered (incoherent) batch goes to the interleaved kernel with
-    ``CPU_RAYS_PER_THREAD`` slots, camera rays (left in their order) to one ray per thread."""
+    ``CPU_RAYS_PER_THREAD`` slots and its results to the scatter, camera rays (left in their order)
+    to one ray per thread."""
     import serenity.kernels.kdtree as K
 
     v, f = lumpy_mesh(3)
@@ -371,10 +372,11 @@ def test_big_incoherent_batches_are_traced_interleaved_and_coherent_ones_one_by_
     o2, d2 = random_rays(np.random.default_rng(22), SORT_MIN_RAYS + 1000, extent=2.0)
     tree.intersect(oc, dc, device="cpu")
     assert launched[-1] is K.intersect_rays
+    # a reordered batch is traced in its order, then its results are scattered back in a pass of their own
     tree.intersect(o2, d2, device="cpu")
-    assert launched[-1] is K.trace_rays_kernel(CPU_RAYS_PER_THREAD, False)
+    assert launched[-2:] == [K.trace_rays_kernel(CPU_RAYS_PER_THREAD, False), K.scatter_hits]
     tree.occluded(o2, d2, device="cpu")
-    assert launched[-1] is K.trace_rays_kernel(CPU_RAYS_PER_THREAD, True)
+    assert launched[-2:] == [K.trace_rays_kernel(CPU_RAYS_PER_THREAD, True), K.scatter_int]
 
 def test_build_does_not_depend_on_the_thread_count():
     from serenity.kernels.kdtree_build import build_arrays
