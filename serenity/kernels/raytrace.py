@@ -52,7 +52,7 @@ here), cone_width (N,) or scalar m, cone_spread (N,) or scalar rad. Host class
 :class:`RayTracer` packs the merged scene (geometry, materials and every texture's mip chain) into
 Warp arrays once — the geometry is static — and owns the kd-tree. On the CPU launches are split
 over all cores (:func:`serenity.kernels.launch.launch`); big incoherent batches are traced in a
-reordered order and written back in the caller's (``sort``, as :meth:`KdTree.intersect` does).
+reordered order and scattered back into the caller's (``sort``, as :meth:`KdTree.intersect` does).
 """
 
 from __future__ import annotations
@@ -213,7 +213,6 @@ def trace_gbuffer(
     tmin: float,
     tmax: float,
     transmissions: int,
-    order: wp.array(dtype=wp.int32),
     sun: wp.vec3,
     sun_shadows: int,
     # outputs
@@ -226,20 +225,17 @@ def trace_gbuffer(
     out_back: wp.array(dtype=wp.int32),  # empty, or 1 where the hit is a triangle's back face
     offset: int,
 ):
-    i = wp.tid() + offset  # the ray's index in the traced order (inputs)
-    j = i  # its index in the caller's order (outputs)
-    if order.shape[0] > 0:
-        j = order[i]
+    i = wp.tid() + offset  # the ray's index in the traced order (inputs and outputs)
     zero = wp.vec4(0.0, 0.0, 0.0, 0.0)
-    out_albedo[j] = zero
-    out_normal[j] = zero
-    out_position[j] = zero
-    out_material[j] = zero
-    out_ray[j] = zero
-    out_eye[j] = zero
+    out_albedo[i] = zero
+    out_normal[i] = zero
+    out_position[i] = zero
+    out_material[i] = zero
+    out_ray[i] = zero
+    out_eye[i] = zero
     report_back = out_back.shape[0] > 0
     if report_back:
-        out_back[j] = 0
+        out_back[i] = 0
     d = directions[i]
     len_d = wp.length(d)
     if not (finite(len_d) and len_d > 0.0):
@@ -250,9 +246,9 @@ def trace_gbuffer(
     # pass through up to ``transmissions`` transparent interfaces, then shade the hit
     for k in range(transmissions + 1):
         prim, t, u, v = trace_kd(scene.tree, o, dn, tmin, tmax, False)
-        out_eye[j] = wp.vec4(o[0], o[1], o[2], 0.0)
+        out_eye[i] = wp.vec4(o[0], o[1], o[2], 0.0)
         if prim < 0:
-            out_ray[j] = wp.vec4(dn[0], dn[1], dn[2], 0.0)
+            out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], 0.0)
             return
         f = scene.faces[prim]
         b0 = 1.0 - u - v
@@ -275,9 +271,9 @@ def trace_gbuffer(
             travelled += t
             continue
         t_all = travelled + t
-        out_ray[j] = wp.vec4(dn[0], dn[1], dn[2], t_all)
+        out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], t_all)
         if report_back and wp.dot(ng, dn) > 0.0:
-            out_back[j] = 1
+            out_back[i] = 1
         if wp.dot(n, dn) > 0.0:  # two-sided: face the viewer of this ray, as the G-buffer pass does
             n = -n
         albedo = scene.mat_albedo[m]
@@ -290,17 +286,52 @@ def trace_gbuffer(
             cone = cone_width[i] + cone_spread[i] * t_all
             lod = eval_texture_lod(scene, tex, p0, p1, p2, uv0, uv1, uv2, cone, wp.abs(wp.dot(ng, dn)))
             albedo = wp.cw_mul(albedo, sample_trilinear(scene, tex, uv, lod))
-        out_albedo[j] = wp.vec4(albedo[0], albedo[1], albedo[2], float(m))
-        out_normal[j] = wp.vec4(n[0], n[1], n[2], scene.mat_specular[m])
-        out_position[j] = wp.vec4(p[0], p[1], p[2], 1.0)
-        out_material[j] = prm
+        out_albedo[i] = wp.vec4(albedo[0], albedo[1], albedo[2], float(m))
+        out_normal[i] = wp.vec4(n[0], n[1], n[2], scene.mat_specular[m])
+        out_position[i] = wp.vec4(p[0], p[1], p[2], 1.0)
+        out_material[i] = prm
         if sun_shadows != 0:
             vis = float(1.0)
             s_prim, s_t, s_u, s_v = trace_kd(scene.tree, p, sun, tmin, float(1.0e30), True)
             if s_prim >= 0:
                 vis = 0.0
-            out_eye[j] = wp.vec4(o[0], o[1], o[2], vis)
+            out_eye[i] = wp.vec4(o[0], o[1], o[2], vis)
         return
+
+
+@wp.kernel(enable_backward=False)
+def scatter_gbuffer(
+    # inputs
+    order: wp.array(dtype=wp.int32),
+    albedo: wp.array(dtype=wp.vec4),
+    normal: wp.array(dtype=wp.vec4),
+    position: wp.array(dtype=wp.vec4),
+    material: wp.array(dtype=wp.vec4),
+    ray: wp.array(dtype=wp.vec4),
+    eye: wp.array(dtype=wp.vec4),
+    back: wp.array(dtype=wp.int32),
+    # outputs
+    out_albedo: wp.array(dtype=wp.vec4),
+    out_normal: wp.array(dtype=wp.vec4),
+    out_position: wp.array(dtype=wp.vec4),
+    out_material: wp.array(dtype=wp.vec4),
+    out_ray: wp.array(dtype=wp.vec4),
+    out_eye: wp.array(dtype=wp.vec4),
+    out_back: wp.array(dtype=wp.int32),  # empty when ``back`` is
+    offset: int,
+):
+    """A reordered batch's G-buffer, traced in the order of ``kdtree.ray_order``, back in the caller's:
+    ``out[order[i]] = in[i]`` (a pass of its own, as ``kdtree.scatter_hits``)."""
+    i = wp.tid() + offset
+    j = order[i]
+    out_albedo[j] = albedo[i]
+    out_normal[j] = normal[i]
+    out_position[j] = position[i]
+    out_material[j] = material[i]
+    out_ray[j] = ray[i]
+    out_eye[j] = eye[i]
+    if out_back.shape[0] > 0:
+        out_back[j] = back[i]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -423,12 +454,17 @@ class RayTracer:
                     wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev)]
             tree = self.data.tree
             order = ray_order(tree.box_lo, tree.box_hi, rays[0], rays[1], n, sort, dev, threads)
-            if order.shape[0]:
+            reordered = order.shape[0] > 0
+            if reordered:
                 rays = gather_in_order(order, rays, dev, threads)
+            # a reordered batch is traced into scratch arrays in its order, then scattered back
+            traced = [wp.empty_like(a) for a in (*outs, back)] if reordered else [*outs, back]
             args = [self.data, *rays, float(self.ray_epsilon if tmin is None else tmin), float(tmax),
-                    int(max(0, transmissions)), order, wp.vec3(*(float(x) for x in sun)),
-                    int(sun_direction is not None), *outs, back]
+                    int(max(0, transmissions)), wp.vec3(*(float(x) for x in sun)),
+                    int(sun_direction is not None), *traced]
             launch(trace_gbuffer, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+            if reordered:
+                launch(scatter_gbuffer, n, [order, *traced, *outs, back], device=dev, threads=threads)
         out = {k: a.numpy().reshape(n, 4) for k, a in zip(RT_GBUFFER_KEYS, outs, strict=True)}
         if backfaces:
             out["backface"] = back.numpy().astype(bool)
