@@ -51,8 +51,8 @@ separate pass: a random read per ray inside the traversal costs more than the pa
 it differs between rays), traced with their results written in that order, and the results
 scattered back to each ray's own index by a pass of their own (:func:`scatter_hits`), so the results
 do not depend on the order. (Written back from inside the traversal, the four random stores per ray
-cost 60-90 ms of a 0.92 M-ray batch's ~470 ms on one thread, the separate scatter 10 ms: round 23,
-``benchmarks/results/kdtree_ab_scatter.json``.) Rays
+cost 60-90 ms of a 0.92 M-ray batch's ~470 ms on one thread, the separate scatter 10 ms: README,
+"The kd-tree ray tracer", round 23; its A/Bs ``benchmarks/results/kdtree_ab_scatter*.json``.) Rays
 already in a coherent order (camera rays; the default ``sort=None`` looks at how often the key
 changes along the batch) and batches below ``SORT_MIN_RAYS`` are traced as they come. On the
 benchmark's incoherent rays: +14-18 % rays per CPU-second, sort and gather included
