@@ -49,7 +49,7 @@ same way, and walk the same nodes and triangles while they are still in the cach
 the sort numpy's radix sort of 16-bit keys; the rays are gathered into the sorted order (a
 separate pass: a random read per ray inside the traversal costs more than the pass; tmax only when
 it differs between rays), traced with their results written in that order, and the results
-scattered back to each ray's own index by a pass of their own (:func:`scatter_hits`), so the results
+scattered back to each ray's own index by a pass of their own (:func:`scatter_in_order`), so the results
 do not depend on the order. (Written back from inside the traversal, the four random stores per ray
 cost 60-90 ms of a 0.92 M-ray batch's ~470 ms on one thread, the separate scatter 10 ms: README,
 "The kd-tree ray tracer", round 23; its A/Bs ``benchmarks/results/kdtree_ab_scatter*.json``.) Rays
@@ -115,6 +115,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -718,43 +719,24 @@ def gather_float(
 
 
 @wp.kernel(enable_backward=False)
-def scatter_hits(
+def scatter_array(
     # inputs
     order: wp.array(dtype=wp.int32),
-    t: wp.array(dtype=float),
-    prim: wp.array(dtype=wp.int32),
-    u: wp.array(dtype=float),
-    v: wp.array(dtype=float),
+    src: wp.array(dtype=Any),
     # outputs
-    out_t: wp.array(dtype=float),
-    out_prim: wp.array(dtype=wp.int32),
-    out_u: wp.array(dtype=float),
-    out_v: wp.array(dtype=float),
+    dst: wp.array(dtype=Any),
     offset: int,
 ):
-    """Closest hits traced in the order of :func:`ray_order` back to the caller's: ``out[order[i]] =
-    in[i]`` (a separate pass: four random stores per ray inside the traversal cost more, module
-    docstring, "Ray reordering")."""
-    i = wp.tid() + offset
-    j = order[i]
-    out_t[j] = t[i]
-    out_prim[j] = prim[i]
-    out_u[j] = u[i]
-    out_v[j] = v[i]
-
-
-@wp.kernel(enable_backward=False)
-def scatter_int(
-    # inputs
-    order: wp.array(dtype=wp.int32),
-    src: wp.array(dtype=wp.int32),
-    # outputs
-    dst: wp.array(dtype=wp.int32),
-    offset: int,
-):
-    """``dst[order[i]] = src[i]``: occlusion results back in the caller's order."""
+    """``dst[order[i]] = src[i]``: a per-ray result traced in the order of :func:`ray_order` back in
+    the caller's (:func:`scatter_in_order`; compiled for the result types in ``SCATTER_DTYPES``)."""
     i = wp.tid() + offset
     dst[order[i]] = src[i]
+
+
+#: the per-ray result types :func:`scatter_array` is compiled for (hits, flags, ray-traced G-buffers)
+SCATTER_DTYPES = (wp.int32, wp.float32, wp.vec4)
+for _dtype in SCATTER_DTYPES:
+    wp.overload(scatter_array, {"src": wp.array(dtype=_dtype), "dst": wp.array(dtype=_dtype)})
 
 
 @wp.kernel(enable_backward=False)
@@ -1028,6 +1010,16 @@ def gather_in_order(order: wp.array, arrays: list, device: str, threads: int | N
     return out
 
 
+def scatter_in_order(order: wp.array, arrays: list, outs: list, device: str, threads: int | None = None) -> None:
+    """The inverse of :func:`gather_in_order`: ``out[order[i]] = a[i]`` for each pair, results traced
+    in the reordered order written back at their rays' own indices (a pass of its own: random stores
+    from inside the traversal compete with its loads, module docstring, "Ray reordering"). Empty
+    arrays are skipped."""
+    for a, b in zip(arrays, outs, strict=True):
+        if a.shape[0]:
+            launch(scatter_array, a.shape[0], [order, a, b], device=device, threads=threads)
+
+
 def _slot_rays(n: int, slots: int, threads: int | None) -> int:
     """Rays per slot and kernel thread for ``n`` rays on ``slots`` slots: ``RAYS_PER_SLOT``, fewer
     when the launch would otherwise have fewer than ``CHUNKS_PER_THREAD`` chunks of
@@ -1041,10 +1033,10 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
     """Launch the closest-hit (``any_hit=False``; outputs t, prim, u, v) or occlusion query (outputs
     [occluded]) over ``n`` rays ``inputs`` (tree, origins, directions, tmin, tmax) given in the trace
     order ``order`` (empty: the caller's; else ray i is the caller's ray ``order[i]``: the results
-    are traced into scratch arrays in that order and scattered back by :func:`scatter_hits` /
-    :func:`scatter_int`). On the CPU a reordered batch goes to the interleaved kernel with
-    ``CPU_RAYS_PER_THREAD`` slots (:func:`trace_rays_kernel`), a batch in the caller's order
-    (coherent: camera rays) to one ray per kernel thread (``intersect_rays`` / ``occlude_rays``:
+    are traced into scratch arrays in that order and scattered back by :func:`scatter_in_order`).
+    On the CPU a reordered batch goes to the interleaved kernel with ``CPU_RAYS_PER_THREAD`` slots
+    (:func:`trace_rays_kernel`), a batch in the caller's order (coherent: camera rays) to one ray per
+    kernel thread (``intersect_rays`` / ``occlude_rays``:
     faster there, module docstring); ``rays_per_thread`` forces 1 (one ray) or a slot count of
     ``INTERLEAVE_FACTORS``. CUDA traces one ray per thread (its parallelism is threads)."""
     one_ray = occlude_rays if any_hit else intersect_rays
@@ -1066,8 +1058,7 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device,
                threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
     if reordered:
-        launch(scatter_int if any_hit else scatter_hits, n, [order, *traced, *outputs], device=device,
-               threads=threads)
+        scatter_in_order(order, traced, outputs, device, threads)
 
 
 class KdTree:
@@ -1227,5 +1218,5 @@ __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "I
            "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_float",
            "gather_in_order", "gather_vec3", "inner_step_flat", "intersect_rays", "intersect_triangle",
            "intersect_triangle_fixed", "leaf_hits", "node_head", "node_split", "occlude_rays", "ray_order",
-           "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes", "scatter_hits",
-           "scatter_int", "setup_ray", "sort_keys", "start_ray", "trace_kd", "trace_rays_kernel"]
+           "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes", "scatter_array",
+           "scatter_in_order", "setup_ray", "sort_keys", "start_ray", "trace_kd", "trace_rays_kernel"]

@@ -72,6 +72,7 @@ from serenity.kernels.kdtree import (
     finite,
     gather_in_order,
     ray_order,
+    scatter_in_order,
     trace_kd,
 )
 from serenity.kernels.launch import launch
@@ -299,41 +300,6 @@ def trace_gbuffer(
         return
 
 
-@wp.kernel(enable_backward=False)
-def scatter_gbuffer(
-    # inputs
-    order: wp.array(dtype=wp.int32),
-    albedo: wp.array(dtype=wp.vec4),
-    normal: wp.array(dtype=wp.vec4),
-    position: wp.array(dtype=wp.vec4),
-    material: wp.array(dtype=wp.vec4),
-    ray: wp.array(dtype=wp.vec4),
-    eye: wp.array(dtype=wp.vec4),
-    back: wp.array(dtype=wp.int32),
-    # outputs
-    out_albedo: wp.array(dtype=wp.vec4),
-    out_normal: wp.array(dtype=wp.vec4),
-    out_position: wp.array(dtype=wp.vec4),
-    out_material: wp.array(dtype=wp.vec4),
-    out_ray: wp.array(dtype=wp.vec4),
-    out_eye: wp.array(dtype=wp.vec4),
-    out_back: wp.array(dtype=wp.int32),  # empty when ``back`` is
-    offset: int,
-):
-    """A reordered batch's G-buffer, traced in the order of ``kdtree.ray_order``, back in the caller's:
-    ``out[order[i]] = in[i]`` (a pass of its own, as ``kdtree.scatter_hits``)."""
-    i = wp.tid() + offset
-    j = order[i]
-    out_albedo[j] = albedo[i]
-    out_normal[j] = normal[i]
-    out_position[j] = position[i]
-    out_material[j] = material[i]
-    out_ray[j] = ray[i]
-    out_eye[j] = eye[i]
-    if out_back.shape[0] > 0:
-        out_back[j] = back[i]
-
-
 # ----------------------------------------------------------------------------------------------
 # host
 # ----------------------------------------------------------------------------------------------
@@ -464,7 +430,7 @@ class RayTracer:
                     int(sun_direction is not None), *traced]
             launch(trace_gbuffer, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
             if reordered:
-                launch(scatter_gbuffer, n, [order, *traced, *outs, back], device=dev, threads=threads)
+                scatter_in_order(order, traced, [*outs, back], dev, threads)
         out = {k: a.numpy().reshape(n, 4) for k, a in zip(RT_GBUFFER_KEYS, outs, strict=True)}
         if backfaces:
             out["backface"] = back.numpy().astype(bool)
