@@ -691,31 +691,24 @@ def sample_key_changes(
 
 
 @wp.kernel(enable_backward=False)
-def gather_vec3(
+def gather_array(
     # inputs
     order: wp.array(dtype=wp.int32),
-    src: wp.array(dtype=wp.vec3),
+    src: wp.array(dtype=Any),
     # outputs
-    dst: wp.array(dtype=wp.vec3),
+    dst: wp.array(dtype=Any),
     offset: int,
 ):
-    """``dst[i] = src[order[i]]``: a per-ray array in the traced order."""
+    """``dst[i] = src[order[i]]``: a per-ray array in the traced order (:func:`gather_in_order`;
+    compiled for the ray input types in ``GATHER_DTYPES``)."""
     i = wp.tid() + offset
     dst[i] = src[order[i]]
 
 
-@wp.kernel(enable_backward=False)
-def gather_float(
-    # inputs
-    order: wp.array(dtype=wp.int32),
-    src: wp.array(dtype=float),
-    # outputs
-    dst: wp.array(dtype=float),
-    offset: int,
-):
-    """``dst[i] = src[order[i]]``: a per-ray array in the traced order."""
-    i = wp.tid() + offset
-    dst[i] = src[order[i]]
+#: the per-ray input types :func:`gather_array` is compiled for (origins, directions, tmax, cones)
+GATHER_DTYPES = (wp.vec3, wp.float32)
+for _dtype in GATHER_DTYPES:
+    wp.overload(gather_array, {"src": wp.array(dtype=_dtype), "dst": wp.array(dtype=_dtype)})
 
 
 @wp.kernel(enable_backward=False)
@@ -1004,8 +997,7 @@ def gather_in_order(order: wp.array, arrays: list, device: str, threads: int | N
     out = []
     for a in arrays:
         b = wp.empty(a.shape[0], dtype=a.dtype, device=device)
-        launch(gather_vec3 if a.dtype == wp.vec3 else gather_float, a.shape[0], [order, a, b], device=device,
-               threads=threads)
+        launch(gather_array, a.shape[0], [order, a, b], device=device, threads=threads)
         out.append(b)
     return out
 
@@ -1215,8 +1207,8 @@ class KdTree:
 
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS",
            "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS", "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits",
-           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_float",
-           "gather_in_order", "gather_vec3", "inner_step_flat", "intersect_rays", "intersect_triangle",
+           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_array",
+           "gather_in_order", "inner_step_flat", "intersect_rays", "intersect_triangle",
            "intersect_triangle_fixed", "leaf_hits", "node_head", "node_split", "occlude_rays", "ray_order",
            "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes", "scatter_array",
            "scatter_in_order", "setup_ray", "sort_keys", "start_ray", "trace_kd", "trace_rays_kernel"]
