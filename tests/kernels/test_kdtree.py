@@ -22,6 +22,7 @@ from serenity.kernels.kdtree import (
     intersect_triangle,
     ray_order,
     setup_ray,
+    sort_scale,
 )
 from serenity.scene.procedural import lumpy_mesh
 
@@ -217,7 +218,9 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
     assert np.array_equal(np.sort(order), np.arange(len(o2)))
     lo, hi = np.array(data.box_lo), np.array(data.box_hi)
     cells = 1 << SORT_ORIGIN_BITS
-    q = np.clip(np.floor((o2[order] - lo) / (hi - lo) * cells), 0, cells - 1).astype(np.int64)
+    scale = np.array(sort_scale(data.box_lo, data.box_hi), np.float32)  # cells / extent, as the kernel has it
+    assert np.allclose(scale, cells / (hi - lo), rtol=1e-6)
+    q = np.clip(np.floor((o2[order] - lo) * scale), 0, cells - 1).astype(np.int64)
     cell = (q[:, 0] * cells + q[:, 1]) * cells + q[:, 2]
     octant = (d2[order] < 0) @ np.array([1, 2, 4])
     runs = np.flatnonzero(np.diff(cell) != 0)  # where the origin's cell changes along the order
@@ -227,6 +230,41 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
     assert np.all(np.diff(octant)[within] >= 0)  # and sorted by octant inside its run
 
 
+
+
+def test_query_scratch_is_reused_without_aliasing_results():
+    """Reordered queries trace into per-thread scratch buffers that grow and are reused
+    (``query_scratch``): a later, bigger or smaller batch leaves an earlier call's results as they
+    were, each batch's hits equal a fresh tree's, and two threads querying one tree at once each
+    get their own batch's hits."""
+    import threading
+
+    v, f = lumpy_mesh(3)
+    rng = np.random.default_rng(11)
+    batches = [random_rays(rng, n, extent=2.0) for n in (SORT_MIN_RAYS + 5, 2 * SORT_MIN_RAYS + 17, SORT_MIN_RAYS)]
+    expected = [KdTree.build(v, f).intersect(o, d, device="cpu", threads=1, sort=True) for o, d in batches]
+    tree = KdTree.build(v, f)
+    kept = []
+    for (o, d), want in zip(batches, expected, strict=True):
+        got = tree.intersect(o, d, device="cpu", threads=2, sort=True)
+        assert _hits_equal(got, want)
+        kept.append((got, {k: np.copy(getattr(got, k)) for k in ("t", "prim", "u", "v")}))
+        assert tree.occluded(o, d, 1.0, device="cpu", sort=True).dtype == bool
+    for got, copy in kept:  # nothing a later query did wrote into an earlier one's results
+        assert all(np.array_equal(getattr(got, k), a) for k, a in copy.items())
+    results = [None, None]
+
+    def query(k):
+        o, d = batches[k]
+        results[k] = [tree.intersect(o, d, device="cpu", threads=1, sort=True) for _ in range(3)]
+
+    workers = [threading.Thread(target=query, args=(k,)) for k in (0, 1)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    for k in (0, 1):
+        assert all(_hits_equal(h, expected[k]) for h in results[k]), k
 
 def _edge_case_rays(rng, tree, n):
     """Random rays with the traversal's edge cases mixed in: origins on split planes, rays inside
