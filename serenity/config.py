@@ -484,6 +484,15 @@ class RenderConfig:
     thread while the main thread issues the GL passes that do not need them (G-buffer, ray-casting
     buffer, shadow cascades, SSAO), as on a GPU they would queue beside them. False: on the main
     thread between those passes (the serial schedule always does)."""
+    volume_nice: int = 4
+    """With the volume worker: the niceness (0..19) its thread adds to this process's, set from the
+    thread itself when the worker starts (a thread may lower its own priority without privileges).
+    0 = the frame's priority, so that the volumes' kernels take a share of the cores from llvmpipe's
+    threads while these render; higher, the GL passes beside them keep more of the cores and the
+    volumes run more in what they leave idle, at the risk of the frame waiting for them where it
+    joins them ("wait for volumes"). 4: the G-buffer, CSM and SSAO got faster by more than the wait
+    grew (frame −1.5 to −4 % at 320×180 and 640×360, 10: no better than 0; README, "What each
+    technique costs", round 24; ``benchmarks/bench_pass_ab.py --a-config volume_nice=0``)."""
     tracer_nice: int = 19
     """The niceness (-20..19), relative to this process's, of the tracer process that the overlapped
     schedule on the CPU traces in (``kernels/tracer_process``): 19 = the lowest priority, so that it
@@ -528,6 +537,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.exposure must be positive, got {self.exposure}")
         if not (isinstance(self.transmissions, int) and 0 <= self.transmissions <= 16):
             raise ConfigError(f"RenderConfig.transmissions must be an int in 0..16, got {self.transmissions!r}")
+        if not (isinstance(self.volume_nice, int) and 0 <= self.volume_nice <= 19):
+            raise ConfigError(f"RenderConfig.volume_nice must be an int in 0..19, got {self.volume_nice!r}")
         if not (isinstance(self.tracer_nice, int) and -20 <= self.tracer_nice <= 19):
             raise ConfigError(f"RenderConfig.tracer_nice must be an int in -20..19, got {self.tracer_nice!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):

@@ -69,7 +69,7 @@ from serenity.raster.shadow import STAGGER_PAD, ShadowPass, fit_overlapped, fit_
 from serenity.raster.sky import SkyTexturesGL
 from serenity.raster.ssao import SSAOPass
 from serenity.raster.tonemap import TonemapPass
-from serenity.threads import single_threaded_blas
+from serenity.threads import lower_thread_priority, single_threaded_blas
 
 MAIN_LANE = "main (GL + volumes)"
 STAGES = (
@@ -243,7 +243,8 @@ class Renderer:
             # ("gather" sky volumes stay on the main thread: their passes are split over every core
             # already, and beside the GL passes they only slowed both)
             self._sky_in_worker = self.sky_volume is not None and cfg.sky.method != "gather"
-            self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix=VOLUME_THREAD)
+            self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix=VOLUME_THREAD,
+                                                    initializer=lower_thread_priority, initargs=(cfg.volume_nice,))
                                  if cfg.overlap and cfg.overlap_volumes and str(self.device).startswith("cpu")
                                  and (self._sky_in_worker or self.lpv is not None) else None)
         self._upload_ms = self._timings.pop("upload")

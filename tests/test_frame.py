@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import os
+import threading
 
 import numpy as np
 import pytest
@@ -161,6 +162,26 @@ def test_tracer_process_runs_at_the_configured_niceness(nice):
     finally:
         r.close()
 
+
+
+@pytest.mark.skipif(not hasattr(os, "getpriority"), reason="POSIX priorities")
+def test_volume_worker_runs_at_the_configured_niceness(courtyard):
+    """``RenderConfig.volume_nice`` lowers the volume worker's thread only: the worker's niceness is
+    the process's plus it, the calling thread's is unchanged, and the frames are those of a worker
+    at the frame's priority."""
+    own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    images = []
+    for nice in (0, 6):
+        r = Renderer(courtyard, *SIZE, config=RenderConfig.preset("medium", volume_nice=nice))
+        try:
+            assert r._volume_pool is not None
+            worker = r._volume_pool.submit(lambda: os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
+            assert worker.result() == min(19, own + nice)
+            images.append(r.render().hdr)
+        finally:
+            r.close()
+        assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == own
+    assert np.array_equal(images[0], images[1])
 
 def test_sync_modes_give_the_same_frames(courtyard):
     """``sync_stages`` only decides when the frame waits for GL: "each", "cpu" and "none" render the
