@@ -491,8 +491,9 @@ class RenderConfig:
     threads while these render; higher, the GL passes beside them keep more of the cores and the
     volumes run more in what they leave idle, at the risk of the frame waiting for them where it
     joins them ("wait for volumes"). 4: the G-buffer, CSM and SSAO got faster by more than the wait
-    grew (frame −1.5 to −4 % at 320×180 and 640×360, 10: no better than 0; README, "What each
-    technique costs", round 24; ``benchmarks/bench_pass_ab.py --a-config volume_nice=0``)."""
+    grew (frame −1.4 to −3.3 % at 320×180 and 640×360; 10: about −1 %, the frame waiting 2.4 ms for
+    the volumes; README, "What each technique costs", round 24; ``benchmarks/bench_pass_ab.py
+    --a-config volume_nice=0``)."""
     tracer_nice: int = 19
     """The niceness (-20..19), relative to this process's, of the tracer process that the overlapped
     schedule on the CPU traces in (``kernels/tracer_process``): 19 = the lowest priority, so that it
