@@ -999,7 +999,7 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
     consecutive rays before any key per ray is made; ``True`` always, ``False`` never. The keys come from a Warp
     kernel (over all cores on the CPU) and are sorted by numpy's radix sort of 16-bit integers on
     the host (~10 ms per million rays; on CUDA the keys and the order make a round trip). ``scratch``:
-    where the keys go (a grow-only buffer, :func:`query_scratch`), else a new array."""
+    where the keys go (a grow-only buffer, :meth:`KdTree.scratch`), else a new array."""
     if (sort is False) or n < 2 or (sort is None and n < SORT_MIN_RAYS):
         return wp.empty(0, dtype=wp.int32, device=device)
     scale = sort_scale(box_lo, box_hi)
@@ -1020,15 +1020,10 @@ def gather_in_order(order: wp.array, arrays: list, device: str, threads: int | N
                     scratch: Staging | None = None) -> list:
     """Per-ray arrays (vec3 or float) in the traced order of :func:`ray_order`: ``out[i] = a[order[i]]``
     (a separate pass: a random read per ray inside the traversal costs more). ``scratch``: the
-    outputs are its grow-only buffers (one per position and dtype, valid until its next use), else new
-    arrays."""
-    out = []
-    for k, a in enumerate(arrays):
-        n = a.shape[0]
-        b = (wp.empty(n, dtype=a.dtype, device=device) if scratch is None
-             else scratch.buffer(f"gather{k}-{a.dtype.__name__}", n, a.dtype))
-        launch(gather_array, n, [order, a, b], device=device, threads=threads)
-        out.append(b)
+    outputs are its grow-only buffers (:func:`buffers_like`), else new arrays."""
+    out = buffers_like(arrays, "gather", device, scratch)
+    for a, b in zip(arrays, out, strict=True):
+        launch(gather_array, a.shape[0], [order, a, b], device=device, threads=threads)
     return out
 
 
@@ -1042,19 +1037,12 @@ def scatter_in_order(order: wp.array, arrays: list, outs: list, device: str, thr
             launch(scatter_array, a.shape[0], [order, a, b], device=device, threads=threads)
 
 
-def query_scratch(owner: threading.local, device: str) -> Staging:
-    """The calling thread's grow-only scratch buffers on ``device`` in ``owner`` (a tree's or a ray
-    tracer's ``threading.local``): the reordered rays, their keys and the results traced in their
-    order, reused from one query to the next. New arrays each query cost first-touch page faults:
-    ~3,000 per 0.92 M-ray batch, 1-2 ms per 11 MB array on the 2-core machine. Per thread, because
-    a tree may be queried from several threads at once (the frame and its volume worker)."""
-    bufs = getattr(owner, "buffers", None)
-    if bufs is None:
-        bufs = owner.buffers = {}
-    staging = bufs.get(device)
-    if staging is None:
-        staging = bufs[device] = Staging(device)
-    return staging
+def buffers_like(arrays: list, prefix: str, device: str, scratch: Staging | None = None) -> list:
+    """An array of the shape and dtype of each of ``arrays``: new ones, or ``scratch``'s grow-only
+    buffers ``prefix``0, ``prefix``1, ... (valid until their next use; :meth:`KdTree.scratch`)."""
+    if scratch is None:
+        return [wp.empty(a.shape[0], dtype=a.dtype, device=device) for a in arrays]
+    return [scratch.buffer(f"{prefix}{k}", a.shape[0], a.dtype) for k, a in enumerate(arrays)]
 
 
 def _slot_rays(n: int, slots: int, threads: int | None) -> int:
@@ -1076,7 +1064,7 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
     kernel thread (``intersect_rays`` / ``occlude_rays``:
     faster there, module docstring); ``rays_per_thread`` forces 1 (one ray) or a slot count of
     ``INTERLEAVE_FACTORS``. CUDA traces one ray per thread (its parallelism is threads). ``scratch``:
-    where the reordered results are traced (:func:`query_scratch`), else new arrays."""
+    where the reordered results are traced (:meth:`KdTree.scratch`), else new arrays."""
     one_ray = occlude_rays if any_hit else intersect_rays
     on_cpu = device.startswith("cpu")
     reordered = order.shape[0] > 0
@@ -1085,10 +1073,7 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         k = CPU_RAYS_PER_THREAD if on_cpu and reordered else 1
     if k != 1 and k not in INTERLEAVE_FACTORS:
         raise SerenityError(f"rays_per_thread={k}: 1 or one of {INTERLEAVE_FACTORS}")
-    traced = outputs
-    if reordered:
-        traced = [wp.empty(n, dtype=a.dtype, device=device) if scratch is None else
-                  scratch.buffer(f"traced{k}-{a.dtype.__name__}", n, a.dtype) for k, a in enumerate(outputs)]
+    traced = buffers_like(outputs, "traced", device, scratch) if reordered else outputs
     if k == 1 or not on_cpu:
         launch(one_ray, n, [*inputs, *traced], device=device, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
     else:
@@ -1118,7 +1103,7 @@ class KdTree:
         self.box = arrays["box"]
         self.stats = stats
         self._device_data: dict[str, KdTreeData] = {}
-        self._scratch = threading.local()  # per thread: query_scratch
+        self._scratch = threading.local()  # per thread: scratch()
 
     # -- build and cache ------------------------------------------------------------------------
 
@@ -1194,6 +1179,20 @@ class KdTree:
             self._device_data[device] = data
         return data
 
+    def scratch(self, device: str) -> Staging:
+        """The calling thread's grow-only scratch buffers on ``device`` for queries of this tree (the
+        reordered rays, their keys, the results traced in their order; the ray tracer's queries use
+        them too), reused from one query to the next. New arrays each query cost first-touch page
+        faults: ~3,000 per 0.92 M-ray batch, 1-2 ms per 11 MB array on the 2-core machine. Per
+        thread, because a tree may be queried from several threads at once."""
+        bufs = getattr(self._scratch, "buffers", None)
+        if bufs is None:
+            bufs = self._scratch.buffers = {}
+        staging = bufs.get(device)
+        if staging is None:
+            staging = bufs[device] = Staging(device)
+        return staging
+
     # -- queries --------------------------------------------------------------------------------
 
     @staticmethod
@@ -1213,7 +1212,7 @@ class KdTree:
         data = self.device_data(dev)
         origins, directions, tmin, tmax = _ray_arrays(o, d, tm, dev, tmin)
         n = len(o)
-        scratch = query_scratch(self._scratch, dev)
+        scratch = self.scratch(dev)
         order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads, scratch)
         if order.shape[0]:
             origins, directions = gather_in_order(order, [origins, directions], dev, threads, scratch)
@@ -1239,7 +1238,7 @@ class KdTree:
         if n:
             args, order = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
             _launch_query(False, n, args, order, [out_t, out_p, out_u, out_v], dev, threads, rays_per_thread,
-                          query_scratch(self._scratch, dev))
+                          self.scratch(dev))
         return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
@@ -1253,15 +1252,15 @@ class KdTree:
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
             args, order = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
-            _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, query_scratch(self._scratch, dev))
+            _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, self.scratch(dev))
         return out.numpy().astype(bool)
 
 
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS",
            "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS", "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits",
-           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "cache_dir", "finite", "gather_array",
-           "gather_in_order", "inner_step_flat", "intersect_rays", "intersect_triangle", "intersect_triangle_fixed",
-           "leaf_hits", "node_head", "node_split", "occlude_rays", "origin_cell", "query_scratch", "ray_order",
-           "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes", "scatter_array",
-           "scatter_in_order", "setup_ray", "sort_keys", "sort_scale", "spread_bits", "start_ray", "trace_kd",
-           "trace_rays_kernel"]
+           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "buffers_like", "cache_dir", "finite",
+           "gather_array", "gather_in_order", "inner_step_flat", "intersect_rays", "intersect_triangle",
+           "intersect_triangle_fixed", "leaf_hits", "node_head", "node_split", "occlude_rays", "origin_cell",
+           "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes",
+           "scatter_array", "scatter_in_order", "setup_ray", "sort_keys", "sort_scale", "spread_bits", "start_ray",
+           "trace_kd", "trace_rays_kernel"]

@@ -225,14 +225,16 @@ class Staging:
     def __init__(self, device: str):
         self.device = device
         self._copy = not str(device).startswith("cpu")
-        self._buffers: dict[str, wp.array] = {}
+        self._buffers: dict[tuple, wp.array] = {}
 
     def buffer(self, name: str, n: int, dtype) -> wp.array:
-        """The first ``n`` elements of the grow-only buffer ``name`` (for outputs, or staged inputs)."""
-        buf = self._buffers.get(name)
+        """The first ``n`` elements of the grow-only buffer ``name`` of ``dtype`` (for outputs, or staged
+        inputs; one name may hold one buffer per dtype)."""
+        key = (name, dtype)
+        buf = self._buffers.get(key)
         if buf is None or buf.shape[0] < n:
             buf = wp.empty(max(n, 1 << max(0, int(n - 1).bit_length())), dtype=dtype, device=self.device)
-            self._buffers[name] = buf
+            self._buffers[key] = buf
         return buf[:n]
 
     def input(self, a, name: str, dtype, width: int) -> wp.array:

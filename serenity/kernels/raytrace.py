@@ -57,8 +57,6 @@ reordered order and scattered back into the caller's (``sort``, as :meth:`KdTree
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 import warp as wp
 
@@ -71,9 +69,9 @@ from serenity.kernels.kdtree import (
     TRACE_MODULE_OPTIONS,
     KdTree,
     KdTreeData,
+    buffers_like,
     finite,
     gather_in_order,
-    query_scratch,
     ray_order,
     scatter_in_order,
     trace_kd,
@@ -347,7 +345,6 @@ class RayTracer:
     def __init__(self, scene, device: str | None = None, *, tree_config: KdBuildConfig | None = None,
                  cache: bool | None = None, progress: bool | None = None, ray_epsilon: float | None = None):
         self.device = resolve_device(device)
-        self._scratch = threading.local()  # per thread: kdtree.query_scratch
         wp_ = init_warp()
         pos, nrm, uv, faces, fmat = scene.merged()
         if len(faces) == 0:
@@ -423,16 +420,13 @@ class RayTracer:
             rays = [wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
                     wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev)]
             tree = self.data.tree
-            scratch = query_scratch(self._scratch, dev)
+            scratch = self.tree.scratch(dev)
             order = ray_order(tree.box_lo, tree.box_hi, rays[0], rays[1], n, sort, dev, threads, scratch)
             reordered = order.shape[0] > 0
             if reordered:
                 rays = gather_in_order(order, rays, dev, threads, scratch)
             # a reordered batch is traced into scratch arrays in its order, then scattered back
-            traced = [*outs, back]
-            if reordered:
-                traced = [scratch.buffer(f"traced{k}-{a.dtype.__name__}", a.shape[0], a.dtype)
-                          for k, a in enumerate(traced)]
+            traced = buffers_like([*outs, back], "traced", dev, scratch) if reordered else [*outs, back]
             args = [self.data, *rays, float(self.ray_epsilon if tmin is None else tmin), float(tmax),
                     int(max(0, transmissions)), wp.vec3(*(float(x) for x in sun)),
                     int(sun_direction is not None), *traced]

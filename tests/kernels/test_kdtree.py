@@ -3,6 +3,7 @@ so t and the primitive must match exactly), Embree on a big mesh, watertightness
 degenerate input, the disk cache, and CPU vs CUDA."""
 
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -234,11 +235,9 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
 
 def test_query_scratch_is_reused_without_aliasing_results():
     """Reordered queries trace into per-thread scratch buffers that grow and are reused
-    (``query_scratch``): a later, bigger or smaller batch leaves an earlier call's results as they
+    (``KdTree.scratch``): a later, bigger or smaller batch leaves an earlier call's results as they
     were, each batch's hits equal a fresh tree's, and two threads querying one tree at once each
     get their own batch's hits."""
-    import threading
-
     v, f = lumpy_mesh(3)
     rng = np.random.default_rng(11)
     batches = [random_rays(rng, n, extent=2.0) for n in (SORT_MIN_RAYS + 5, 2 * SORT_MIN_RAYS + 17, SORT_MIN_RAYS)]

@@ -104,6 +104,8 @@ def test_staging_wraps_or_copies_and_checks_the_device(device):
     assert a.shape == (4,) and str(a.device) == device
     np.testing.assert_array_equal(a.numpy(), np.arange(12, dtype=np.float32).reshape(4, 3))
     assert st.buffer("out", 5, wp.vec3).shape == (5,)
+    # one name, one buffer per dtype: asking for another dtype never hands back the first
+    assert st.buffer("out", 5, wp.float32).dtype == wp.float32 and st.buffer("out", 3, wp.vec3).dtype == wp.vec3
     other = "cpu" if device != "cpu" else None
     if other:
         with pytest.raises(ValueError, match="expected"):
