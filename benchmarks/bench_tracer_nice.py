@@ -1,8 +1,13 @@
-"""What the tracer process's priority costs the frame and the tracer: one serial renderer and one
-overlapped renderer per niceness (``RenderConfig.tracer_nice``), frames interleaved in one process.
+"""What the tracer process's scheduling costs the frame and the tracer: one serial renderer and one
+overlapped renderer per variant, frames interleaved in one process.
 
-    python benchmarks/bench_tracer_nice.py [--sizes 320x180,640x360] [--nices=-15,-10,-5,0,19]
+    python benchmarks/bench_tracer_nice.py [--sizes 320x180,640x360] [--variants=19,0,-5,19/session,0/idle]
         [--frames 24] [--passes 10] [--json FILE] [--chart FILE.png]
+
+A variant is ``NICE[/session][/idle]``: the tracer process's niceness (``RenderConfig.tracer_nice``),
+in a session of its own (``tracer_session``: its own autogroup where Linux has them), and its rays
+handed over where the main thread is about to wait for the volume worker instead of right after
+the G-buffer (``tracer_start = "idle"``).
 
 Every renderer draws the ``serenity bench`` camera path and moving sun (``--passes`` times over); at
 each frame of the path every renderer draws once, in an order rotated from frame to frame, so a
@@ -10,8 +15,9 @@ drift of the machine's speed weighs on all alike. Per variant, over the frames a
 first two: the median frame (wall ms), the median "cpu ray tracing" stage and "wait for ray
 tracing", the tracer's CPU-ms; and the two ratios issue 12 asks about: the overlapped frame ÷ the
 serial frame, and the overlapped tracer stage ÷ the serial (inline) one. A negative niceness needs
-CAP_SYS_NICE (root); ``actual_nice`` records what the OS granted. Measures only; the default stays
-what the committed results support.
+CAP_SYS_NICE (root); ``actual_nice`` records what the OS granted, ``scheduling_group`` the tracer's
+autogroup. The chart puts each variant at (tracer ÷ inline, frame ÷ serial), one panel per size,
+with the two bars as lines.
 """
 
 from __future__ import annotations
@@ -33,16 +39,25 @@ from serenity.io.results import machine_info, write_results  # noqa: E402
 RT, WAIT = "cpu ray tracing", "wait for ray tracing"
 
 
-def run_size(scene_name: str, w: int, h: int, nices: list[int], frames: int, passes: int, quality: str) -> dict:
+def parse_variant(spec: str) -> dict:
+    """``NICE[/session][/idle]`` → the RenderConfig fields it sets."""
+    nice, *flags = spec.strip().split("/")
+    if set(flags) - {"session", "idle"}:
+        raise SystemExit(f"a variant is NICE[/session][/idle], got {spec!r}")
+    return {"tracer_nice": int(nice), "tracer_session": "session" in flags,
+            "tracer_start": "idle" if "idle" in flags else "g-buffer"}
+
+
+def run_size(scene_name: str, w: int, h: int, variants: list[str], frames: int, passes: int, quality: str) -> dict:
     from serenity.bench import camera_path, sun_path
     from serenity.config import RenderConfig
     from serenity.frame import Renderer
     from serenity.scene import load
 
     base = load(scene_name)
-    names = ["serial"] + [f"nice {n}" for n in nices]
+    names = ["serial", *variants]
     configs = [RenderConfig.preset(quality, overlap=False)] + [
-        RenderConfig.preset(quality, overlap=True, tracer_nice=n) for n in nices]
+        RenderConfig.preset(quality, overlap=True, **parse_variant(v)) for v in variants]
     scenes = {k: copy.deepcopy(base) for k in names}
     renderers = {k: Renderer(scenes[k], w, h, config=c) for k, c in zip(names, configs, strict=True)}
     rec = {k: {"frame": [], "rt": [], "wait": [], "rt_cpu": []} for k in names}
@@ -65,6 +80,7 @@ def run_size(scene_name: str, w: int, h: int, nices: list[int], frames: int, pas
                             rec[k]["rt_cpu"].append(f.tracer_cpu_ms)
                     bar.update()
         actual = {k: r.tracer_niceness for k, r in renderers.items()}  # what the OS granted
+        groups = {k: r._tracer_proc.scheduling_group if r._tracer_proc else None for k, r in renderers.items()}
     finally:
         for r in renderers.values():
             r.close()
@@ -74,43 +90,48 @@ def run_size(scene_name: str, w: int, h: int, nices: list[int], frames: int, pas
                       "tracer_cpu_ms": serial["rt_cpu"],
                       "tracer_cores_held": serial["rt_cpu"] / serial["rt"] if serial["rt"] else None},
            "overlapped": {}}
-    for n in nices:
-        m = med[f"nice {n}"]
-        out["overlapped"][str(n)] = {
+    for v in variants:
+        m = med[v]
+        out["overlapped"][v] = {
+            **parse_variant(v),
             # what the OS granted: a negative niceness needs CAP_SYS_NICE, without which the child runs at 0
-            "actual_nice": actual.get(f"nice {n}"),
+            "actual_nice": actual.get(v), "scheduling_group": groups.get(v),
             "frame_ms": m["frame"], "cpu_ray_tracing_ms": m["rt"], "wait_for_ray_tracing_ms": m["wait"],
             # CPU-ms the tracer process spent on the rays (all its threads): the work, whatever the wall
             "tracer_cpu_ms": m["rt_cpu"], "tracer_cores_held": m["rt_cpu"] / m["rt"] if m["rt"] else None,
             "frame_ratio_vs_serial": m["frame"] / serial["frame"],
             "tracer_ratio_vs_serial": m["rt"] / serial["rt"] if serial["rt"] else None,
-            "frame_ms_p10_p90": [float(np.percentile(rec[f"nice {n}"]["frame"], q)) for q in (10, 90)]}
+            "frame_ms_p10_p90": [float(np.percentile(rec[v]["frame"], q)) for q in (10, 90)]}
     return out
 
 
 def chart(result: dict, path: str) -> None:
     from serenity.optional import pyplot
 
-    plt = pyplot("the tracer-niceness chart")
+    plt = pyplot("the tracer-scheduling chart")
     sizes = list(result["sizes"])
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for size in sizes:
-        r = result["sizes"][size]
-        nices = [int(n) for n in r["overlapped"]]
-        o = [r["overlapped"][str(n)] for n in nices]
-        axes[0].plot(nices, [v["frame_ratio_vs_serial"] for v in o], "o-", label=size)
-        line, = axes[1].plot(nices, [v["tracer_ratio_vs_serial"] for v in o], "o-", label=f"{size}: wall")
-        axes[1].plot(nices, [v["tracer_cpu_ms"] / r["serial"]["tracer_cpu_ms"] for v in o], "s--",
-                     color=line.get_color(), label=f"{size}: CPU-ms")
-    axes[0].axhline(1.0, color="grey", lw=0.8, ls="--")
-    axes[1].axhline(1.5, color="grey", lw=0.8, ls="--")
-    axes[0].set_title("overlapped frame / serial frame (bar: ≤ 1)", fontsize=10)
-    axes[1].set_title("overlapped tracer / inline: wall (bar: ≤ 1.5) and CPU-ms", fontsize=10)
-    axes[1].set_ylim(bottom=0.9)
-    for ax in axes:
-        ax.set_xlabel("tracer process niceness")
+    variants = list(result["variants"])
+    markers = "osD^v<>ph*"
+    fig, axes = plt.subplots(1, len(sizes), figsize=(5.5 * len(sizes), 4.6), squeeze=False)
+    for ax, size in zip(axes[0], sizes, strict=True):
+        o = result["sizes"][size]["overlapped"]
+        ax.axvline(1.5, color="grey", lw=0.8, ls="--")
+        ax.axhline(1.0, color="grey", lw=0.8, ls="--")
+        for k, v in enumerate(variants):
+            ax.plot(o[v]["tracer_ratio_vs_serial"], o[v]["frame_ratio_vs_serial"], markers[k % len(markers)],
+                    color=f"C{k}", ms=8, label=v)
+        xs = [o[v]["tracer_ratio_vs_serial"] for v in variants]
+        ys = [o[v]["frame_ratio_vs_serial"] for v in variants]
+        ax.set_xlim(0.9, max(xs + [1.6]) * 1.08)
+        lo, hi = min(ys + [0.98]), max(ys + [1.01])
+        y0 = lo - 0.1 * (hi - lo)
+        ax.set_ylim(y0, hi + 0.1 * (hi - lo))
+        ax.fill_between([0.9, 1.5], y0, 1.0, color="tab:green", alpha=0.08, lw=0)  # both bars met
+        ax.set_title(f"{size}: both bars met in the lower left", fontsize=10)
+        ax.set_xlabel("tracer stage, overlapped ÷ inline (bar ≤ 1.5)")
+        ax.set_ylabel("frame, overlapped ÷ serial (bar ≤ 1)")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+    axes[0][-1].legend(fontsize=8, title="NICE[/session][/idle]", title_fontsize=8, loc="best")
     fig.suptitle(f"{result['scene']}, {result['quality']}: medians of {result['frames_per_variant']} frames "
                  "per variant, interleaved", fontsize=10)
     fig.tight_layout()
@@ -118,31 +139,43 @@ def chart(result: dict, path: str) -> None:
     plt.close(fig)
 
 
+def _autogroup_enabled() -> bool | None:
+    try:
+        with open("/proc/sys/kernel/sched_autogroup_enabled") as f:
+            return f.read().strip() == "1"
+    except OSError:
+        return None
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="courtyard")
     ap.add_argument("--sizes", default="320x180,640x360")
-    ap.add_argument("--nices", default="-15,-10,-5,0,19")
+    ap.add_argument("--variants", default="19,0,-5,19/session,0/idle,19/session/idle",
+                    help="NICE[/session][/idle], comma-separated")
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--passes", type=int, default=10)
     ap.add_argument("--quality", default="medium")
     ap.add_argument("--json")
     ap.add_argument("--chart")
     args = ap.parse_args(argv)
-    nices = [int(n) for n in args.nices.split(",")]
+    variants = args.variants.split(",")
+    for v in variants:
+        parse_variant(v)
     cli = argv if argv is not None else sys.argv[1:]
     result = {"benchmark": "tracer_nice", "command": "python benchmarks/bench_tracer_nice.py " + " ".join(cli),
-              "scene": args.scene, "quality": args.quality, "nices": nices,
+              "scene": args.scene, "quality": args.quality, "variants": variants,
+              "autogroup_enabled": _autogroup_enabled(),
               "frames_per_variant": args.passes * (args.frames - 2),
               "machine": machine_info(), "sizes": {}}
     for size in args.sizes.split(","):
         w, h = (int(x) for x in size.lower().split("x"))
-        r = result["sizes"][size] = run_size(args.scene, w, h, nices, args.frames, args.passes, args.quality)
+        r = result["sizes"][size] = run_size(args.scene, w, h, variants, args.frames, args.passes, args.quality)
         se = r["serial"]
         print(f"{size}: serial frame {se['frame_ms']:.1f} ms, tracer inline {se['cpu_ray_tracing_ms']:.2f} ms, "
               f"CPU {se['tracer_cpu_ms']:.2f} ms ({se['tracer_cores_held']:.2f} cores held)")
         for n, v in r["overlapped"].items():
-            print(f"  nice {n:>2}: frame {v['frame_ms']:.1f} ms ({v['frame_ratio_vs_serial']:.3f}x serial), "
+            print(f"  {n:>18}: frame {v['frame_ms']:.1f} ms ({v['frame_ratio_vs_serial']:.3f}x serial), "
                   f"tracer {v['cpu_ray_tracing_ms']:.2f} ms ({v['tracer_ratio_vs_serial']:.2f}x inline), "
                   f"wait {v['wait_for_ray_tracing_ms']:.2f} ms, tracer CPU {v['tracer_cpu_ms']:.2f} ms "
                   f"({v['tracer_cores_held']:.2f} cores held)")

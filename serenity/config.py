@@ -501,6 +501,25 @@ class RenderConfig:
     preempts the frame's threads (allowed only with CAP_SYS_NICE, e.g. as root; elsewhere it runs at
     0). ``benchmarks/bench_tracer_nice.py`` measures the trade: the lower, the shorter the tracer's
     stage and the slower the frame (``benchmarks/results/tracer_nice.json``)."""
+    tracer_session: bool = False
+    """Start the tracer process in a session of its own (``setsid``). Where Linux groups processes by
+    session for scheduling (autogroup: ``/proc/sys/kernel/sched_autogroup_enabled`` = 1, and the
+    renderer in the root cgroup), the tracer then shares the cores with the renderer as one group
+    against another, instead of as one more thread beside llvmpipe's, the Warp launches' and the
+    main thread; ``tracer_nice`` then orders nothing (the tracer is alone in its group). Elsewhere
+    nothing changes. No privilege needed. Off by default: on round 25's host it halved the tracer's
+    stage (3.51 -> 1.69x the inline trace at 320x180, 3.40 -> 1.50x at 640x360) but the frame lost
+    1.5-2.5 % against nice 19 (0.952 / 0.939 against 0.929 / 0.925 of the serial frame;
+    ``bench_tracer_nice.py``, README "What overlap can and cannot buy")."""
+    tracer_start: str = "g-buffer"
+    """With the volume worker on the CPU: where the frame reads the ray-casting buffer back and hands
+    its rays to the tracer process (sync 1). "g-buffer": right after the G-buffer, as in the paper;
+    "idle": just before the main thread waits for the volume worker, when the worker has work this
+    frame (otherwise right after the G-buffer), so that the tracer starts where a core may fall idle.
+    The same images either way. "g-buffer" by default: "idle" only pays with ``tracer_session`` (the
+    shortest tracer stage without privilege on round 25's host, 1.50 / 1.30x inline, at a frame 3-4 %
+    slower than the default's), and at nice 0 it made the 640x360 frame 1.029x the serial one
+    (``bench_tracer_nice.py``)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
     rt_sun_shadows: str = "traced"
@@ -542,6 +561,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.volume_nice must be an int in 0..19, got {self.volume_nice!r}")
         if not (isinstance(self.tracer_nice, int) and -20 <= self.tracer_nice <= 19):
             raise ConfigError(f"RenderConfig.tracer_nice must be an int in -20..19, got {self.tracer_nice!r}")
+        if self.tracer_start not in ("g-buffer", "idle"):
+            raise ConfigError(f"RenderConfig.tracer_start must be g-buffer or idle, got {self.tracer_start!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):
             raise ConfigError(f"RenderConfig.osm_size must be in 16..{MAX_IMAGE_SIZE}, got {self.osm_size}")
         if self.rt_sun_shadows not in ("traced", "osm"):

@@ -367,8 +367,8 @@ class Renderer:
             lpv_plan = self._plan_lpv(light, sky_may_change)
         with self._stage("g-buffer"):
             gbuf = self.gbuffer_pass.render(view_proj, self.scene.camera.position)
-        rcb, join = self._start_ray_tracing(view_proj, gbuf)            # sync 1
         if pool is None:
+            rcb, join = self._start_ray_tracing(view_proj, gbuf)        # sync 1
             # the volumes first: their Warp kernels mostly keep one core busy, so the tracer process
             # gets the other; the GL passes that follow keep both busy (llvmpipe's threads)
             self._update_volumes(gbuf, light)
@@ -377,7 +377,15 @@ class Renderer:
             if self.sky_volume is not None and sky_job is None:  # a "gather" sky volume: here, in turn
                 self._upload_sky(self._compute_sky())
             lpv_job = self._start_lpv(gbuf, lpv_plan)
+            # sync 1: where the main thread is about to wait for the volume worker, which has work this
+            # frame ("idle"); otherwise, or with "g-buffer", right away
+            late = self.config.tracer_start == "idle" and ((sky_job is not None and sky_may_change)
+                                                           or lpv_job is not None)
+            if not late:
+                rcb, join = self._start_ray_tracing(view_proj, gbuf)
             shadow, ao, guide = self._main_view(view_proj, gbuf)
+            if late:
+                rcb, join = self._start_ray_tracing(view_proj, gbuf)
             with self._stage("wait for volumes", gl=False):
                 prepared = sky_job.result() if sky_job is not None else None
                 if lpv_job is not None:
@@ -729,7 +737,8 @@ class Renderer:
         calls that hold the GIL); built on the first frame that shows a traced pixel."""
         if self.config.overlap and str(self.device).startswith("cpu"):
             if self._tracer_proc is None:
-                self._tracer_proc = TracerProcess(self.scene, self.device, nice=self.config.tracer_nice)
+                self._tracer_proc = TracerProcess(self.scene, self.device, nice=self.config.tracer_nice,
+                                                 session=self.config.tracer_session)
             return self._tracer_proc
         if self.tracer is None:
             t0 = time.perf_counter()

@@ -164,6 +164,35 @@ def test_tracer_process_runs_at_the_configured_niceness(nice):
 
 
 
+@pytest.mark.skipif(not hasattr(os, "getsid"), reason="POSIX sessions")
+def test_tracer_process_in_a_session_of_its_own():
+    """``RenderConfig.tracer_session`` starts the tracer process as the leader of a new session (and so,
+    where Linux has autogroups enabled, in a scheduling group of its own); it traces the frame the
+    tracer in the renderer's session traces, bit for bit."""
+    images = []
+    for session in (False, True):
+        r = Renderer(load("glass"), *SIZE, config=RenderConfig(tracer_session=session))
+        try:
+            f = r.render(read_back={"hdr"})
+            assert f.rays > 0 and f.tracer_cpu_ms > 0.0
+            pid = r._tracer_proc._proc.pid
+            assert (os.getsid(pid) == pid) == session and (os.getsid(pid) == os.getsid(0)) != session
+            group = r._tracer_proc.scheduling_group
+            try:
+                with open("/proc/sys/kernel/sched_autogroup_enabled") as fh:
+                    autogroups = fh.read().strip() == "1"
+                with open("/proc/self/autogroup") as fh:
+                    own = fh.read().strip()
+            except OSError:
+                autogroups = False
+            if autogroups and group is not None:
+                assert (group.split()[0] != own.split()[0]) == session
+            images.append(f.hdr)
+        finally:
+            r.close()
+    assert np.array_equal(images[0], images[1])
+
+
 @pytest.mark.skipif(not hasattr(os, "getpriority"), reason="POSIX priorities")
 def test_volume_worker_runs_at_the_configured_niceness(courtyard):
     """``RenderConfig.volume_nice`` lowers the volume worker's thread only: the worker's niceness is
@@ -246,3 +275,48 @@ def test_volume_worker_gives_the_serial_frames(courtyard):
         assert "lpv propagate" in stages[1] and "sky volume update" in stages[1]
         assert "lpv propagate" in stages[4] or "lpv propagate" in stages[5]  # the sweep goes on: sky VPLs
         assert "lpv propagate" not in stages[11]  # nothing changed
+
+
+def test_tracer_start_moves_sync_1_only(courtyard):
+    """``RenderConfig.tracer_start = "idle"`` reads the ray-casting buffer back and hands the rays to
+    the tracer process just before the main thread waits for the volume worker, in a frame where it
+    will wait, and right after the G-buffer in a frame with no volume work; "g-buffer" always right
+    after it. Only the schedule moves: both render the same frames, bit for bit, while the sun and
+    camera move and after they stop."""
+    def start(f, name):
+        return next(e[2] for e in f.events if e[1] == name)
+
+    def busy(f):  # whether the frame changed a volume
+        return bool(set(f.timings) & {"sky upload", *LPV_UPDATE_STAGES})
+
+    runs = {}
+    for where in ("g-buffer", "idle"):
+        scene = copy.deepcopy(courtyard)
+        base_cam, base_sun = scene.camera, scene.sun.direction.copy()
+        r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium", tracer_start=where))
+        try:
+            assert r._volume_pool is not None
+            frames = []
+            for i in range(40):
+                if i < 3:
+                    scene.camera = camera_path(base_cam, i / 4)
+                    scene.sun.direction = sun_path(base_sun, i / 4)
+                f = r.render(read_back=("hdr",))
+                frames.append(f)
+                if i >= 4 and not any(busy(g) for g in frames[-2:]):
+                    break  # the volumes caught up a frame ago: nothing for the worker now
+        finally:
+            r.close()
+        runs[where] = frames
+    early, late = runs["g-buffer"], runs["idle"]
+    assert len(early) == len(late) < 40
+    for a, b in zip(early, late, strict=True):
+        assert a.rays > 0 and np.array_equal(a.hdr, b.hdr)
+    for f in early[1:3]:  # moving: the tracer starts before the main view's passes
+        assert start(f, "ray casting buffer") < start(f, "shadow maps (CSM)")
+    for f in late[1:3]:  # after them, where the main thread is about to wait for the worker
+        assert start(f, "ssao") < start(f, "ray casting buffer") < start(f, "wait for volumes")
+    for f in (early[-1], late[-1]):  # nothing for the worker: right after the G-buffer either way
+        assert start(f, "ray casting buffer") < start(f, "shadow maps (CSM)")
+    with pytest.raises(ConfigError, match="tracer_start"):
+        RenderConfig(tracer_start="later")

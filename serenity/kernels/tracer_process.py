@@ -7,7 +7,10 @@ process has its own interpreter and GIL: the frame hands it the rays at sync 1 a
 hits at sync 2, and nothing in between needs the parent's GIL. The child's CPU time for each frame
 comes back too (``cpu_seconds``), so a frame's CPU cost counts both processes. The child runs at
 the lowest priority (``NICE``), in the cores' idle gaps, and its pipes are widened (``PIPE_BYTES``)
-so that neither side blocks halfway through a frame's message.
+so that neither side blocks halfway through a frame's message. With ``session=True`` the child starts a
+session of its own (``setsid``): where Linux schedules by autogroup (one group per session), it
+then competes with the renderer's process as a whole rather than with each of its threads, and its
+niceness, alone in its group, orders nothing (``RenderConfig.tracer_session``).
 
 Protocol (private): the child is ``python -m serenity.kernels.tracer_process IN OUT NICE`` with two pipe
 file descriptors and its niceness; messages are length-prefixed pickles. First message in: (scene, device); the child
@@ -97,13 +100,14 @@ class TracerProcess:
     ``submit(batches)`` sends one frame's ray batches and returns at once; ``result()`` waits for
     them and returns (results, t0, t1). One frame in flight at a time."""
 
-    def __init__(self, scene, device: str = "cpu", nice: int = NICE):
+    def __init__(self, scene, device: str = "cpu", nice: int = NICE, session: bool = False):
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "serenity.kernels.tracer_process", str(to_child_r), str(from_child_w),
              str(int(nice))],
-            pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+            pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+            start_new_session=bool(session) and os.name == "posix")
         os.close(to_child_r)
         os.close(from_child_w)
         _widen(to_child_w)
@@ -123,6 +127,17 @@ class TracerProcess:
         try:
             return os.getpriority(os.PRIO_PROCESS, self._proc.pid) - os.getpriority(os.PRIO_PROCESS, 0)
         except (AttributeError, OSError):  # pragma: no cover - not POSIX, or the child is gone
+            return None
+
+    @property
+    def scheduling_group(self) -> str | None:
+        """The child's scheduling group as Linux' autogroup names it (``/proc/PID/autogroup``, e.g.
+        "/autogroup-12 nice 0"; one per session where ``/proc/sys/kernel/sched_autogroup_enabled``
+        is 1), or None where there is none to read."""
+        try:
+            with open(f"/proc/{self._proc.pid}/autogroup") as f:
+                return f.read().strip()
+        except OSError:
             return None
 
     def _wait_ready(self) -> None:
