@@ -367,8 +367,13 @@ class Renderer:
             lpv_plan = self._plan_lpv(light, sky_may_change)
         with self._stage("g-buffer"):
             gbuf = self.gbuffer_pass.render(view_proj, self.scene.camera.position)
-        if pool is None:
+        # sync 1 right after the G-buffer, or with tracer_start = "idle" where the main thread is about
+        # to wait for the volume worker, in a frame that gives the worker work
+        late = pool is not None and self.config.tracer_start == "idle" and (
+            (sky_job is not None and sky_may_change) or lpv_plan is not None)
+        if not late:
             rcb, join = self._start_ray_tracing(view_proj, gbuf)        # sync 1
+        if pool is None:
             # the volumes first: their Warp kernels mostly keep one core busy, so the tracer process
             # gets the other; the GL passes that follow keep both busy (llvmpipe's threads)
             self._update_volumes(gbuf, light)
@@ -377,12 +382,6 @@ class Renderer:
             if self.sky_volume is not None and sky_job is None:  # a "gather" sky volume: here, in turn
                 self._upload_sky(self._compute_sky())
             lpv_job = self._start_lpv(gbuf, lpv_plan)
-            # sync 1: where the main thread is about to wait for the volume worker, which has work this
-            # frame ("idle"); otherwise, or with "g-buffer", right away
-            late = self.config.tracer_start == "idle" and ((sky_job is not None and sky_may_change)
-                                                           or lpv_job is not None)
-            if not late:
-                rcb, join = self._start_ray_tracing(view_proj, gbuf)
             shadow, ao, guide = self._main_view(view_proj, gbuf)
             if late:
                 rcb, join = self._start_ray_tracing(view_proj, gbuf)
