@@ -17,7 +17,9 @@ tracing", the tracer's CPU-ms; and the two ratios issue 12 asks about: the overl
 serial frame, and the overlapped tracer stage ÷ the serial (inline) one. A negative niceness needs
 CAP_SYS_NICE (root); ``actual_nice`` records what the OS granted, ``scheduling_group`` the tracer's
 autogroup. The chart puts each variant at (tracer ÷ inline, frame ÷ serial), one panel per size,
-with the two bars as lines.
+with the two bars as lines. ``--load N`` runs N busy-looping processes beside the renderers, each in
+a session of its own (as another program on the machine would be), to see each variant on a machine
+that is not idle.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from __future__ import annotations
 import argparse
 import copy
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -132,11 +135,26 @@ def chart(result: dict, path: str) -> None:
         ax.set_ylabel("frame, overlapped ÷ serial (bar ≤ 1)")
         ax.grid(alpha=0.3)
     axes[0][-1].legend(fontsize=8, title="NICE[/session][/idle]", title_fontsize=8, loc="best")
+    load = result.get("background_load")
     fig.suptitle(f"{result['scene']}, {result['quality']}: medians of {result['frames_per_variant']} frames "
-                 "per variant, interleaved", fontsize=10)
+                 "per variant, interleaved" + (f", busy-looping processes beside: {load}" if load else ""),
+                 fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def measure_size(args, result: dict, size: str, variants: list[str]) -> None:
+    w, h = (int(x) for x in size.lower().split("x"))
+    r = result["sizes"][size] = run_size(args.scene, w, h, variants, args.frames, args.passes, args.quality)
+    se = r["serial"]
+    print(f"{size}: serial frame {se['frame_ms']:.1f} ms, tracer inline {se['cpu_ray_tracing_ms']:.2f} ms, "
+          f"CPU {se['tracer_cpu_ms']:.2f} ms ({se['tracer_cores_held']:.2f} cores held)")
+    for n, v in r["overlapped"].items():
+        print(f"  {n:>18}: frame {v['frame_ms']:.1f} ms ({v['frame_ratio_vs_serial']:.3f}x serial), "
+              f"tracer {v['cpu_ray_tracing_ms']:.2f} ms ({v['tracer_ratio_vs_serial']:.2f}x inline), "
+              f"wait {v['wait_for_ray_tracing_ms']:.2f} ms, tracer CPU {v['tracer_cpu_ms']:.2f} ms "
+              f"({v['tracer_cores_held']:.2f} cores held)")
 
 
 def _autogroup_enabled() -> bool | None:
@@ -156,6 +174,7 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--passes", type=int, default=10)
     ap.add_argument("--quality", default="medium")
+    ap.add_argument("--load", type=int, default=0, help="busy-looping processes to run beside (other programs)")
     ap.add_argument("--json")
     ap.add_argument("--chart")
     args = ap.parse_args(argv)
@@ -165,20 +184,18 @@ def main(argv=None) -> int:
     cli = argv if argv is not None else sys.argv[1:]
     result = {"benchmark": "tracer_nice", "command": "python benchmarks/bench_tracer_nice.py " + " ".join(cli),
               "scene": args.scene, "quality": args.quality, "variants": variants,
-              "autogroup_enabled": _autogroup_enabled(),
+              "autogroup_enabled": _autogroup_enabled(), "background_load": args.load,
               "frames_per_variant": args.passes * (args.frames - 2),
               "machine": machine_info(), "sizes": {}}
-    for size in args.sizes.split(","):
-        w, h = (int(x) for x in size.lower().split("x"))
-        r = result["sizes"][size] = run_size(args.scene, w, h, variants, args.frames, args.passes, args.quality)
-        se = r["serial"]
-        print(f"{size}: serial frame {se['frame_ms']:.1f} ms, tracer inline {se['cpu_ray_tracing_ms']:.2f} ms, "
-              f"CPU {se['tracer_cpu_ms']:.2f} ms ({se['tracer_cores_held']:.2f} cores held)")
-        for n, v in r["overlapped"].items():
-            print(f"  {n:>18}: frame {v['frame_ms']:.1f} ms ({v['frame_ratio_vs_serial']:.3f}x serial), "
-                  f"tracer {v['cpu_ray_tracing_ms']:.2f} ms ({v['tracer_ratio_vs_serial']:.2f}x inline), "
-                  f"wait {v['wait_for_ray_tracing_ms']:.2f} ms, tracer CPU {v['tracer_cpu_ms']:.2f} ms "
-                  f"({v['tracer_cores_held']:.2f} cores held)")
+    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
+                for _ in range(args.load)]
+    try:
+        for size in args.sizes.split(","):
+            measure_size(args, result, size, variants)
+    finally:
+        for p in spinners:
+            p.kill()
+            p.wait()
     result["load_average_after"] = list(os.getloadavg())
     if args.json:
         write_results(args.json, result)

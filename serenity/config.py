@@ -507,19 +507,21 @@ class RenderConfig:
     renderer in the root cgroup), the tracer then shares the cores with the renderer as one group
     against another, instead of as one more thread beside llvmpipe's, the Warp launches' and the
     main thread; ``tracer_nice`` then orders nothing (the tracer is alone in its group). Elsewhere
-    nothing changes. No privilege needed. Off by default: on round 25's host it halved the tracer's
-    stage (3.51 -> 1.69x the inline trace at 320x180, 3.40 -> 1.50x at 640x360) but the frame lost
-    1.5-2.5 % against nice 19 (0.952 / 0.939 against 0.929 / 0.925 of the serial frame;
-    ``bench_tracer_nice.py``, README "What overlap can and cannot buy")."""
+    nothing changes. No privilege needed. Off by default, since the README's figures are measured on
+    an idle machine, where the frame is fastest without it; on round 25's host (``bench_tracer_nice.py``,
+    README "What overlap can and cannot buy"), idle: the tracer's stage 3.36 -> 1.63x the inline
+    trace at 320x180, 3.00 -> 1.54x at 640x360, the frame 0.956 -> 0.983 and 0.953 -> 0.981x the
+    serial one; beside one busy process: the tracer 11.35 -> 1.85x and 13.85 -> 1.99x, the frame
+    1.069 -> 0.980 and 1.030 -> 0.995x."""
     tracer_start: str = "g-buffer"
     """With the volume worker on the CPU: where the frame reads the ray-casting buffer back and hands
     its rays to the tracer process (sync 1). "g-buffer": right after the G-buffer, as in the paper;
     "idle": just before the main thread waits for the volume worker, when the worker has work this
     frame (otherwise right after the G-buffer), so that the tracer starts where a core may fall idle.
-    The same images either way. "g-buffer" by default: "idle" only pays with ``tracer_session`` (the
-    shortest tracer stage without privilege on round 25's host, 1.50 / 1.30x inline, at a frame 3-4 %
-    slower than the default's), and at nice 0 it made the 640x360 frame 1.029x the serial one
-    (``bench_tracer_nice.py``)."""
+    The same images either way. "g-buffer" by default (the paper's place, and the fastest frame on an
+    idle machine). With ``tracer_session`` at nice 19 it met both of the overlap's bars at both sizes
+    on round 25's idle host (tracer 1.26 / 1.22x inline, frame 0.958 / 0.986x serial at 320x180 /
+    640x360; ``bench_tracer_nice.py``), in a first sweep it sat on the tracer's (1.50 / 1.30)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
     rt_sun_shadows: str = "traced"
