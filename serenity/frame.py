@@ -8,7 +8,9 @@ ray tracing of the reflective/refractive pixels starts in the tracer process (on
 thread); meanwhile the main thread issues the GL work (shadow cascades, G-buffer, RSM, SSAO, the
 lighting passes) and the volume kernels (LPV, the sky volume); then it joins the tracer (sync 2),
 uploads the ray-traced G-buffers, lights them with the overlapped shadow maps and composites them
-with a Fresnel blend; last the tone map. ``RenderConfig.overlap=False`` (``--serial``) runs the
+with a Fresnel blend; last the tone map. (``RenderConfig.tracer_start = "idle"`` moves sync 1 to just
+before the main thread waits for the volume worker; ``tracer_session`` and ``tracer_nice`` set how
+the tracer process shares the cores.) ``RenderConfig.overlap=False`` (``--serial``) runs the
 ray tracing inline before the GL work, for comparison. ``STAGES`` names every stage in order;
 each stage of ``Renderer.render`` is one short method below.
 
