@@ -157,14 +157,6 @@ def measure_size(args, result: dict, size: str, variants: list[str]) -> None:
               f"({v['tracer_cores_held']:.2f} cores held)")
 
 
-def _autogroup_enabled() -> bool | None:
-    try:
-        with open("/proc/sys/kernel/sched_autogroup_enabled") as f:
-            return f.read().strip() == "1"
-    except OSError:
-        return None
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="courtyard")
@@ -184,7 +176,7 @@ def main(argv=None) -> int:
     cli = argv if argv is not None else sys.argv[1:]
     result = {"benchmark": "tracer_nice", "command": "python benchmarks/bench_tracer_nice.py " + " ".join(cli),
               "scene": args.scene, "quality": args.quality, "variants": variants,
-              "autogroup_enabled": _autogroup_enabled(), "background_load": args.load,
+              "background_load": args.load,  # whether autogroups are on: machine.sched_autogroup
               "frames_per_variant": args.passes * (args.frames - 2),
               "machine": machine_info(), "sizes": {}}
     spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
