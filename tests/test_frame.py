@@ -177,13 +177,32 @@ def test_tracer_process_in_a_session_of_its_own():
             assert f.rays > 0 and f.tracer_cpu_ms > 0.0
             pid = r._tracer_proc._proc.pid
             assert (os.getsid(pid) == pid) == session and (os.getsid(pid) == os.getsid(0)) != session
-            groups.append(r._tracer_proc.scheduling_group)  # None without autogroups
+            group = r._tracer_proc.scheduling_group  # None without autogroups, or in a CPU cgroup (CI)
+            assert group is None or group.startswith("/autogroup-")
+            groups.append(group)
             images.append(f.hdr)
         finally:
             r.close()
     assert np.array_equal(images[0], images[1])
     if None not in groups:  # the session child's autogroup is not the one the renderer's session shares
         assert groups[0].split()[0] != groups[1].split()[0]
+
+
+def test_scheduling_group_is_none_where_the_kernel_names_none(monkeypatch, tmp_path):
+    """``/proc/PID/autogroup`` reads empty for a process in a cgroup with a CPU controller of its own
+    (CI runners, containers) and is absent without autogroup support: both are "no group", not ""."""
+    import types
+
+    from serenity.kernels import tracer_process
+
+    proc = types.SimpleNamespace(_proc=types.SimpleNamespace(pid=os.getpid()))
+    for text, expected in (("/autogroup-7 nice 0\n", "/autogroup-7 nice 0"), ("", None), (None, None)):
+        path = tmp_path / "autogroup"
+        path.unlink(missing_ok=True)
+        if text is not None:
+            path.write_text(text)
+        monkeypatch.setattr(tracer_process, "open", lambda _name, p=path: open(p), raising=False)
+        assert tracer_process.TracerProcess.scheduling_group.fget(proc) == expected
 
 
 @pytest.mark.skipif(not hasattr(os, "getpriority"), reason="POSIX priorities")

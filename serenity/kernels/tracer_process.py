@@ -133,10 +133,12 @@ class TracerProcess:
     def scheduling_group(self) -> str | None:
         """The child's scheduling group as Linux' autogroup names it (``/proc/PID/autogroup``, e.g.
         "/autogroup-12 nice 0"; one per session where ``/proc/sys/kernel/sched_autogroup_enabled``
-        is 1), or None where there is none to read."""
+        is 1), or None where there is none to read. The file is empty where the process sits in a
+        cgroup with a CPU controller of its own (containers, CI runners): the kernel schedules it by
+        that cgroup, not by autogroup, and a session of its own changes nothing there."""
         try:
             with open(f"/proc/{self._proc.pid}/autogroup") as f:
-                return f.read().strip()
+                return f.read().strip() or None
         except OSError:
             return None
 
