@@ -500,28 +500,31 @@ class RenderConfig:
     takes a core only where the frame's own threads leave one idle; 0 = the frame's; below 0 it
     preempts the frame's threads (allowed only with CAP_SYS_NICE, e.g. as root; elsewhere it runs at
     0). ``benchmarks/bench_tracer_nice.py`` measures the trade: the lower, the shorter the tracer's
-    stage and the slower the frame (``benchmarks/results/tracer_nice.json``)."""
-    tracer_session: bool = False
+    stage and the slower the frame (``benchmarks/results/tracer_nice.json``). In a scheduling group of
+    its own (``tracer_session``, where it takes effect) the niceness orders nothing; 19 stays the
+    default for the machines where it does not."""
+    tracer_session: bool = True
     """Start the tracer process in a session of its own (``setsid``). Where Linux groups processes by
-    session for scheduling (autogroup: ``/proc/sys/kernel/sched_autogroup_enabled`` = 1, and the
-    renderer in the root cgroup), the tracer then shares the cores with the renderer as one group
-    against another, instead of as one more thread beside llvmpipe's, the Warp launches' and the
-    main thread; ``tracer_nice`` then orders nothing (the tracer is alone in its group). Elsewhere
-    nothing changes. No privilege needed. Off by default, since the README's figures are measured on
-    an idle machine, where the frame is fastest without it; on round 25's host (``bench_tracer_nice.py``,
-    README "What overlap can and cannot buy"), idle: the tracer's stage 3.36 -> 1.63x the inline
-    trace at 320x180, 3.00 -> 1.54x at 640x360, the frame 0.956 -> 0.983 and 0.953 -> 0.981x the
-    serial one; beside one busy process: the tracer 11.35 -> 1.85x and 13.85 -> 1.99x, the frame
-    1.069 -> 0.980 and 1.030 -> 0.995x."""
-    tracer_start: str = "g-buffer"
+    session for scheduling (autogroup: ``/proc/sys/kernel/sched_autogroup_enabled`` = 1, and neither
+    process in a CPU cgroup of its own), the tracer then shares the cores with the renderer as one
+    group against another, instead of as one more thread beside llvmpipe's, the Warp launches' and
+    the main thread; ``tracer_nice`` then orders nothing (the tracer is alone in its group).
+    Elsewhere nothing changes (``TracerProcess.own_group`` says which). No privilege needed. On by
+    default since round 26: with ``tracer_start = "auto"`` it is the one setting that met both of the
+    overlap's bars (tracer stage ≤ 1.5x the inline trace, frame ≤ the serial one) at both sizes in
+    all three sweeps on round 25/26's host, and it keeps the frame under the serial one beside a busy
+    process, where nice 19 alone starves the tracer (README, "What overlap can and cannot buy";
+    ``benchmarks/bench_tracer_nice.py``). The price on an idle machine: a frame 1-4 % slower than
+    nice 19 in the renderer's group."""
+    tracer_start: str = "auto"
     """With the volume worker on the CPU: where the frame reads the ray-casting buffer back and hands
     its rays to the tracer process (sync 1). "g-buffer": right after the G-buffer, as in the paper;
     "idle": just before the main thread waits for the volume worker, when the worker has work this
-    frame (otherwise right after the G-buffer), so that the tracer starts where a core may fall idle.
-    The same images either way. "g-buffer" by default (the paper's place, and the fastest frame on an
-    idle machine). With ``tracer_session`` at nice 19 it met both of the overlap's bars at both sizes
-    on round 25's idle host (tracer 1.26 / 1.22x inline, frame 0.958 / 0.986x serial at 320x180 /
-    640x360; ``bench_tracer_nice.py``), in a first sweep it sat on the tracer's (1.50 / 1.30)."""
+    frame (otherwise right after the G-buffer), so that the tracer starts where a core may fall idle;
+    "auto" (default): "idle" where the tracer process runs in a scheduling group of its own
+    (``tracer_session`` took effect), else "g-buffer" — at nice 19 in the renderer's group a later
+    start only delays a tracer that still waits for a core (round 26's sweep: tracer 5.0x inline at
+    640x360 against 3.3x from the G-buffer). The same images in every case (tests)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
     rt_sun_shadows: str = "traced"
@@ -563,8 +566,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.volume_nice must be an int in 0..19, got {self.volume_nice!r}")
         if not (isinstance(self.tracer_nice, int) and -20 <= self.tracer_nice <= 19):
             raise ConfigError(f"RenderConfig.tracer_nice must be an int in -20..19, got {self.tracer_nice!r}")
-        if self.tracer_start not in ("g-buffer", "idle"):
-            raise ConfigError(f"RenderConfig.tracer_start must be g-buffer or idle, got {self.tracer_start!r}")
+        if self.tracer_start not in ("auto", "g-buffer", "idle"):
+            raise ConfigError(f"RenderConfig.tracer_start must be auto, g-buffer or idle, got {self.tracer_start!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):
             raise ConfigError(f"RenderConfig.osm_size must be in 16..{MAX_IMAGE_SIZE}, got {self.osm_size}")
         if self.rt_sun_shadows not in ("traced", "osm"):

@@ -8,10 +8,11 @@ ray tracing of the reflective/refractive pixels starts in the tracer process (on
 thread); meanwhile the main thread issues the GL work (shadow cascades, G-buffer, RSM, SSAO, the
 lighting passes) and the volume kernels (LPV, the sky volume); then it joins the tracer (sync 2),
 uploads the ray-traced G-buffers, lights them with the overlapped shadow maps and composites them
-with a Fresnel blend; last the tone map. (``RenderConfig.tracer_start = "idle"`` moves sync 1 to just
-before the main thread waits for the volume worker; ``tracer_session`` and ``tracer_nice`` set how
-the tracer process shares the cores.) ``RenderConfig.overlap=False`` (``--serial``) runs the
-ray tracing inline before the GL work, for comparison. ``STAGES`` names every stage in order;
+with a Fresnel blend; last the tone map. (By default the tracer process runs in a session of its own,
+``RenderConfig.tracer_session``, and where that gives it a scheduling group of its own sync 1 moves
+to just before the main thread waits for the volume worker, ``tracer_start = "auto"``; with
+``tracer_nice`` they set how the tracer process shares the cores.) ``RenderConfig.overlap=False``
+(``--serial``) runs the ray tracing inline before the GL work, for comparison. ``STAGES`` names every stage in order;
 each stage of ``Renderer.render`` is one short method below.
 
 Stage names follow the paper's Table 1 where it has one. ``Frame.timings`` holds each stage's
@@ -369,9 +370,10 @@ class Renderer:
             lpv_plan = self._plan_lpv(light, sky_may_change)
         with self._stage("g-buffer"):
             gbuf = self.gbuffer_pass.render(view_proj, self.scene.camera.position)
-        # sync 1 right after the G-buffer, or with tracer_start = "idle" where the main thread is about
-        # to wait for the volume worker, in a frame that gives the worker work
-        late = pool is not None and self.config.tracer_start == "idle" and (
+        # sync 1 right after the G-buffer, or with tracer_start = "idle" (or "auto" and the tracer in
+        # a scheduling group of its own) where the main thread is about to wait for the volume
+        # worker, in a frame that gives the worker work
+        late = pool is not None and self._tracer_starts_idle() and (
             (sky_job is not None and sky_may_change) or lpv_plan is not None)
         if not late:
             rcb, join = self._start_ray_tracing(view_proj, gbuf)        # sync 1
@@ -731,6 +733,16 @@ class Renderer:
         """The tracer process's niceness relative to this process's, as the OS granted
         ``RenderConfig.tracer_nice`` (None before the first traced frame, or without the process)."""
         return None if self._tracer_proc is None else self._tracer_proc.niceness
+
+    def _tracer_starts_idle(self) -> bool:
+        """Whether sync 1 waits for the main thread's idle point (``RenderConfig.tracer_start``):
+        "auto" does once the tracer process is known to run in a scheduling group of its own
+        (``TracerProcess.own_group``); a tracer sharing the renderer's group at nice 19 would only
+        start later and still wait for a core."""
+        where = self.config.tracer_start
+        if where == "auto":
+            return self._tracer_proc is not None and self._tracer_proc.own_group
+        return where == "idle"
 
     def _ensure_tracer(self):
         """The in-process tracer (serial schedule, or CUDA), or for the overlapped schedule on the

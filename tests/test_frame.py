@@ -169,7 +169,7 @@ def test_tracer_process_in_a_session_of_its_own():
     """``RenderConfig.tracer_session`` starts the tracer process as the leader of a new session (and so,
     where Linux has autogroups enabled, in a scheduling group of its own); it traces the frame the
     tracer in the renderer's session traces, bit for bit."""
-    images, groups = [], []
+    images, groups, owns = [], [], []
     for session in (False, True):
         r = Renderer(load("glass"), *SIZE, config=RenderConfig(tracer_session=session))
         try:
@@ -180,12 +180,16 @@ def test_tracer_process_in_a_session_of_its_own():
             group = r._tracer_proc.scheduling_group  # None without autogroups, or in a CPU cgroup (CI)
             assert group is None or group.startswith("/autogroup-")
             groups.append(group)
+            owns.append(r._tracer_proc.own_group)
             images.append(f.hdr)
         finally:
             r.close()
     assert np.array_equal(images[0], images[1])
     if None not in groups:  # the session child's autogroup is not the one the renderer's session shares
         assert groups[0].split()[0] != groups[1].split()[0]
+        assert owns == [False, True]
+    else:  # no autogroups here (or a CPU cgroup): the session changes nothing the scheduler sees
+        assert owns == [False, False]
 
 
 def test_scheduling_group_is_none_where_the_kernel_names_none(monkeypatch, tmp_path):
@@ -332,3 +336,29 @@ def test_tracer_start_moves_sync_1_only(courtyard):
         assert start(f, "ray casting buffer") < start(f, "shadow maps (CSM)")
     with pytest.raises(ConfigError, match="tracer_start"):
         RenderConfig(tracer_start="later")
+
+
+@pytest.mark.parametrize("own_group", [True, False])
+def test_tracer_start_auto_follows_the_tracers_scheduling_group(courtyard, monkeypatch, own_group):
+    """``tracer_start = "auto"`` (the default) starts the tracer at the main thread's idle point once the
+    tracer process is known to run in a scheduling group of its own, and right after the G-buffer
+    where it shares the renderer's (nice 19 there: a later start would only delay it)."""
+    from serenity.kernels.tracer_process import TracerProcess
+
+    monkeypatch.setattr(TracerProcess, "own_group", property(lambda self: own_group))
+    assert RenderConfig().tracer_start == "auto" and RenderConfig().tracer_session
+    scene = copy.deepcopy(courtyard)
+    base_cam, base_sun = scene.camera, scene.sun.direction.copy()
+    r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium"))
+    try:
+        frames = []
+        for i in range(3):
+            scene.camera = camera_path(base_cam, i / 4)
+            scene.sun.direction = sun_path(base_sun, i / 4)
+            frames.append(r.render())
+    finally:
+        r.close()
+    for f in frames[1:]:  # the tracer process exists from the first frame on; the volumes are moving
+        order = {e[1]: e[2] for e in f.events}
+        assert (order["ssao"] < order["ray casting buffer"]) == own_group
+        assert order["ray casting buffer"] < order["wait for volumes"]

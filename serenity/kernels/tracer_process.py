@@ -114,6 +114,7 @@ class TracerProcess:
         _widen(from_child_r)
         self._out, self._in = to_child_w, from_child_r
         self._pending = False
+        self._own_group: bool | None = None
         self.build_seconds: float | None = None
         """Seconds the child took to build its tracer (None until it has said it is ready)."""
         self.cpu_seconds = 0.0
@@ -141,6 +142,22 @@ class TracerProcess:
                 return f.read().strip() or None
         except OSError:
             return None
+
+    @property
+    def own_group(self) -> bool:
+        """Whether the kernel schedules the child in a group of its own, apart from this process's
+        (``session=True`` where Linux has autogroups and neither process sits in a CPU cgroup of its
+        own): then it gets its share of the cores against the renderer as a whole, whatever its
+        niceness. Read once: a process's group changes only with its session."""
+        if self._own_group is None:
+            child = self.scheduling_group
+            try:
+                with open("/proc/self/autogroup") as f:
+                    mine = f.read().split()
+            except OSError:
+                mine = []
+            self._own_group = bool(child) and bool(mine) and child.split()[0] != mine[0]
+        return self._own_group
 
     def _wait_ready(self) -> None:
         if self.build_seconds is None:
