@@ -1,13 +1,15 @@
 """What the tracer process's scheduling costs the frame and the tracer: one serial renderer and one
 overlapped renderer per variant, frames interleaved in one process.
 
-    python benchmarks/bench_tracer_nice.py [--sizes 320x180,640x360] [--variants=19,0,-5,19/session,0/idle]
+    python benchmarks/bench_tracer_nice.py [--sizes 320x180,640x360] [--variants=default,19,0,19/session/idle]
         [--frames 24] [--passes 10] [--json FILE] [--chart FILE.png]
 
-A variant is ``NICE[/session][/idle]``: the tracer process's niceness (``RenderConfig.tracer_nice``),
-in a session of its own (``tracer_session``: its own autogroup where Linux has them), and its rays
-handed over where the main thread is about to wait for the volume worker instead of right after
-the G-buffer (``tracer_start = "idle"``).
+A variant is ``default`` (RenderConfig's own settings) or ``NICE[/session][/idle]``: the tracer
+process's niceness (``RenderConfig.tracer_nice``), in a session of its own (``tracer_session``: its
+own autogroup where Linux has them), and its rays handed over where the main thread is about to
+wait for the volume worker instead of right after the G-buffer (``tracer_start = "idle"``; without
+``/idle`` "g-buffer"). ``own_group`` records whether the tracer got a scheduling group of its own,
+which decides where ``default``'s "auto" start hands the rays over.
 
 Every renderer draws the ``serenity bench`` camera path and moving sun (``--passes`` times over); at
 each frame of the path every renderer draws once, in an order rotated from frame to frame, so a
@@ -43,7 +45,10 @@ RT, WAIT = "cpu ray tracing", "wait for ray tracing"
 
 
 def parse_variant(spec: str) -> dict:
-    """``NICE[/session][/idle]`` → the RenderConfig fields it sets."""
+    """``NICE[/session][/idle]`` → the RenderConfig fields it sets; ``default`` → none (RenderConfig's
+    own: nice 19, a session of its own, the "auto" start)."""
+    if spec.strip() == "default":
+        return {}
     nice, *flags = spec.strip().split("/")
     if set(flags) - {"session", "idle"}:
         raise SystemExit(f"a variant is NICE[/session][/idle], got {spec!r}")
@@ -84,6 +89,7 @@ def run_size(scene_name: str, w: int, h: int, variants: list[str], frames: int, 
                     bar.update()
         actual = {k: r.tracer_niceness for k, r in renderers.items()}  # what the OS granted
         groups = {k: r._tracer_proc.scheduling_group if r._tracer_proc else None for k, r in renderers.items()}
+        own = {k: r._tracer_proc.own_group if r._tracer_proc else None for k, r in renderers.items()}
     finally:
         for r in renderers.values():
             r.close()
@@ -98,7 +104,7 @@ def run_size(scene_name: str, w: int, h: int, variants: list[str], frames: int, 
         out["overlapped"][v] = {
             **parse_variant(v),
             # what the OS granted: a negative niceness needs CAP_SYS_NICE, without which the child runs at 0
-            "actual_nice": actual.get(v), "scheduling_group": groups.get(v),
+            "actual_nice": actual.get(v), "scheduling_group": groups.get(v), "own_group": own.get(v),
             "frame_ms": m["frame"], "cpu_ray_tracing_ms": m["rt"], "wait_for_ray_tracing_ms": m["wait"],
             # CPU-ms the tracer process spent on the rays (all its threads): the work, whatever the wall
             "tracer_cpu_ms": m["rt_cpu"], "tracer_cores_held": m["rt_cpu"] / m["rt"] if m["rt"] else None,
@@ -161,8 +167,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="courtyard")
     ap.add_argument("--sizes", default="320x180,640x360")
-    ap.add_argument("--variants", default="19,0,-5,19/session,0/idle,19/session/idle",
-                    help="NICE[/session][/idle], comma-separated")
+    ap.add_argument("--variants", default="default,19,19/idle,0,-5,0/idle,19/session",
+                    help="default or NICE[/session][/idle], comma-separated")
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--passes", type=int, default=10)
     ap.add_argument("--quality", default="medium")

@@ -31,6 +31,8 @@ frame() {
     # the 320x180 bench five times (its spread), and what the tracer process's priority costs
     $PY benchmarks/bench_frame_repeat.py --runs 5 --size 320x180
     $PY benchmarks/bench_tracer_nice.py --frames 24 --passes 10 --json $R/tracer_nice.json --chart $R/tracer_nice.png
+    $PY benchmarks/bench_tracer_nice.py --frames 24 --passes 10 --load 1 --json $R/tracer_nice_load1.json \
+        --chart $R/tracer_nice_load1.png
     # where the frame's CPU time goes, thread by thread (the bound on what overlap can buy)
     $PY benchmarks/bench_frame_threads.py --frames 60 --json $R/frame_threads.json
 }
