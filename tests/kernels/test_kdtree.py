@@ -233,6 +233,25 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
 
 
 
+def test_counting_order_is_numpys_stable_argsort():
+    """The CPU's counting sort of the 16-bit keys (``counting_order``) gives the order numpy's stable
+    argsort gives, on one thread and on several (runs of uneven length, keys at both ends of the
+    range, many ties, a batch too small to split), into fresh arrays and into reused scratch."""
+    from serenity.kernels.kdtree import SORT_MIN_KEYS_PER_THREAD, counting_order
+    from serenity.kernels.launch import Staging
+
+    rng = np.random.default_rng(3)
+    scratch = Staging("cpu")
+    for n in (1, 1000, 3 * SORT_MIN_KEYS_PER_THREAD + 17):
+        keys = rng.integers(0, 1 << 16, n).astype(np.uint16)
+        keys[: n // 3] = rng.choice(np.array([0, 7, 65535], np.uint16), n // 3)  # ties and both ends
+        expected = np.argsort(keys, kind="stable")
+        wk = wp.array(keys, dtype=wp.uint16, device="cpu")
+        for threads in (1, 2, 3, 8):
+            assert np.array_equal(counting_order(wk, n, threads).numpy(), expected), (n, threads)
+            assert np.array_equal(counting_order(wk, n, threads, scratch).numpy(), expected), (n, threads)
+
+
 def test_query_scratch_is_reused_without_aliasing_results():
     """Reordered queries trace into per-thread scratch buffers that grow and are reused
     (``KdTree.scratch``): a later, bigger or smaller batch leaves an earlier call's results as they
