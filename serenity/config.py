@@ -503,19 +503,24 @@ class RenderConfig:
     stage and the slower the frame (``benchmarks/results/tracer_nice.json``). In a scheduling group of
     its own (``tracer_session``, where it takes effect) the niceness orders nothing; 19 stays the
     default for the machines where it does not."""
-    tracer_session: bool = True
+    tracer_session: bool | None = None
     """Start the tracer process in a session of its own (``setsid``). Where Linux groups processes by
     session for scheduling (autogroup: ``/proc/sys/kernel/sched_autogroup_enabled`` = 1, and neither
     process in a CPU cgroup of its own), the tracer then shares the cores with the renderer as one
     group against another, instead of as one more thread beside llvmpipe's, the Warp launches' and
     the main thread; ``tracer_nice`` then orders nothing (the tracer is alone in its group).
-    Elsewhere nothing changes (``TracerProcess.own_group`` says which). No privilege needed. On by
-    default since round 26: with ``tracer_start = "auto"`` it is the one setting that met both of the
-    overlap's bars (tracer stage ≤ 1.5x the inline trace, frame ≤ the serial one) at both sizes in
-    all three sweeps on round 25/26's host, and it keeps the frame under the serial one beside a busy
-    process, where nice 19 alone starves the tracer (README, "What overlap can and cannot buy";
-    ``benchmarks/bench_tracer_nice.py``). The price on an idle machine: a frame 1-4 % slower than
-    nice 19 in the renderer's group."""
+    Elsewhere nothing changes (``TracerProcess.own_group`` says which). No privilege needed.
+    None (default since round 26) = a session of its own where the frame has a volume worker (the
+    overlapped CPU schedule of ``medium``, ``high``, ``paper``), whose wait leaves a core idle: with
+    ``tracer_start = "auto"`` that is the one setting that met both of the overlap's bars (tracer
+    stage ≤ 1.5x the inline trace, frame ≤ the serial one) at both sizes in all four sweeps on
+    round 25/26's host, and it keeps the frame at or under the serial one beside a busy process,
+    where nice 19 alone starves the tracer (README, "What overlap can and cannot buy";
+    ``benchmarks/bench_tracer_nice.py``); its price on an idle machine is a frame 1-4 % slower than
+    nice 19 in the renderer's group. Without a volume worker (``low``: its gathered sky volume keeps
+    both cores busy from the main thread) the tracer stays in the renderer's session, where a group
+    of its own only took cores from that work (round 26: frame 1.040 against 1.001x the serial one
+    at 320x180, 1.019 against 1.009x at 640x360)."""
     tracer_start: str = "auto"
     """With the volume worker on the CPU: where the frame reads the ray-casting buffer back and hands
     its rays to the tracer process (sync 1). "g-buffer": right after the G-buffer, as in the paper;
@@ -566,6 +571,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.volume_nice must be an int in 0..19, got {self.volume_nice!r}")
         if not (isinstance(self.tracer_nice, int) and -20 <= self.tracer_nice <= 19):
             raise ConfigError(f"RenderConfig.tracer_nice must be an int in -20..19, got {self.tracer_nice!r}")
+        if self.tracer_session not in (None, True, False):
+            raise ConfigError(f"RenderConfig.tracer_session must be None, True or False, got {self.tracer_session!r}")
         if self.tracer_start not in ("auto", "g-buffer", "idle"):
             raise ConfigError(f"RenderConfig.tracer_start must be auto, g-buffer or idle, got {self.tracer_start!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):

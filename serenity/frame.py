@@ -8,10 +8,10 @@ ray tracing of the reflective/refractive pixels starts in the tracer process (on
 thread); meanwhile the main thread issues the GL work (shadow cascades, G-buffer, RSM, SSAO, the
 lighting passes) and the volume kernels (LPV, the sky volume); then it joins the tracer (sync 2),
 uploads the ray-traced G-buffers, lights them with the overlapped shadow maps and composites them
-with a Fresnel blend; last the tone map. (By default the tracer process runs in a session of its own,
-``RenderConfig.tracer_session``, and where that gives it a scheduling group of its own sync 1 moves
-to just before the main thread waits for the volume worker, ``tracer_start = "auto"``; with
-``tracer_nice`` they set how the tracer process shares the cores.) ``RenderConfig.overlap=False``
+with a Fresnel blend; last the tone map. (With a volume worker the tracer process runs in a session of its own by
+default, ``RenderConfig.tracer_session``, and where that gives it a scheduling group of its own sync
+1 moves to just before the main thread waits for the volume worker, ``tracer_start = "auto"``;
+with ``tracer_nice`` they set how the tracer process shares the cores.) ``RenderConfig.overlap=False``
 (``--serial``) runs the ray tracing inline before the GL work, for comparison. ``STAGES`` names every stage in order;
 each stage of ``Renderer.render`` is one short method below.
 
@@ -750,8 +750,11 @@ class Renderer:
         calls that hold the GIL); built on the first frame that shows a traced pixel."""
         if self.config.overlap and str(self.device).startswith("cpu"):
             if self._tracer_proc is None:
+                session = self.config.tracer_session
+                if session is None:  # a group of its own where the main thread will wait for a volume worker
+                    session = self._volume_pool is not None
                 self._tracer_proc = TracerProcess(self.scene, self.device, nice=self.config.tracer_nice,
-                                                 session=self.config.tracer_session)
+                                                 session=session)
             return self._tracer_proc
         if self.tracer is None:
             t0 = time.perf_counter()

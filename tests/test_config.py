@@ -28,6 +28,7 @@ from serenity.errors import SerenityError
     (RenderConfig, {"rt_sun_shadows": "pcss"}, "RenderConfig.rt_sun_shadows"),
     (RenderConfig, {"tracer_nice": 20}, "RenderConfig.tracer_nice"),
     (RenderConfig, {"tracer_nice": -21}, "RenderConfig.tracer_nice"),
+    (RenderConfig, {"tracer_session": "yes"}, "RenderConfig.tracer_session"),
     (RenderConfig, {"volume_nice": -1}, "RenderConfig.volume_nice"),
     (RenderConfig, {"volume_nice": 20}, "RenderConfig.volume_nice"),
     (SSAOConfig, {"steps": 0}, "SSAOConfig.steps"),

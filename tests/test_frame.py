@@ -192,6 +192,22 @@ def test_tracer_process_in_a_session_of_its_own():
         assert owns == [False, False]
 
 
+@pytest.mark.skipif(not hasattr(os, "getsid"), reason="POSIX sessions")
+@pytest.mark.parametrize("quality", ["medium", "low"])
+def test_tracer_session_by_default_where_a_volume_worker_waits(quality):
+    """``tracer_session=None`` (the default) starts the tracer process in a session of its own where
+    the frame has a volume worker (``medium``), and in the renderer's where it has none (``low``:
+    the gathered sky volume's work on the main thread would lose cores to it)."""
+    r = Renderer(load("glass"), *SIZE, config=RenderConfig.preset(quality))
+    try:
+        r.render()
+        pid = r._tracer_proc._proc.pid
+        assert (r._volume_pool is not None) == (quality == "medium")
+        assert (os.getsid(pid) == pid) == (quality == "medium")
+    finally:
+        r.close()
+
+
 def test_scheduling_group_is_none_where_the_kernel_names_none(monkeypatch, tmp_path):
     """``/proc/PID/autogroup`` reads empty for a process in a cgroup with a CPU controller of its own
     (CI runners, containers) and is absent without autogroup support: both are "no group", not ""."""
@@ -346,7 +362,7 @@ def test_tracer_start_auto_follows_the_tracers_scheduling_group(courtyard, monke
     from serenity.kernels.tracer_process import TracerProcess
 
     monkeypatch.setattr(TracerProcess, "own_group", property(lambda self: own_group))
-    assert RenderConfig().tracer_start == "auto" and RenderConfig().tracer_session
+    assert RenderConfig().tracer_start == "auto" and RenderConfig().tracer_session is None
     scene = copy.deepcopy(courtyard)
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
     r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium"))
