@@ -773,16 +773,12 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
     runs = max(1, min(threads or cpu_threads(), n // SORT_MIN_KEYS_PER_THREAD))
     per_run = -(-n // runs)
     bins = 1 << SORT_KEY_BITS
-
-    def buf(name, size):
-        return wp.empty(size, dtype=wp.int32, device="cpu") if scratch is None else scratch.buffer(name, size, wp.int32)
-
-    counts = buf("sort_counts", runs * bins)
+    counts = scratch_buffer(scratch, "sort_counts", runs * bins, wp.int32, "cpu")
     launch(count_keys, runs, [keys, n, per_run, counts], device="cpu", threads=runs, min_items=1)
     totals = counts.numpy().reshape(runs, bins).sum(axis=0, dtype=np.int64)
-    starts = buf("sort_starts", bins)
+    starts = scratch_buffer(scratch, "sort_starts", bins, wp.int32, "cpu")
     starts.numpy()[:] = np.cumsum(totals) - totals  # where each bin starts in the order
-    order = buf("order", n)
+    order = scratch_buffer(scratch, "order", n, wp.int32, "cpu")
     launch(place_keys, 1, [keys, n, starts, order], device="cpu", threads=1)
     return order
 
@@ -1085,7 +1081,7 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
                threads=1)
         if int(np.count_nonzero(changes.numpy())) * SORT_MIN_RUN < m:
             return wp.empty(0, dtype=wp.int32, device=device)
-    keys = wp.empty(n, dtype=wp.uint16, device=device) if scratch is None else scratch.buffer("keys", n, wp.uint16)
+    keys = scratch_buffer(scratch, "keys", n, wp.uint16, device)
     launch(sort_keys, n, [box_lo, scale, origins, directions, keys], device=device, threads=threads)
     if device.startswith("cpu"):
         return counting_order(keys, n, threads, scratch)
@@ -1114,12 +1110,16 @@ def scatter_in_order(order: wp.array, arrays: list, outs: list, device: str, thr
             launch(scatter_array, a.shape[0], [order, a, b], device=device, threads=threads)
 
 
+def scratch_buffer(scratch: Staging | None, name: str, n: int, dtype, device: str) -> wp.array:
+    """``n`` elements of ``dtype``: ``scratch``'s grow-only buffer ``name`` (valid until its next use;
+    :meth:`KdTree.scratch`), or a new array without one."""
+    return wp.empty(n, dtype=dtype, device=device) if scratch is None else scratch.buffer(name, n, dtype)
+
+
 def buffers_like(arrays: list, prefix: str, device: str, scratch: Staging | None = None) -> list:
-    """An array of the shape and dtype of each of ``arrays``: new ones, or ``scratch``'s grow-only
-    buffers ``prefix``0, ``prefix``1, ... (valid until their next use; :meth:`KdTree.scratch`)."""
-    if scratch is None:
-        return [wp.empty(a.shape[0], dtype=a.dtype, device=device) for a in arrays]
-    return [scratch.buffer(f"{prefix}{k}", a.shape[0], a.dtype) for k, a in enumerate(arrays)]
+    """An array of the shape and dtype of each of ``arrays`` (:func:`scratch_buffer`: ``scratch``'s
+    buffers ``prefix``0, ``prefix``1, ..., or new ones)."""
+    return [scratch_buffer(scratch, f"{prefix}{k}", a.shape[0], a.dtype, device) for k, a in enumerate(arrays)]
 
 
 def _slot_rays(n: int, slots: int, threads: int | None) -> int:

@@ -94,6 +94,15 @@ def _read(fd: int):
     return pickle.loads(_read_exact(fd, n))
 
 
+def _autogroup(pid) -> str | None:
+    """``/proc/PID/autogroup`` (PID a process id or "self"), None where it is absent or empty."""
+    try:
+        with open(f"/proc/{pid}/autogroup") as f:
+            return f.read().strip() or None
+    except OSError:
+        return None
+
+
 class TracerProcess:
     """A :class:`~serenity.kernels.raytrace.RayTracer` of ``scene`` in a child process.
 
@@ -137,11 +146,7 @@ class TracerProcess:
         is 1), or None where there is none to read. The file is empty where the process sits in a
         cgroup with a CPU controller of its own (containers, CI runners): the kernel schedules it by
         that cgroup, not by autogroup, and a session of its own changes nothing there."""
-        try:
-            with open(f"/proc/{self._proc.pid}/autogroup") as f:
-                return f.read().strip() or None
-        except OSError:
-            return None
+        return _autogroup(self._proc.pid)
 
     @property
     def own_group(self) -> bool:
@@ -150,13 +155,8 @@ class TracerProcess:
         own): then it gets its share of the cores against the renderer as a whole, whatever its
         niceness. Read once: a process's group changes only with its session."""
         if self._own_group is None:
-            child = self.scheduling_group
-            try:
-                with open("/proc/self/autogroup") as f:
-                    mine = f.read().split()
-            except OSError:
-                mine = []
-            self._own_group = bool(child) and bool(mine) and child.split()[0] != mine[0]
+            child, mine = self.scheduling_group, _autogroup("self")
+            self._own_group = None not in (child, mine) and child.split()[0] != mine.split()[0]
         return self._own_group
 
     def _wait_ready(self) -> None:
