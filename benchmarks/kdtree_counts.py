@@ -1,12 +1,25 @@
 """Work per ray of the kd-tree traversal: inner-node steps, non-empty leaves, triangle tests and
-stack pops per ray, for the benchmark's rays and several build settings (no timing).
+stack pops per ray, for the benchmark's rays and several build settings (no timing); and what a
+traversal with ropes would do on the same trees and rays (the rope model, below).
 
     python benchmarks/kdtree_counts.py --json FILE [--configs "SPEC;SPEC;..."] [--size 1280x720]
+                                       [--rope-sample 2000] [--rope-grid 32]
 
 Each SPEC is ``key=value,...`` of :class:`serenity.config.KdBuildConfig` ('' = the defaults). The
 counters are added to a copy of ``serenity/kernels/kdtree.py``'s traversal by text substitution
 (each substitution must apply, or this stops), loaded as its own module; the hits are checked
 against the real traversal on the same tree. Rays as in ``bench_kdtree.py``.
+
+The rope model answers whether a stackless traversal with ropes (Havran's neighbour links;
+Popov et al. 2007) would take fewer dependent steps than the stack traversal: each leaf gets its
+box and six ropes (the node across each face that holds the whole face, pushed down the tree as
+far as the leaf's face allows), and a ray walks from the leaf holding its start, leaf to leaf
+through the ropes, each time descending from the rope's node to the leaf it enters (a point
+location: one node per step). Walked in Python on ``--rope-sample`` rays per set, up to each
+ray's real hit; counted are the descent steps and the leaves entered (the empty ones too: a rope
+walk reads every leaf it passes, where the stack traversal skips empty leaves by their parent's
+flags), from the root and from the deepest node holding the ray's origin cell on a
+``--rope-grid``³ grid over the root box (an entry-point table, for rays that start inside it).
 """
 
 from __future__ import annotations
@@ -37,9 +50,9 @@ SUBSTITUTIONS = [
      "    while not done:\n        head = node_head(tree.nodes, node)"),
     ("        if axis != 3:\n            split = node_split(tree.nodes, node)",
      "        if axis != 3:\n            n_inner += 1\n            split = node_split(tree.nodes, node)"),
-    ("            n = int(node_split(tree.nodes, node))\n            for j in range(n):",
-     "            n = int(node_split(tree.nodes, node))\n            n_leaf += 1\n            n_tri += n\n"
-     "            for j in range(n):"),
+    ("        else:\n            prim, best_t, hit_u, hit_v = intersect_leaf(",
+     "        else:\n            n_leaf += 1\n            n_tri += int(node_split(tree.nodes, node))\n"
+     "            prim, best_t, hit_u, hit_v = intersect_leaf("),
     ("                    if t0 <= best_t:\n                        popped = 1",
      "                    if t0 <= best_t:\n                        popped = 1\n                        n_pop += 1"),
     ("    if prim < 0:\n        best_t = _INF\n    return prim, best_t, hit_u, hit_v",
@@ -57,6 +70,129 @@ def counting_module(tmp: Path):
     return module_from_source("kdtree_counting", src, tmp)
 
 
+def node_boxes_and_ropes(head: np.ndarray, split: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """Per node its box (float32: the split positions themselves) and per leaf its six ropes (face
+    2a: the low side of axis a, 2a + 1 the high side; −1 outside the root box), built level by level
+    and then pushed down: while a rope's node is inner, step to its child on the leaf's side when
+    the node splits the face's axis or splits another axis outside the leaf's face."""
+    n = len(head)
+    leaf = (head & 3) == 3
+    child = head >> 2
+    blo = np.empty((n, 3), np.float32)
+    bhi = np.empty((n, 3), np.float32)
+    ropes = np.full((n, 6), -1, np.int64)
+    blo[0], bhi[0] = lo, hi
+    level = np.array([0])
+    while len(level):
+        inner = level[~leaf[level]]
+        a, left = head[inner] & 3, child[inner]
+        right = left + 1
+        for c in (left, right):
+            blo[c], bhi[c], ropes[c] = blo[inner], bhi[inner], ropes[inner]
+        bhi[left, a] = split[inner]
+        blo[right, a] = split[inner]
+        ropes[left, 2 * a + 1] = right
+        ropes[right, 2 * a] = left
+        level = np.concatenate([left, right])
+    leaves = np.flatnonzero(leaf)
+    for face in range(6):
+        fa, high = face // 2, face & 1
+        target = ropes[leaves, face]
+        while True:
+            idx = np.flatnonzero((target >= 0) & ~leaf[np.maximum(target, 0)])
+            t = target[idx]
+            b, s, c = head[t] & 3, split[t], child[t]
+            step = np.where(b == fa, np.where(high == 1, c, c + 1), -1)
+            other = b != fa
+            step = np.where(other & (bhi[leaves[idx], b] <= s), c, step)
+            step = np.where(other & (blo[leaves[idx], b] >= s), c + 1, step)
+            moved = step >= 0
+            if not moved.any():
+                break
+            target[idx[moved]] = step[moved]
+        ropes[leaves, face] = target
+    return blo, bhi, ropes
+
+
+def rope_walk(o, d, t_end, tree_arrays, start_node: int):
+    """(descent steps, leaves entered, non-empty leaves entered) of one ray's rope walk up to
+    ``t_end`` (its hit, or inf), from ``start_node`` (the root, or an entry node holding the origin)."""
+    head, split, count, blo, bhi, ropes, lo, hi = tree_arrays
+    with np.errstate(divide="ignore"):
+        inv = np.where(d != 0, 1 / np.where(d != 0, d, 1), 0.0)
+    ta, tb = (lo - o) * inv, (hi - o) * inv
+    t_in = max(0.0, float(np.max(np.where(inv != 0, np.minimum(ta, tb), -np.inf))))
+    t_out = float(np.min(np.where(inv != 0, np.maximum(ta, tb), np.inf)))
+    steps = leaves = non_empty = 0
+    node, t = start_node, t_in
+    while t_in <= t_out:
+        while (head[node] & 3) != 3:
+            steps += 1
+            a, c, s = head[node] & 3, head[node] >> 2, split[node]
+            if inv[a] == 0:
+                node = c + 1 if o[a] > s else c
+                continue
+            ts = (s - o[a]) * inv[a]
+            early, late = (c, c + 1) if d[a] > 0 else (c + 1, c)
+            node = late if t > ts else early
+        leaves += 1
+        non_empty += count[node] > 0
+        far = np.where(d > 0, bhi[node], blo[node])
+        te = np.where(inv != 0, (far - o) * inv, np.inf)
+        axis = int(np.argmin(te))
+        if t_end <= te[axis] or te[axis] >= t_out:
+            break
+        node = ropes[node, 2 * axis + (1 if d[axis] > 0 else 0)]
+        if node < 0:
+            break
+        t = max(t, float(te[axis]))
+    return steps, leaves, non_empty
+
+
+def entry_node(cell_lo, cell_hi, head, split) -> int:
+    """The deepest node whose box holds the whole cell."""
+    node = 0
+    while (head[node] & 3) != 3:
+        a, c, s = head[node] & 3, head[node] >> 2, split[node]
+        if cell_hi[a] <= s:
+            node = c
+        elif cell_lo[a] >= s:
+            node = c + 1
+        else:
+            break
+    return node
+
+
+def rope_model(tree, o, d, t_hit, inner_steps, non_empty, sample, grid: int) -> dict:
+    """The rope walk of ``sample`` (ray indices) against the stack traversal's counted steps."""
+    data = tree.device_data("cpu")
+    lo = np.array([data.box_lo[i] for i in range(3)], np.float32)
+    hi = np.array([data.box_hi[i] for i in range(3)], np.float32)
+    head = tree.node_head.astype(np.int64)
+    split = tree.node_split.astype(np.float32)
+    leaf = (head & 3) == 3
+    count = np.where(leaf, tree.prims[np.where(leaf, head >> 2, 0)], 0)
+    blo, bhi, ropes = node_boxes_and_ropes(head, split, lo, hi)
+    arrays = (head, split, count, blo, bhi, ropes, lo.astype(np.float64), hi.astype(np.float64))
+    ext = (hi - lo).astype(np.float64)
+    out = {"rays": len(sample), "stack": {"inner_steps": float(inner_steps[sample].mean()),
+                                          "non_empty_leaves": float(non_empty[sample].mean())}}
+    for name in ("ropes_from_root", f"ropes_from_grid_{grid}"):
+        walks = []
+        for i in sample:
+            oi, di = o[i].astype(np.float64), d[i].astype(np.float64)
+            start = 0
+            if name != "ropes_from_root" and np.all((oi >= lo) & (oi <= hi)):
+                cell = np.clip(np.floor((oi - lo) / ext * grid), 0, grid - 1)
+                start = entry_node(lo + cell * ext / grid, lo + (cell + 1) * ext / grid, head, split)
+            walks.append(rope_walk(oi, di, float(t_hit[i]), arrays, start))
+        w = np.array(walks, np.float64)
+        out[name] = {"descent_steps": float(w[:, 0].mean()), "leaves_entered": float(w[:, 1].mean()),
+                     "non_empty_leaves": float(w[:, 2].mean()),
+                     "node_and_leaf_reads": float(w[:, 0].mean() + w[:, 1].mean())}
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--json", required=True)
@@ -64,6 +200,8 @@ def main(argv=None) -> dict:
                     "traversal_cost=1.0,max_depth=40,min_empty_fraction=0.0")
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--subdivisions", type=int, default=6)
+    ap.add_argument("--rope-sample", type=int, default=2000, help="rays per set for the rope model (0: none)")
+    ap.add_argument("--rope-grid", type=int, default=32, help="cells per axis of the rope model's entry table")
     args = ap.parse_args(argv)
     init_warp()
     from serenity.kernels.kdtree import KdTree
@@ -91,7 +229,7 @@ def main(argv=None) -> dict:
                    "references_per_non_empty_leaf": st.references / max(1, st.leaves - st.empty_leaves),
                    "node_mib": st.nodes * 8 / 2**20, "reference_mib": len(tree.prims) * 40 / 2**20}
             for name, (o, d) in {"coherent": (oc, dc), "incoherent": (oi, di)}.items():
-                c = tree.intersect(o, d, device="cpu")
+                c = tree.intersect(o, d, device="cpu", rays_per_thread=1)  # trace_kd, which holds the counters
                 ref = real.intersect(o, d, device="cpu")
                 if not (np.array_equal(c.prim, ref.prim) and np.array_equal(c.t, ref.t)):
                     raise SystemExit("kdtree_counts: the counting traversal's hits differ from the real one")
@@ -104,6 +242,15 @@ def main(argv=None) -> dict:
                              "hit_fraction": float(c.hit.mean())}
                 print(f"{row['config']:>36} {name:>10}: inner steps {inner.mean():5.1f}, non-empty leaves "
                       f"{leaves.mean():4.2f}, triangle tests {tris.mean():4.2f}, pops {pops.mean():4.2f}", flush=True)
+                if args.rope_sample > 0:
+                    sample = np.sort(rng.choice(len(o), min(args.rope_sample, len(o)), replace=False))
+                    model = rope_model(real, o, d, ref.t, inner, leaves, sample, args.rope_grid)
+                    row[name]["rope_model"] = model
+                    for key, m in model.items():
+                        if key.startswith("ropes"):
+                            print(f"{'':>36} {'':>10}  {key}: descent steps {m['descent_steps']:5.1f} + leaves "
+                                  f"entered {m['leaves_entered']:4.2f} (stack traversal on the same rays: "
+                                  f"{model['stack']['inner_steps']:5.1f} inner steps)", flush=True)
             rows.append(row)
     out = {"benchmark": "kdtree_counts", "triangles": len(f), "size": [width, height], "per_ray_means": rows}
     write_results(args.json, out)
