@@ -1,0 +1,131 @@
+"""Where one kd-tree query's time goes: each step of ``KdTree.intersect`` timed on its own, for the
+benchmark's rays, on 1 thread and on all threads.
+
+    python benchmarks/kdtree_phases.py --json FILE [--size 1280x720] [--subdivisions 6] [--rounds 9]
+
+Rays and scene as in ``bench_kdtree.py`` (coherent camera rays; incoherent random rays from their
+hits). The default call is timed as it runs: every Warp launch the query makes through
+``serenity.kernels.launch.launch`` is timed by wrapping ``serenity.kernels.kdtree``'s reference to
+it (the query itself is not changed), and so is the counting sort as a whole
+(``counting_order``: its two launches, ``count_keys`` and ``place_keys``, plus numpy's prefix sum of
+the bins). ``other`` is the call's wall time less its timed parts: the conversion of the numpy
+inputs, the arrays' allocation, the results' copy back, Python. Per phase the median over
+``--rounds`` calls (after one warm-up call) of its milliseconds per call, and its share of the
+call's median. Phases:
+- ``sample_key_changes``: whether the batch is coherent (keys of 4096 pairs of consecutive rays);
+- ``sort_keys``: each ray's 16-bit reordering key; ``counting_order``: the keys' stable order;
+- ``gather_array``: the rays' origins and directions in that order (one launch per array);
+- ``trace``: the traversal (``trace_rays``, interleaved, for a reordered batch; ``intersect_rays``,
+  one ray per kernel thread, for one in the caller's order);
+- ``scatter_array``: the four results back at their rays' own indices (one launch per array).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from serenity.device import init_warp
+from serenity.io.results import machine_info, write_results
+from serenity.kernels.launch import cpu_threads
+from serenity.scene.procedural import lumpy_mesh
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_kdtree import camera_rays  # noqa: E402
+
+#: the kernels that are the traversal itself
+TRACE_KERNELS = ("trace_rays", "intersect_rays")
+#: the launches made inside counting_order, which is timed as a whole
+SORT_PARTS = ("count_keys", "place_keys")
+
+
+def phase_name(kernel) -> str:
+    key = getattr(kernel, "key", str(kernel))
+    for name in TRACE_KERNELS:
+        if key.endswith(name):
+            return "trace"
+    return key
+
+
+def instrument(kd, times: dict) -> None:
+    """Wrap ``kd.launch`` and ``kd.counting_order`` so that each call adds its wall seconds to
+    ``times[phase]`` (the current call's entries)."""
+    launch, counting_order = kd.launch, kd.counting_order
+
+    def timed_launch(kernel, *args, **kwargs):
+        t = time.perf_counter()
+        launch(kernel, *args, **kwargs)
+        times[phase_name(kernel)] += time.perf_counter() - t
+
+    def timed_order(*args, **kwargs):
+        t = time.perf_counter()
+        out = counting_order(*args, **kwargs)
+        times["counting_order"] += time.perf_counter() - t
+        return out
+
+    kd.launch, kd.counting_order = timed_launch, timed_order
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--json", required=True)
+    ap.add_argument("--size", default="1280x720")
+    ap.add_argument("--subdivisions", type=int, default=6)
+    ap.add_argument("--rounds", type=int, default=9)
+    args = ap.parse_args(argv)
+    init_warp()
+    import serenity.kernels.kdtree as kd
+
+    width, height = (int(x) for x in args.size.lower().split("x"))
+    v, f = lumpy_mesh(args.subdivisions)
+    tree = kd.KdTree.build(v, f, progress=True)
+    oc, dc = camera_rays(width, height)
+    h = tree.intersect(oc, dc, device="cpu")
+    rng = np.random.default_rng(0)
+    oi = oc.copy()
+    oi[h.hit] = oc[h.hit] + dc[h.hit] * (h.t[h.hit] - 1e-3)[:, None]
+    di = rng.normal(size=oc.shape).astype(np.float32)
+    di /= np.linalg.norm(di, axis=1, keepdims=True)
+    sets = {"coherent": (oc, dc), "incoherent": (oi, di)}
+    current: dict = defaultdict(float)
+    instrument(kd, current)
+    thread_counts = sorted({1, cpu_threads()})
+    results = {}
+    for threads in thread_counts:
+        for name, (o, d) in sets.items():
+            calls = []
+            for r in range(args.rounds + 1):  # the first is the warm-up
+                current.clear()
+                t = time.perf_counter()
+                tree.intersect(o, d, device="cpu", threads=threads)
+                wall = time.perf_counter() - t
+                if r:
+                    parts = {k: s for k, s in current.items() if k not in SORT_PARTS}
+                    calls.append({"call": wall, **parts, "other": wall - sum(parts.values())})
+            call_ms = 1e3 * statistics.median(c["call"] for c in calls)
+            phases = {}
+            for key in calls[0]:
+                if key == "call":
+                    continue
+                ms = 1e3 * statistics.median(c.get(key, 0.0) for c in calls)
+                phases[key] = {"ms": ms, "share": ms / call_ms}
+            results[f"{name}_{threads}t"] = {"rays": len(o), "threads": threads, "call_ms": call_ms,
+                                             "mrays_per_s": len(o) / call_ms / 1e3, "phases": phases}
+            print(f"{name:>10}, {threads} thread(s): {call_ms:6.1f} ms per call", flush=True)
+            for key, p in phases.items():
+                print(f"{'':>14}{key:<22}{p['ms']:7.2f} ms  {100 * p['share']:5.1f} %", flush=True)
+    out = {"benchmark": "kdtree_phases", "triangles": len(f), "size": [width, height], "rounds": args.rounds,
+           "timing": "wall ms per call, median over rounds; each phase's median on its own",
+           "machine": machine_info(), "results": results}
+    write_results(args.json, out)
+    return out
+
+
+if __name__ == "__main__":
+    main()
