@@ -2,6 +2,7 @@
 benchmark's rays, on 1 thread and on all threads.
 
     python benchmarks/kdtree_phases.py --json FILE [--size 1280x720] [--subdivisions 6] [--rounds 9]
+    python benchmarks/kdtree_phases.py --table FILE    # the README's table, printed from a run's JSON
 
 Rays and scene as in ``bench_kdtree.py`` (coherent camera rays; incoherent random rays from their
 hits). The default call is timed as it runs: every Warp launch the query makes through
@@ -23,6 +24,7 @@ call's median. Phases:
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import time
@@ -72,13 +74,54 @@ def instrument(kd, times: dict) -> None:
     kd.launch, kd.counting_order = timed_launch, timed_order
 
 
+#: the README table's rows: (label, the phases summed into it)
+TABLE_ROWS = [
+    ("traversal (`trace_rays` / `intersect_rays`)", ("trace",)),
+    ("gather of origins and directions", ("gather_array",)),
+    ("scatter of the four results", ("scatter_array",)),
+    ("sort keys", ("sort_keys",)),
+    ("counting sort", ("counting_order",)),
+    ("coherence sample, Python, allocation", ("sample_key_changes", "other")),
+]
+#: the README table's columns: (label, the run's result key)
+TABLE_COLUMNS = [("incoherent, 1 thread", "incoherent_1t"), ("incoherent, 2 threads", "incoherent_2t"),
+                 ("camera rays, 1 thread", "coherent_1t")]
+
+
+def markdown_table(run: dict) -> str:
+    """The README's table of a run's phases: ms per call (share of the call) per column; rows the
+    coherent call does not have read "—"; the last row is the remainder, without a share."""
+    cols = [(label, run["results"][key]) for label, key in TABLE_COLUMNS if key in run["results"]]
+    lines = ["| phase | " + " | ".join(label for label, _ in cols) + " |", "| --- |" + " --- |" * len(cols),
+             "| whole call | " + " | ".join(f"{r['call_ms']:.1f}" for _, r in cols) + " |"]
+    for k, (label, keys) in enumerate(TABLE_ROWS):
+        cells = []
+        for _, r in cols:
+            parts = [r["phases"][key] for key in keys if key in r["phases"]]
+            if not parts:
+                cells.append("—")
+                continue
+            ms = sum(p["ms"] for p in parts)
+            last = k == len(TABLE_ROWS) - 1
+            cells.append(f"{ms:.1f}" if last else f"{ms:.1f} ({100 * ms / r['call_ms']:.1f} %)")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--json", required=True)
+    ap.add_argument("--json")
+    ap.add_argument("--table", metavar="FILE", help="print the README's table from a run's JSON and stop")
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--subdivisions", type=int, default=6)
     ap.add_argument("--rounds", type=int, default=9)
     args = ap.parse_args(argv)
+    if args.table:
+        with open(args.table) as fh:
+            print(markdown_table(json.load(fh)))
+        return {}
+    if not args.json:
+        ap.error("--json FILE is required (or --table FILE)")
     init_warp()
     import serenity.kernels.kdtree as kd
 

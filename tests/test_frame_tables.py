@@ -30,3 +30,15 @@ def test_readme_render_block_is_the_committed_run():
     block = _run("--render").strip()
     assert block.startswith("scene courtyard:") and "frame (wall clock)" in block
     assert block in (ROOT / "README.md").read_text(), "README's quick-start block differs from render_output.json"
+
+
+def test_readme_kdtree_phases_table_is_the_committed_run():
+    """The kd-tree section's table of one query's phases is ``kdtree_phases.py --table`` of the
+    committed JSON."""
+    out = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "kdtree_phases.py"), "--table",
+                          str(ROOT / "benchmarks" / "results" / "kdtree_phases.json")],
+                         capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    table = out.stdout.strip()
+    assert table.startswith("| phase | incoherent, 1 thread")
+    assert table in (ROOT / "README.md").read_text(), "README's kd-tree phases table differs from kdtree_phases.json"
