@@ -95,6 +95,21 @@ def camera_rays(width: int, height: int, position=(0.0, 0.6, 3.5), target=(0.0, 
     return np.ascontiguousarray(o, np.float32), d.astype(np.float32)
 
 
+def ray_sets(tree, width: int, height: int) -> dict:
+    """The benchmark's two ray sets, traced against ``tree`` (any version's ``KdTree``) to place the
+    second: ``coherent``, the camera's rays, one per pixel of ``width`` × ``height``; ``incoherent``,
+    from their hit points (nudged back 1 mm; a miss keeps the camera's origin) in uniformly random
+    directions (seed 0). Each is (origins, directions), (N, 3) float32."""
+    oc, dc = camera_rays(width, height)
+    hits = tree.intersect(oc, dc, device="cpu")
+    rng = np.random.default_rng(0)
+    oi = oc.copy()
+    oi[hits.hit] = oc[hits.hit] + dc[hits.hit] * (hits.t[hits.hit] - 1e-3)[:, None]
+    di = rng.normal(size=oc.shape).astype(np.float32)
+    di /= np.linalg.norm(di, axis=1, keepdims=True)
+    return {"coherent": (oc, dc), "incoherent": (oi, di)}
+
+
 def median_time(fn, repeats: int, cpu: dict | None = None, key: str = "") -> float:
     """Median wall seconds of ``fn`` over ``repeats`` runs after a warm-up; with ``cpu``, also
     ``cpu[key]`` = the median CPU seconds of the process (all its threads) per run."""
@@ -290,15 +305,7 @@ def main(argv=None) -> dict:
     say(f"built the tree of {len(f):,} triangles: {build_s:.2f} s")
 
     # rays
-    oc, dc = camera_rays(width, height)
-    hits = tree.intersect(oc, dc, device="cpu")
-    rng = np.random.default_rng(0)
-    hit = hits.hit
-    oi = oc.copy()
-    oi[hit] = oc[hit] + dc[hit] * (hits.t[hit] - 1e-3)[:, None]
-    di = rng.normal(size=oc.shape).astype(np.float32)
-    di /= np.linalg.norm(di, axis=1, keepdims=True)
-    ray_sets = {"coherent": (oc, dc), "incoherent": (oi, di)}
+    sets = ray_sets(tree, width, height)
 
     # anchors
     from embreex import rtcore_scene
@@ -319,7 +326,7 @@ def main(argv=None) -> dict:
 
     figures, table = {}, []
     scaling, scaling_cpu, scaling_projected = [], [], []
-    for name, (o, d) in ray_sets.items():
+    for name, (o, d) in sets.items():
         say(f"{name} rays")
         n = len(o)
         rates, cpu_rates, paired = measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts,
@@ -415,9 +422,9 @@ def main(argv=None) -> dict:
     print(f"thread_scaling (2 threads / 1, worse of the two) {figures['thread_scaling']:.2f}; "
           f"CPU-bound (Σ thread CPU / busiest thread) {figures['thread_scaling_cpu_bound']:.2f}; "
           "one chunk per thread: " + ", ".join(
-              f"{k} {figures[k]['thread_scaling_cpu_bound_one_chunk_per_thread']:.2f}" for k in ray_sets))
+              f"{k} {figures[k]['thread_scaling_cpu_bound_one_chunk_per_thread']:.2f}" for k in sets))
     print("CPU cost per ray, 1 thread / 2 threads: " + ", ".join(
-        f"{k} {figures[k]['thread_cpu_efficiency']:.2f}" for k in ray_sets)
+        f"{k} {figures[k]['thread_cpu_efficiency']:.2f}" for k in sets)
         + f"; projected 2-thread speed-up on an idle machine {figures['thread_scaling_projected']:.2f}")
     print(f"agreement with Embree: coherent {figures['coherent']['agreement_with_embree']:.6f}, "
           f"incoherent {figures['incoherent']['agreement_with_embree']:.6f}")

@@ -42,7 +42,7 @@ from serenity.io.results import write_results
 from serenity.scene.procedural import lumpy_mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_kdtree import camera_rays  # noqa: E402
+from bench_kdtree import ray_sets  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -92,14 +92,7 @@ def main(argv=None) -> dict:
             mod = load_version(git_rev, Path(tmp), k)
             tree = mod.KdTree.build(v, f, config=cfg, cache=False, progress=False)
             versions.append((rev, mod, tree, query))
-        oc, dc = camera_rays(width, height)
-        hits = versions[0][2].intersect(oc, dc, device="cpu")
-        rng = np.random.default_rng(0)
-        oi = oc.copy()
-        oi[hits.hit] = oc[hits.hit] + dc[hits.hit] * (hits.t[hits.hit] - 1e-3)[:, None]
-        di = rng.normal(size=oc.shape).astype(np.float32)
-        di /= np.linalg.norm(di, axis=1, keepdims=True)
-        sets = {"coherent": (oc, dc), "incoherent": (oi, di)}
+        sets = ray_sets(versions[0][2], width, height)
         ref, agreement = {}, {}
         for k, (_, _, tree, query) in enumerate(versions):  # also the warm-up (compile, first touch)
             for s, (o, d) in sets.items():

@@ -38,7 +38,7 @@ from serenity.io.results import write_results
 from serenity.scene.procedural import lumpy_mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_kdtree import camera_rays  # noqa: E402
+from bench_kdtree import ray_sets  # noqa: E402
 from bench_kdtree_steps import module_from_source  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -216,19 +216,14 @@ def main(argv=None) -> dict:
             tree = mod.KdTree.build(v, f, config=cfg, cache=False, progress=False)
             real = KdTree(tree.vertices, tree.faces, {"node_head": tree.node_head, "node_split": tree.node_split,
                                                       "prims": tree.prims, "box": tree.box}, tree.stats)
-            oc, dc = camera_rays(width, height)
-            h = real.intersect(oc, dc, device="cpu")
-            rng = np.random.default_rng(0)
-            oi = oc.copy()
-            oi[h.hit] = oc[h.hit] + dc[h.hit] * (h.t[h.hit] - 1e-3)[:, None]
-            di = rng.normal(size=oc.shape).astype(np.float32)
-            di /= np.linalg.norm(di, axis=1, keepdims=True)
+            sets = ray_sets(real, width, height)
+            rng = np.random.default_rng(1)  # the rope model's sample
             st = tree.stats
             row = {"config": spec or "defaults", "nodes": st.nodes, "leaves": st.leaves,
                    "empty_leaves": st.empty_leaves, "references": st.references, "depth": st.depth,
                    "references_per_non_empty_leaf": st.references / max(1, st.leaves - st.empty_leaves),
                    "node_mib": st.nodes * 8 / 2**20, "reference_mib": len(tree.prims) * 40 / 2**20}
-            for name, (o, d) in {"coherent": (oc, dc), "incoherent": (oi, di)}.items():
+            for name, (o, d) in sets.items():
                 c = tree.intersect(o, d, device="cpu", rays_per_thread=1)  # trace_kd, which holds the counters
                 ref = real.intersect(o, d, device="cpu")
                 if not (np.array_equal(c.prim, ref.prim) and np.array_equal(c.t, ref.t)):

@@ -31,15 +31,13 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
-
 from serenity.device import init_warp
 from serenity.io.results import machine_info, write_results
 from serenity.kernels.launch import cpu_threads
 from serenity.scene.procedural import lumpy_mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_kdtree import camera_rays  # noqa: E402
+from bench_kdtree import ray_sets  # noqa: E402
 
 #: the kernels that are the traversal itself
 TRACE_KERNELS = ("trace_rays", "intersect_rays")
@@ -128,14 +126,7 @@ def main(argv=None) -> dict:
     width, height = (int(x) for x in args.size.lower().split("x"))
     v, f = lumpy_mesh(args.subdivisions)
     tree = kd.KdTree.build(v, f, progress=True)
-    oc, dc = camera_rays(width, height)
-    h = tree.intersect(oc, dc, device="cpu")
-    rng = np.random.default_rng(0)
-    oi = oc.copy()
-    oi[h.hit] = oc[h.hit] + dc[h.hit] * (h.t[h.hit] - 1e-3)[:, None]
-    di = rng.normal(size=oc.shape).astype(np.float32)
-    di /= np.linalg.norm(di, axis=1, keepdims=True)
-    sets = {"coherent": (oc, dc), "incoherent": (oi, di)}
+    sets = ray_sets(tree, width, height)
     current: dict = defaultdict(float)
     instrument(kd, current)
     thread_counts = sorted({1, cpu_threads()})
