@@ -42,6 +42,8 @@ from bench_kdtree import ray_sets  # noqa: E402
 from bench_kdtree_steps import module_from_source  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
+#: a rope walk that passes more leaves than this has lost its way (a bug in the model): stop
+MAX_ROPE_LEAVES = 100_000
 
 # (old, new): counters in trace_kd; u carries inner steps + pops / 1000, v leaves * 1000 + triangles
 SUBSTITUTIONS = [
@@ -125,7 +127,11 @@ def rope_walk(o, d, t_end, tree_arrays, start_node: int):
     t_out = float(np.min(np.where(inv != 0, np.maximum(ta, tb), np.inf)))
     steps = leaves = non_empty = 0
     node, t = start_node, t_in
-    while t_in <= t_out:
+    if t_in > t_out:  # misses the root box
+        return steps, leaves, non_empty
+    while True:
+        if leaves > MAX_ROPE_LEAVES:
+            raise SystemExit(f"kdtree_counts: a rope walk passed {MAX_ROPE_LEAVES} leaves (o={o}, d={d})")
         while (head[node] & 3) != 3:
             steps += 1
             a, c, s = head[node] & 3, head[node] >> 2, split[node]
@@ -163,8 +169,9 @@ def entry_node(cell_lo, cell_hi, head, split) -> int:
     return node
 
 
-def rope_model(tree, o, d, t_hit, inner_steps, non_empty, sample, grid: int) -> dict:
-    """The rope walk of ``sample`` (ray indices) against the stack traversal's counted steps."""
+def rope_tables(tree) -> tuple:
+    """What :func:`rope_walk` reads of ``tree`` (a ``KdTree``): nodes, splits, each leaf's triangle
+    count, the boxes and ropes, and the padded root box the traversal clips rays to."""
     data = tree.device_data("cpu")
     lo = np.array([data.box_lo[i] for i in range(3)], np.float32)
     hi = np.array([data.box_hi[i] for i in range(3)], np.float32)
@@ -173,8 +180,14 @@ def rope_model(tree, o, d, t_hit, inner_steps, non_empty, sample, grid: int) -> 
     leaf = (head & 3) == 3
     count = np.where(leaf, tree.prims[np.where(leaf, head >> 2, 0)], 0)
     blo, bhi, ropes = node_boxes_and_ropes(head, split, lo, hi)
-    arrays = (head, split, count, blo, bhi, ropes, lo.astype(np.float64), hi.astype(np.float64))
-    ext = (hi - lo).astype(np.float64)
+    return head, split, count, blo, bhi, ropes, lo.astype(np.float64), hi.astype(np.float64)
+
+
+def rope_model(tables: tuple, o, d, t_hit, inner_steps, non_empty, sample, grid: int) -> dict:
+    """The rope walk of ``sample`` (ray indices) on :func:`rope_tables` against the stack
+    traversal's counted steps."""
+    head, split, lo, hi = tables[0], tables[1], tables[6], tables[7]
+    ext = hi - lo
     out = {"rays": len(sample), "stack": {"inner_steps": float(inner_steps[sample].mean()),
                                           "non_empty_leaves": float(non_empty[sample].mean())}}
     for name in ("ropes_from_root", f"ropes_from_grid_{grid}"):
@@ -185,7 +198,7 @@ def rope_model(tree, o, d, t_hit, inner_steps, non_empty, sample, grid: int) -> 
             if name != "ropes_from_root" and np.all((oi >= lo) & (oi <= hi)):
                 cell = np.clip(np.floor((oi - lo) / ext * grid), 0, grid - 1)
                 start = entry_node(lo + cell * ext / grid, lo + (cell + 1) * ext / grid, head, split)
-            walks.append(rope_walk(oi, di, float(t_hit[i]), arrays, start))
+            walks.append(rope_walk(oi, di, float(t_hit[i]), tables, start))
         w = np.array(walks, np.float64)
         out[name] = {"descent_steps": float(w[:, 0].mean()), "leaves_entered": float(w[:, 1].mean()),
                      "non_empty_leaves": float(w[:, 2].mean()),
@@ -218,6 +231,7 @@ def main(argv=None) -> dict:
                                                       "prims": tree.prims, "box": tree.box}, tree.stats)
             sets = ray_sets(real, width, height)
             rng = np.random.default_rng(1)  # the rope model's sample
+            tables = rope_tables(real) if args.rope_sample > 0 else None
             st = tree.stats
             row = {"config": spec or "defaults", "nodes": st.nodes, "leaves": st.leaves,
                    "empty_leaves": st.empty_leaves, "references": st.references, "depth": st.depth,
@@ -239,7 +253,7 @@ def main(argv=None) -> dict:
                       f"{leaves.mean():4.2f}, triangle tests {tris.mean():4.2f}, pops {pops.mean():4.2f}", flush=True)
                 if args.rope_sample > 0:
                     sample = np.sort(rng.choice(len(o), min(args.rope_sample, len(o)), replace=False))
-                    model = rope_model(real, o, d, ref.t, inner, leaves, sample, args.rope_grid)
+                    model = rope_model(tables, o, d, ref.t, inner, leaves, sample, args.rope_grid)
                     row[name]["rope_model"] = model
                     for key, m in model.items():
                         if key.startswith("ropes"):
