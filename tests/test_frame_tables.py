@@ -9,8 +9,8 @@ ROOT = Path(__file__).resolve().parent.parent
 SCRIPT = ROOT / "benchmarks" / "frame_tables.py"
 
 
-def _run(*args: str) -> str:
-    out = subprocess.run([sys.executable, str(SCRIPT), *args], capture_output=True, text=True, cwd=ROOT,
+def _run(*args: str, script: Path = SCRIPT) -> str:
+    out = subprocess.run([sys.executable, str(script), *args], capture_output=True, text=True, cwd=ROOT,
                          timeout=120)
     assert out.returncode == 0, out.stderr
     return out.stdout
@@ -35,10 +35,7 @@ def test_readme_render_block_is_the_committed_run():
 def test_readme_kdtree_phases_table_is_the_committed_run():
     """The kd-tree section's table of one query's phases is ``kdtree_phases.py --table`` of the
     committed JSON."""
-    out = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "kdtree_phases.py"), "--table",
-                          str(ROOT / "benchmarks" / "results" / "kdtree_phases.json")],
-                         capture_output=True, text=True, cwd=ROOT, timeout=120)
-    assert out.returncode == 0, out.stderr
-    table = out.stdout.strip()
+    table = _run("--table", str(ROOT / "benchmarks" / "results" / "kdtree_phases.json"),
+                 script=ROOT / "benchmarks" / "kdtree_phases.py").strip()
     assert table.startswith("| phase | incoherent, 1 thread")
     assert table in (ROOT / "README.md").read_text(), "README's kd-tree phases table differs from kdtree_phases.json"
