@@ -82,6 +82,22 @@ slots as a loop instead of unrolled, the push as a branch, the pop after an empt
 branches (it lengthens every step's chain), two steps per turn, the slots' rays far apart, a
 float32 pre-reject in the leaves, one ray per kernel thread in a loop of several.
 
+Packets (CPU, batches in a coherent order: :func:`trace_packets_kernel`; Wald's thesis traced
+SSE packets of four rays). A kernel thread traces ``PACKET_LANES`` consecutive rays together: the
+packet walks the tree once for all of them, one node's step for every lane is a few SIMD
+instructions (:func:`packet_step`, a native snippet in clang's vector extensions, since Warp's CPU
+code is scalar), lane masks say which lanes go to each child, the second child's lanes keep their
+intervals on the packet's stack, and a leaf's triangles are tested lane by lane
+(:func:`intersect_leaf`). Each lane keeps trace_kd's own interval, best hit, pushes and pops, and
+the packet visits a node's children in the order of its lanes' direction sign on the node's axis,
+which is the order of every lane that visits both (a packet whose lanes head into different
+octants is traced once per octant, with those lanes), so every ray visits trace_kd's nodes and
+triangles in trace_kd's order: the same hits, bit for bit (tests). A node's load, step and
+branches are shared by the lanes that visit it: many on camera rays, few on reordered incoherent
+rays, where packets were measured no faster than the interleaved kernel, so a batch is traced in
+packets only when :func:`batch_is_coherent` finds it coherent (README, "The kd-tree ray tracer",
+round 28).
+
 On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
 ``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
 
@@ -1032,6 +1048,306 @@ def trace_rays_kernel(rays: int, any_hit: bool):
 
 
 # ----------------------------------------------------------------------------------------------
+# packets (CPU, batches in a coherent order)
+# ----------------------------------------------------------------------------------------------
+
+#: rays per packet (module docstring, "Packets"): the lanes of one SIMD node step, and the bits of
+#: the lane masks (an int32 holds them)
+PACKET_LANES = 16
+#: a batch in the caller's order is traced in packets when it has at least this many rays and is
+#: coherent (``sample_key_changes``: the same test as ``ray_order``'s; below it, one ray per thread)
+PACKET_MIN_RAYS = 4 * PACKET_LANES
+# a packet's scratch (float32 per lane, per worker thread): origin and inverse direction per axis,
+# interval tolerance, current interval (t0, t1), best hit t, then a (t0, t1) pair per stack level
+_PK_O = 0
+_PK_IA = 3 * PACKET_LANES
+_PK_TE = 6 * PACKET_LANES
+_PK_T0 = 7 * PACKET_LANES
+_PK_T1 = 8 * PACKET_LANES
+_PK_BT = 9 * PACKET_LANES
+_PK_STACK = 10 * PACKET_LANES
+PACKET_SCRATCH = _PK_STACK + 2 * STACK_SIZE * PACKET_LANES  # floats per worker
+_PK_ALL = wp.constant(wp.int32((1 << PACKET_LANES) - 1))
+_PK_LANE_MASK = wp.constant(wp.int32(PACKET_LANES - 1))
+_PK_FIELD = (1 << 20) - 1  # one lane mask in packet_step's result
+assert PACKET_LANES & (PACKET_LANES - 1) == 0 and PACKET_LANES <= 16 and PACKET_SCRATCH % 16 == 0
+
+# The packet's lane arithmetic as native snippets: Warp's CPU code is scalar, and clang's vector
+# extensions (``ext_vector_type``; the module is compiled for the host CPU, so AVX2/AVX-512 where
+# there is one) do one node's step for all lanes in a few vector instructions. The arithmetic is
+# inner_step_flat's, lane by lane, in the same float32 operations (no contraction: the module's
+# ``fuse_fp`` is off), so every lane makes trace_kd's choices. CPU only (the CUDA branch is never
+# launched: CUDA traces one ray per thread; it exists so that the module compiles there).
+_PK_VEC = f"""
+typedef float pk_f __attribute__((ext_vector_type({PACKET_LANES})));
+typedef bool pk_b __attribute__((ext_vector_type({PACKET_LANES})));
+#define PK_LD(off) ({{ pk_f v_; __builtin_memcpy(&v_, &s.data[base + (off)], sizeof(pk_f)); v_; }})
+#define PK_ST(off, v) do {{ pk_f w_ = (v); __builtin_memcpy(&s.data[base + (off)], &w_, sizeof(pk_f)); }} while (0)
+#define PK_MASK(c) ({{ pk_b b_ = __builtin_convertvector((c), pk_b); unsigned int r_ = 0; \\
+    __builtin_memcpy(&r_, &b_, sizeof(b_)); (long long)r_; }})
+"""
+_PK_VEC_END = "\n#undef PK_LD\n#undef PK_ST\n#undef PK_MASK\n"
+
+
+@wp.func_native(f"""
+#if defined(__CUDA_ARCH__)
+return 0;
+#else
+{_PK_VEC}
+pk_f o = PK_LD({_PK_O} + axis * {PACKET_LANES});
+pk_f ia = PK_LD({_PK_IA} + axis * {PACKET_LANES});
+pk_f te = PK_LD({_PK_TE});
+pk_f t0 = PK_LD({_PK_T0});
+pk_f t1 = PK_LD({_PK_T1});
+pk_f bt = PK_LD({_PK_BT});
+pk_f ts = (split - o) * ia;
+pk_f tn = ts + te;
+pk_f tf = ts - te;
+auto near_only = (ts <= 0.0f) | (ts > t1 + te);
+auto far_only = ~near_only & (ts < t0 - te);
+auto both = ~(near_only | far_only);
+float sgn = a_side ? -1.0f : 1.0f;
+auto origin_b = (o - split) * sgn >= 0.0f;
+auto go_a = (near_only & ~origin_b) | both;
+auto go_b = ~go_a | both;
+pk_f a_t1 = (both & (tn < t1)) ? tn : t1;
+pk_f b_t0 = (both & (tf > t0)) ? tf : t0;
+PK_ST({_PK_STACK} + level * {2 * PACKET_LANES}, b_t0);
+PK_ST({_PK_STACK} + level * {2 * PACKET_LANES} + {PACKET_LANES}, t1);
+PK_ST({_PK_T1}, a_t1);
+pk_f first_t1 = go_a ? a_t1 : t1;
+long long m = PK_MASK(go_a) | (PK_MASK(go_b) << 20) | (PK_MASK(bt <= first_t1) << 40);
+{_PK_VEC_END}
+return m;
+#endif
+""")
+def packet_step(s: wp.array(dtype=float), base: int, axis: int, split: float, a_side: int, level: int) -> wp.int64:
+    """One inner node's step for a packet's lanes (scratch ``s`` from ``base``): each lane's
+    :func:`inner_step_flat` on the node's ``axis`` and ``split``, the packet's first child being the
+    left one (``a_side`` 0) or the right one (1). Writes the second child's intervals (t0, t1) at stack
+    ``level`` and the first child's t1 as the lanes' current one; returns three lane masks, bits 0,
+    20 and 40 on: the lanes whose next node is the first child, those that go to the second child
+    (next or pushed), and those whose best hit lies within their next node's interval (t ≤ t1)."""
+    ...
+
+
+@wp.func_native(f"""
+#if defined(__CUDA_ARCH__)
+return 0;
+#else
+{_PK_VEC}
+pk_f t0 = PK_LD({_PK_STACK} + level * {2 * PACKET_LANES});
+pk_f t1 = PK_LD({_PK_STACK} + level * {2 * PACKET_LANES} + {PACKET_LANES});
+pk_f bt = PK_LD({_PK_BT});
+PK_ST({_PK_T0}, t0);
+PK_ST({_PK_T1}, t1);
+int m = (int)PK_MASK(t0 <= bt);
+{_PK_VEC_END}
+return m;
+#endif
+""")
+def packet_pop(s: wp.array(dtype=float), base: int, level: int) -> int:
+    """The lanes' intervals of stack ``level`` made current; returns the mask of lanes whose entry
+    still lies before their best hit (t0 ≤ best t: trace_kd's pop test)."""
+    ...
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+return __ffs(x) - 1;
+#else
+return __builtin_ctz((unsigned)x);
+#endif
+""")
+def lowest_lane(x: int) -> int:
+    """The index of the lowest set bit of a non-zero lane mask."""
+    ...
+
+
+@kernel_factory(any_hit=(False, True))
+def trace_packets_kernel(any_hit: bool):
+    """The CPU query kernel for batches in a coherent order (module docstring, "Packets"): kernel
+    thread g traces rays g·PACKET_LANES … as one packet through the tree, the lanes' node steps as
+    SIMD (:func:`packet_step`), a leaf's triangles lane by lane (:func:`intersect_leaf`), each lane
+    with its own interval, best hit and entries on the packet's stack, so that every ray visits the
+    nodes and triangles :func:`trace_kd` visits, in its order: the same hits, bit for bit. A packet
+    whose lanes head into different octants is traced once per octant, with those lanes.
+    ``scratch``: ``PACKET_SCRATCH`` floats per worker thread (``launch(..., worker_arg=True)``)."""
+    vec_i = wp.types.vector(length=PACKET_LANES, dtype=wp.int32)
+    vec_f = wp.types.vector(length=PACKET_LANES, dtype=wp.float32)
+    stack_v = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def trace_packets(
+        # inputs
+        tree: KdTreeData,
+        origins: wp.array(dtype=wp.vec3),
+        directions: wp.array(dtype=wp.vec3),
+        tmin: float,
+        tmax: wp.array(dtype=float),
+        n: int,
+        scratch: wp.array(dtype=float),
+        # outputs
+        hit_t: wp.array(dtype=float),
+        hit_prim: wp.array(dtype=wp.int32),
+        hit_u: wp.array(dtype=float),
+        hit_v: wp.array(dtype=float),
+        occluded: wp.array(dtype=wp.int32),
+        worker: int,
+        offset: int,
+    ):
+        first = (wp.tid() + offset) * PACKET_LANES
+        count = wp.min(PACKET_LANES, n - first)
+        base = worker * PACKET_SCRATCH
+        prim = vec_i()
+        hu = vec_f()
+        hv = vec_f()
+        octant = vec_i()
+        kxs = vec_i()
+        kys = vec_i()
+        kzs = vec_i()
+        sxs = vec_f()
+        sys_ = vec_f()
+        szs = vec_f()
+        t0s = vec_f()
+        t1s = vec_f()
+        st_node = stack_v()
+        st_lanes = stack_v()
+        tlo = wp.max(tmin, 0.0)
+        live = int(0)  # lanes with a ray to trace
+        octants = int(0)  # the octants among them (bit per octant)
+        for r in range(PACKET_LANES):
+            if r < count:
+                i = first + r
+                o = origins[i]
+                d = directions[i]
+                tm = tmax[i]
+                kx, ky, kz, sx, sy, sz, inv, t0, t1, teps, _tlo, done = start_ray(tree, o, d, tmin, tm)
+                kxs[r] = kx
+                kys[r] = ky
+                kzs[r] = kz
+                sxs[r] = sx
+                sys_[r] = sy
+                szs[r] = sz
+                t0s[r] = t0
+                t1s[r] = t1
+                oc = int(0)
+                for a in range(3):
+                    # the packet's child order on axis a: 1 = the right child first, as the ray's
+                    # direction says; a ray parallel to the axis (inv 0) goes to its origin's side,
+                    # on the plane first to where d points (trace_kd), and its inverse becomes +-inf:
+                    # ts is then +-inf off the plane (its origin's side) and NaN on it (both sides)
+                    side = wp.where(inv[a] != 0.0, wp.where(inv[a] < 0.0, 1, 0), wp.where(d[a] > 0.0, 1, 0))
+                    oc = oc | (side << a)
+                    scratch[base + _PK_O + a * PACKET_LANES + r] = o[a]
+                    scratch[base + _PK_IA + a * PACKET_LANES + r] = wp.where(
+                        inv[a] != 0.0, inv[a], wp.where(side != 0, -_INF, _INF))
+                scratch[base + _PK_TE + r] = teps
+                scratch[base + _PK_BT + r] = tm
+                prim[r] = -1
+                hu[r] = 0.0
+                hv[r] = 0.0
+                octant[r] = oc
+                if not done:
+                    live = live | (1 << r)
+                    octants = octants | (1 << oc)
+        hits = int(0)  # lanes with a hit
+        finished = int(0)  # lanes whose search is over
+        oc = int(0)
+        while octants != 0:
+            if (octants & 1) != 0:
+                lanes = int(0)
+                for r in range(PACKET_LANES):
+                    if r < count:
+                        if octant[r] == oc:
+                            lanes = lanes | (((live >> r) & 1) << r)
+                            scratch[base + _PK_T0 + r] = t0s[r]
+                            scratch[base + _PK_T1 + r] = t1s[r]
+                node = int(0)
+                sp = int(0)
+                tracing = int(1)
+                while tracing != 0:
+                    head = node_head(tree.nodes, node)
+                    axis = head & 3
+                    descend = int(0)
+                    if axis != 3:
+                        a_side = (oc >> axis) & 1
+                        m = packet_step(scratch, base, axis, node_split(tree.nodes, node), a_side, sp & _STACK_MASK)
+                        to_a = wp.int32(m & wp.int64(_PK_FIELD)) & lanes
+                        to_b = wp.int32((m >> wp.int64(20)) & wp.int64(_PK_FIELD)) & lanes
+                        within = wp.int32((m >> wp.int64(40)) & wp.int64(_PK_FIELD))
+                        child = head >> 4
+                        empty_a = (head >> (2 + a_side)) & 1
+                        empty_b = (head >> (3 - a_side)) & 1
+                        # lanes whose next node is an empty leaf: trace_kd's end-of-leaf test there
+                        at_empty = (to_a & (0 - empty_a)) | (lanes & (to_a ^ _PK_ALL) & (0 - empty_b))
+                        if wp.static(any_hit):
+                            finished = finished | (at_empty & hits)
+                        else:
+                            finished = finished | (at_empty & hits & within)
+                        pushed = to_b & ((empty_b ^ 1) * _PK_ALL)
+                        if pushed != 0:
+                            k = sp & _STACK_MASK
+                            st_node[k] = child + 1 - a_side
+                            st_lanes[k] = pushed
+                            sp += 1
+                        nxt = to_a & ((empty_a ^ 1) * _PK_ALL)
+                        if nxt != 0:
+                            node = child + a_side
+                            lanes = nxt
+                            descend = 1
+                    else:
+                        count_tris = int(node_split(tree.nodes, node))
+                        first_ref = head >> 2
+                        todo = lanes
+                        while todo != 0:
+                            r = lowest_lane(todo) & _PK_LANE_MASK
+                            todo = todo & (todo - 1)
+                            rp, rt, ru, rv = intersect_leaf(tree, first_ref, count_tris, origins[first + r], kxs[r],
+                                                            kys[r], kzs[r], sxs[r], sys_[r], szs[r], tlo,
+                                                            scratch[base + _PK_BT + r], prim[r], hu[r], hv[r],
+                                                            wp.static(any_hit))
+                            prim[r] = rp
+                            scratch[base + _PK_BT + r] = rt
+                            hu[r] = ru
+                            hv[r] = rv
+                            if rp >= 0:
+                                hits = hits | (1 << r)
+                                if wp.static(any_hit):
+                                    finished = finished | (1 << r)
+                                elif rt <= scratch[base + _PK_T1 + r]:
+                                    finished = finished | (1 << r)
+                    while descend == 0:
+                        if sp == 0:
+                            tracing = 0
+                            descend = 1
+                        else:
+                            sp -= 1
+                            k = sp & _STACK_MASK
+                            popped = st_lanes[k] & (finished ^ _PK_ALL)
+                            if popped != 0:
+                                popped = popped & packet_pop(scratch, base, k)
+                                if popped != 0:
+                                    node = st_node[k]
+                                    lanes = popped
+                                    descend = 1
+            octants = octants >> 1
+            oc += 1
+        for r in range(PACKET_LANES):
+            if r < count:
+                i = first + r
+                if wp.static(any_hit):
+                    occluded[i] = wp.where(prim[r] >= 0, 1, 0)
+                else:
+                    hit_prim[i] = prim[r]
+                    hit_t[i] = wp.where(prim[r] >= 0, scratch[base + _PK_BT + r], _INF)
+                    hit_u[i] = hu[r]
+                    hit_v[i] = hv[r]
+
+    return trace_packets
+
+
+# ----------------------------------------------------------------------------------------------
 # host
 # ----------------------------------------------------------------------------------------------
 
@@ -1073,20 +1389,28 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
     where the keys go (a grow-only buffer, :meth:`KdTree.scratch`), else a new array."""
     if (sort is False) or n < 2 or (sort is None and n < SORT_MIN_RAYS):
         return wp.empty(0, dtype=wp.int32, device=device)
+    if sort is None and batch_is_coherent(box_lo, box_hi, origins, directions, n, device):
+        return wp.empty(0, dtype=wp.int32, device=device)
     scale = sort_scale(box_lo, box_hi)
-    if sort is None:
-        m = min(SORT_SAMPLE_PAIRS, n - 1)
-        changes = wp.empty(m, dtype=wp.int32, device=device)
-        launch(sample_key_changes, m, [box_lo, scale, origins, directions, (n - 1) // m, changes], device=device,
-               threads=1)
-        if int(np.count_nonzero(changes.numpy())) * SORT_MIN_RUN < m:
-            return wp.empty(0, dtype=wp.int32, device=device)
     keys = scratch_buffer(scratch, "keys", n, wp.uint16, device)
     launch(sort_keys, n, [box_lo, scale, origins, directions, keys], device=device, threads=threads)
     if device.startswith("cpu"):
         return counting_order(keys, n, threads, scratch)
     order = np.argsort(keys.numpy(), kind="stable").astype(np.int32)
     return wp.array(order, dtype=wp.int32, device=device)
+
+
+def batch_is_coherent(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: wp.array, n: int,
+                      device: str) -> bool:
+    """Are ``n`` rays (n ≥ 2) already in a coherent order? True when :func:`ray_sort_key` changes, on
+    ``SORT_SAMPLE_PAIRS`` evenly spaced pairs of consecutive rays, less often than every
+    ``SORT_MIN_RUN`` rays (camera rays, reflections of a smooth surface in pixel order): such a batch
+    is not reordered (:func:`ray_order`) and is traced in packets on the CPU (``_launch_query``)."""
+    m = min(SORT_SAMPLE_PAIRS, n - 1)
+    changes = wp.empty(m, dtype=wp.int32, device=device)
+    launch(sample_key_changes, m, [box_lo, sort_scale(box_lo, box_hi), origins, directions, (n - 1) // m, changes],
+           device=device, threads=1)
+    return int(np.count_nonzero(changes.numpy())) * SORT_MIN_RUN < m
 
 
 def gather_in_order(order: wp.array, arrays: list, device: str, threads: int | None = None,
@@ -1131,33 +1455,42 @@ def _slot_rays(n: int, slots: int, threads: int | None) -> int:
 
 
 def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs: list, device: str,
-                  threads: int | None, rays_per_thread: int | None, scratch: Staging | None = None) -> None:
+                  threads: int | None, rays_per_thread: int | None, scratch: Staging | None = None,
+                  coherent: bool = False) -> None:
     """Launch the closest-hit (``any_hit=False``; outputs t, prim, u, v) or occlusion query (outputs
     [occluded]) over ``n`` rays ``inputs`` (tree, origins, directions, tmin, tmax) given in the trace
     order ``order`` (empty: the caller's; else ray i is the caller's ray ``order[i]``: the results
     are traced into scratch arrays in that order and scattered back by :func:`scatter_in_order`).
     On the CPU a reordered batch goes to the interleaved kernel with ``CPU_RAYS_PER_THREAD`` slots
-    (:func:`trace_rays_kernel`), a batch in the caller's order (coherent: camera rays) to one ray per
-    kernel thread (``intersect_rays`` / ``occlude_rays``:
-    faster there, module docstring); ``rays_per_thread`` forces 1 (one ray) or a slot count of
-    ``INTERLEAVE_FACTORS``. CUDA traces one ray per thread (its parallelism is threads). ``scratch``:
-    where the reordered results are traced (:meth:`KdTree.scratch`), else new arrays."""
+    (:func:`trace_rays_kernel`), a ``coherent`` batch in the caller's order (camera rays:
+    :func:`batch_is_coherent`) to packets of ``PACKET_LANES`` rays (:func:`trace_packets_kernel`),
+    any other batch to one ray per kernel thread (``intersect_rays`` / ``occlude_rays``; module
+    docstring); ``rays_per_thread`` forces 1 (one ray), a slot count of ``INTERLEAVE_FACTORS`` or
+    ``PACKET_LANES`` (packets). CUDA traces one ray per thread (its parallelism is threads).
+    ``scratch``: where the reordered results are traced and the packets keep their lanes
+    (:meth:`KdTree.scratch`), else new arrays."""
     one_ray = occlude_rays if any_hit else intersect_rays
     on_cpu = device.startswith("cpu")
     reordered = order.shape[0] > 0
     k = rays_per_thread
     if k is None:
-        k = CPU_RAYS_PER_THREAD if on_cpu and reordered else 1
-    if k != 1 and k not in INTERLEAVE_FACTORS:
-        raise SerenityError(f"rays_per_thread={k}: 1 or one of {INTERLEAVE_FACTORS}")
+        k = (CPU_RAYS_PER_THREAD if reordered else PACKET_LANES if coherent else 1) if on_cpu else 1
+    if k != 1 and k not in INTERLEAVE_FACTORS and k != PACKET_LANES:
+        raise SerenityError(f"rays_per_thread={k}: 1, one of {INTERLEAVE_FACTORS} or {PACKET_LANES} (packets)")
     traced = buffers_like(outputs, "traced", device, scratch) if reordered else outputs
+    none_f = wp.empty(0, dtype=float, device=device)
+    none_i = wp.empty(0, dtype=wp.int32, device=device)
+    outs = [none_f, none_i, none_f, none_f, *traced] if any_hit else [*traced, none_i]
     if k == 1 or not on_cpu:
         launch(one_ray, n, [*inputs, *traced], device=device, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+    elif k == PACKET_LANES:
+        workers = threads or cpu_threads()
+        lanes = scratch_buffer(scratch, "packets", workers * PACKET_SCRATCH, float, device)
+        lanes.zero_()
+        launch(trace_packets_kernel(any_hit), -(-n // PACKET_LANES), [*inputs, n, lanes, *outs], device=device,
+               threads=threads, chunks_per_thread=CHUNKS_PER_THREAD, worker_arg=True)
     else:
         per = k * _slot_rays(n, k, threads)
-        none_f = wp.empty(0, dtype=float, device=device)
-        none_i = wp.empty(0, dtype=wp.int32, device=device)
-        outs = [none_f, none_i, none_f, none_f, *traced] if any_hit else [*traced, none_i]
         launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device,
                threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
     if reordered:
@@ -1282,28 +1615,35 @@ class KdTree:
         return o, d, tm
 
     def _query_inputs(self, o, d, tm, dev: str, tmin: float, sort: bool | None, threads: int | None,
-                      uniform_tmax: bool = False) -> tuple[list, wp.array]:
+                      uniform_tmax: bool = False) -> tuple[list, wp.array, bool]:
         """The query kernels' inputs (the tree, the rays in their traced order) and that order (empty:
         as given; else ray i of the kernel is the caller's ray ``order[i]``). ``uniform_tmax``: every
-        ray has the same tmax (a scalar was given), which then needs no reordering."""
+        ray has the same tmax (a scalar was given), which then needs no reordering. Third: whether a batch
+        left in its order is coherent (:func:`batch_is_coherent`; on the CPU it is traced in packets)."""
         data = self.device_data(dev)
         origins, directions, tmin, tmax = _ray_arrays(o, d, tm, dev, tmin)
         n = len(o)
         scratch = self.scratch(dev)
         order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads, scratch)
+        coherent = False
         if order.shape[0]:
             origins, directions = gather_in_order(order, [origins, directions], dev, threads, scratch)
             if not uniform_tmax:
                 (tmax,) = gather_in_order(order, [tmax], dev, threads, scratch)
-        return [data, origins, directions, tmin, tmax], order
+        elif dev.startswith("cpu") and n >= PACKET_MIN_RAYS:
+            # with sort=None, ray_order leaves a big batch in its order only when it found it coherent
+            coherent = (sort is None and n >= SORT_MIN_RAYS) or batch_is_coherent(
+                data.box_lo, data.box_hi, origins, directions, n, dev)
+        return [data, origins, directions, tmin, tmax], order, coherent
 
     def intersect(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
                   threads: int | None = None, sort: bool | None = None, rays_per_thread: int | None = None) -> Hits:
         """Closest hits of rays ``origins`` (N,3), ``directions`` (N,3) with tmin < t < tmax
         (scalar or (N,)); t in units of |direction|. ``sort``: trace the rays in the reordered
         order (:func:`ray_order`; None = for batches of ≥ ``SORT_MIN_RAYS``); ``rays_per_thread``:
-        1 (one ray per kernel thread) or a slot count of ``INTERLEAVE_FACTORS`` (interleaved rays,
-        CPU only; None = interleaved when reordered, ``_launch_query``). The results are the same
+        1 (one ray per kernel thread), a slot count of ``INTERLEAVE_FACTORS`` (interleaved rays) or
+        ``PACKET_LANES`` (packets), CPU only; None = interleaved when reordered, packets when
+        coherent, else one ray (``_launch_query``). The results are the same
         either way, in the caller's order."""
         dev = resolve_device(device)
         o, d, tm = self._rays(origins, directions, tmax)
@@ -1313,9 +1653,9 @@ class KdTree:
         out_u = wp.empty(n, dtype=float, device=dev)
         out_v = wp.empty(n, dtype=float, device=dev)
         if n:
-            args, order = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
+            args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
             _launch_query(False, n, args, order, [out_t, out_p, out_u, out_v], dev, threads, rays_per_thread,
-                          self.scratch(dev))
+                          self.scratch(dev), coherent)
         return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
@@ -1328,16 +1668,17 @@ class KdTree:
         n = len(o)
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
-            args, order = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
-            _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, self.scratch(dev))
+            args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
+            _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, self.scratch(dev), coherent)
         return out.numpy().astype(bool)
 
 
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS",
-           "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS", "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits",
-           "KdBuildConfig", "KdNode", "KdStats", "KdTree", "KdTreeData", "buffers_like", "cache_dir", "finite",
-           "gather_array", "gather_in_order", "inner_step_flat", "intersect_rays", "intersect_triangle",
-           "intersect_triangle_fixed", "leaf_hits", "node_head", "node_split", "occlude_rays", "origin_cell",
-           "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2", "sample_key_changes",
-           "scatter_array", "scatter_in_order", "setup_ray", "sort_keys", "sort_scale", "spread_bits", "start_ray",
-           "trace_kd", "trace_rays_kernel"]
+           "PACKET_LANES", "PACKET_MIN_RAYS", "PACKET_SCRATCH", "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS",
+           "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
+           "KdTreeData", "batch_is_coherent", "buffers_like", "cache_dir", "finite", "gather_array",
+           "gather_in_order", "inner_step_flat", "intersect_rays", "intersect_triangle", "intersect_triangle_fixed",
+           "leaf_hits", "lowest_lane", "node_head", "node_split", "occlude_rays", "origin_cell", "packet_pop",
+           "packet_step", "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2",
+           "sample_key_changes", "scatter_array", "scatter_in_order", "setup_ray", "sort_keys", "sort_scale",
+           "spread_bits", "start_ray", "trace_kd", "trace_packets_kernel", "trace_rays_kernel"]

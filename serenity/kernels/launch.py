@@ -80,7 +80,7 @@ def chunk_ranges(dim: int, threads: int, min_items: int = MIN_ITEMS_PER_THREAD) 
 
 
 def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None = None, start: int = 0,
-           chunks_per_thread: int = 1, min_items: int = MIN_ITEMS_PER_THREAD) -> None:
+           chunks_per_thread: int = 1, min_items: int = MIN_ITEMS_PER_THREAD, worker_arg: bool = False) -> None:
     """Launch ``kernel`` over ``[start, start + dim)``; the kernel's trailing ``offset: int`` is appended.
 
     On ``cpu`` the range is split over ``threads`` worker threads (default: all usable CPUs,
@@ -89,13 +89,21 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     whichever worker is free (module docstring). A thread gets at least ``min_items`` items (fewer
     threads when ``dim`` is small: ``MIN_CHEAP_ITEMS_PER_THREAD`` for cheap per-item kernels). On CUDA it
     is a single asynchronous launch, as ``wp.launch`` is.
+
+    ``worker_arg``: the kernel's trailing parameters are ``worker: int, offset: int``; ``worker`` is
+    the index (0 … threads − 1) of the worker thread running the chunk, so that a kernel can keep
+    per-worker scratch memory (no two chunks with the same index run at once; 0 on CUDA).
     """
     wp = init_warp()
     dim = int(dim)
     if dim <= 0:
         return
+
+    def args(worker: int, offset: int) -> list:
+        return [*inputs, worker, offset] if worker_arg else [*inputs, offset]
+
     if not str(device).startswith("cpu"):
-        wp.launch(kernel, dim=dim, inputs=[*inputs, int(start)], device=device)
+        wp.launch(kernel, dim=dim, inputs=args(0, int(start)), device=device)
         return
     workers = threads or cpu_threads()
     n_chunks = workers
@@ -103,7 +111,7 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
         n_chunks = max(workers, min(workers * int(chunks_per_thread), dim // MIN_ITEMS_PER_CHUNK))
     chunks = chunk_ranges(dim, n_chunks, min_items if chunks_per_thread <= 1 else MIN_ITEMS_PER_THREAD)
     if len(chunks) == 1:
-        wp.launch(kernel, dim=dim, inputs=[*inputs, int(start)], device=device)
+        wp.launch(kernel, dim=dim, inputs=args(0, int(start)), device=device)
         return
     # compile/load the module on this thread first so worker threads never race to build it
     kernel.module.load(wp.get_device(device))
@@ -111,18 +119,18 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     pool = _executor(workers)
     if workers == len(chunks):
         futures = [
-            pool.submit(wp.launch, kernel, dim=count, inputs=[*inputs, int(start) + first], device=device)
-            for first, count in chunks
+            pool.submit(wp.launch, kernel, dim=count, inputs=args(k, int(start) + first), device=device)
+            for k, (first, count) in enumerate(chunks)
         ]
     else:
         ticket = itertools.count()  # next() is atomic under the GIL: each chunk goes to one worker
 
-        def work() -> None:
+        def work(worker: int) -> None:
             while (k := next(ticket)) < len(chunks):
                 first, count = chunks[k]
-                wp.launch(kernel, dim=count, inputs=[*inputs, int(start) + first], device=device)
+                wp.launch(kernel, dim=count, inputs=args(worker, int(start) + first), device=device)
 
-        futures = [pool.submit(work) for _ in range(workers)]
+        futures = [pool.submit(work, w) for w in range(workers)]
     for f in futures:
         f.result()
 

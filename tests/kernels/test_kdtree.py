@@ -14,6 +14,7 @@ from serenity.errors import SerenityError
 from serenity.kernels.kdtree import (
     CPU_RAYS_PER_THREAD,
     INTERLEAVE_FACTORS,
+    PACKET_LANES,
     SORT_MIN_RAYS,
     SORT_ORIGIN_BITS,
     TRACE_MODULE_OPTIONS,
@@ -305,12 +306,12 @@ def _edge_case_rays(rng, tree, n):
     return o, d, tmax
 
 
-def test_interleaved_traversal_gives_the_one_ray_bits(device):
-    """The CPU's interleaved kernels (every slot count shipped, closest and any hit, reordered or
-    not, one thread or several) give the one-ray traversal's hits bit for bit, on rays that hit
-    split planes, run inside them, are axis-parallel or invalid, on a soup, a closed mesh and a
-    flat grid of coplanar triangles (on CUDA ``rays_per_thread`` is accepted and one ray per thread
-    is traced)."""
+def test_interleaved_and_packet_traversals_give_the_one_ray_bits(device):
+    """The CPU's interleaved kernels (every slot count shipped) and packets (``PACKET_LANES``), closest
+    and any hit, reordered or not, one thread or several, give the one-ray traversal's hits bit for
+    bit, on rays that hit split planes, run inside them, are axis-parallel or invalid, on a soup, a
+    closed mesh and a flat grid of coplanar triangles; random rays put every octant into one packet
+    (on CUDA ``rays_per_thread`` is accepted and one ray per thread is traced)."""
     rng = np.random.default_rng(21)
     torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=40, minor_sections=20)
     grid = trimesh.creation.box((4.0, 4.0, 4.0)).subdivide().subdivide()
@@ -324,8 +325,8 @@ def test_interleaved_traversal_gives_the_one_ray_bits(device):
         one = tree.intersect(o, d, tmax, device=device, rays_per_thread=1, sort=False)
         occ = tree.occluded(o, d, tmax, device=device, rays_per_thread=1, sort=False)
         assert 0.05 < one.hit.mean() < 0.95
-        for k in INTERLEAVE_FACTORS:
-            for sort, threads in ((False, 1), (True, 1), (True, 3)):
+        for k in (*INTERLEAVE_FACTORS, PACKET_LANES):
+            for sort, threads in ((False, 1), (True, 1), (True, 3), (False, 3)):
                 kw = dict(device=device, rays_per_thread=k, sort=sort, threads=threads)
                 assert _hits_equal(tree.intersect(o, d, tmax, **kw), one), (k, sort, threads)
                 assert np.array_equal(tree.occluded(o, d, tmax, **kw), occ), (k, sort, threads)
@@ -413,10 +414,11 @@ def test_branch_free_step_makes_trace_kd_s_choices():
     assert ref[:, 2].mean() > 0.05 and (ref[:, 0] != (head >> 4)).mean() > 0.1  # pushes, right children
     assert np.array_equal(flat, ref)
 
-def test_big_incoherent_batches_are_traced_interleaved_and_coherent_ones_one_by_one(monkeypatch):
+def test_default_cpu_kernels_interleave_incoherent_batches_and_packet_coherent_ones(monkeypatch):
     """The default CPU query: a reordered (incoherent) batch goes to the interleaved kernel with
-    ``CPU_RAYS_PER_THREAD`` slots and its results to the scatter, camera rays (left in their order)
-    to one ray per thread."""
+    ``CPU_RAYS_PER_THREAD`` slots and its results to the scatter, camera rays (left in their order,
+    coherent) to packets, with the one-ray kernel's bits, and a small batch of random rays (not
+    reordered, not coherent) to one ray per thread."""
     import serenity.kernels.kdtree as K
 
     v, f = lumpy_mesh(3)
@@ -426,7 +428,14 @@ def test_big_incoherent_batches_are_traced_interleaved_and_coherent_ones_one_by_
     monkeypatch.setattr(K, "launch", lambda kernel, *a, **kw: (launched.append(kernel), original(kernel, *a, **kw)))
     oc, dc = camera_rays(320, 180, position=(0.0, 0.6, 3.5))
     o2, d2 = random_rays(np.random.default_rng(22), SORT_MIN_RAYS + 1000, extent=2.0)
-    tree.intersect(oc, dc, device="cpu")
+    packets = tree.intersect(oc, dc, device="cpu")
+    assert launched[-1] is K.trace_packets_kernel(False)
+    assert _hits_equal(packets, tree.intersect(oc, dc, device="cpu", rays_per_thread=1))
+    assert launched[-1] is K.intersect_rays
+    occluded = tree.occluded(oc, dc, 2.0, device="cpu")
+    assert launched[-1] is K.trace_packets_kernel(True)
+    assert np.array_equal(occluded, tree.occluded(oc, dc, 2.0, device="cpu", rays_per_thread=1))
+    tree.intersect(o2[:5000], d2[:5000], device="cpu")
     assert launched[-1] is K.intersect_rays
     # a reordered batch is traced in its order, then its results are scattered back in a pass of their own
     tree.intersect(o2, d2, device="cpu")

@@ -33,6 +33,11 @@ def _chunk_start(out: wp.array(dtype=wp.int32), offset: int):
     out[wp.tid() + offset] = offset
 
 
+@wp.kernel
+def _worker_and_chunk(out: wp.array(dtype=wp.vec2i), worker: int, offset: int):
+    out[wp.tid() + offset] = wp.vec2i(worker, offset)
+
+
 def test_launch_gives_each_thread_at_least_min_items():
     out = wp.zeros(10_000, dtype=wp.int32, device="cpu")
     launch(_chunk_start, 10_000, [out], device="cpu", threads=4, min_items=2_500)
@@ -128,3 +133,18 @@ def test_balanced_launch_covers_exactly_once_in_any_order():
     got = part.numpy()
     assert np.all(got[:7] == -1) and np.all(got[50_007:] == -1)
     assert np.array_equal(got[7:50_007], one.numpy()[7:50_007])
+
+
+def test_worker_arg_names_the_worker_thread_of_each_chunk():
+    """``worker_arg``: every chunk gets the index of the worker that runs it, below the thread
+    count (per-worker scratch memory relies on it), one index per chunk; 0 for a single chunk."""
+    n = 200_000
+    for threads, k in ((1, 1), (2, 1), (2, 16), (3, 5), (8, 64)):
+        out = wp.full(n, wp.vec2i(-1, -1), dtype=wp.vec2i, device="cpu")
+        launch(_worker_and_chunk, n, [out], device="cpu", threads=threads, chunks_per_thread=k, worker_arg=True)
+        got = out.numpy()
+        assert got[:, 0].min() >= 0 and got[:, 0].max() < threads, (threads, k)
+        for start in np.unique(got[:, 1]):
+            assert len(np.unique(got[got[:, 1] == start, 0])) == 1, (threads, k, start)
+        if threads == 1:
+            assert np.all(got[:, 0] == 0)
