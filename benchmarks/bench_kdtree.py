@@ -2,6 +2,7 @@
 
     python benchmarks/bench_kdtree.py --json FILE [--size 1280x720] [--subdivisions 6] [--repeats 11]
                                       [--build-sizes 10000,40000,160000,640000,1000000] [--charts PREFIX]
+    python benchmarks/bench_kdtree.py --table RUN.json [EARLIER.json ...]   # the README's table
 
 Scene: a displaced icosphere on a wavy terrain grid (``--subdivisions 6``: 164k triangles, 7: 655k).
 Rays (the same arrays for every tracer):
@@ -11,8 +12,9 @@ Rays (the same arrays for every tracer):
 Tracers: ours (:class:`serenity.kernels.kdtree.KdTree`, closest hit; the default call, which
 reorders incoherent batches before the launch — ``sort=None``, ``serenity.kernels.kdtree.ray_order``
 — with the sort, the gather and the write-back inside the timed call; ``reordered`` per ray set says
-whether it did, and ``rays_per_thread`` how many rays each kernel thread interleaves: a reordered
-batch is traced by the interleaved kernel, ``serenity.kernels.kdtree.trace_rays_kernel``),
+whether it did, and ``rays_per_thread`` how many rays each kernel thread traces at once: a reordered
+batch is traced by the interleaved kernel, ``serenity.kernels.kdtree.trace_rays_kernel``, a coherent
+one in the caller's order in packets, ``trace_packets_kernel``),
 Embree (``embreex``, closest hit, one ``run`` call over all rays) and Warp's BVH
 (``wp.mesh_query_ray``, SAH constructor; both take the rays as they come). Ours and Warp's run on
 1, 2, ... all threads (through ``serenity.kernels.launch``); Embree on 1 thread, and its calls
@@ -59,6 +61,7 @@ import math
 import os
 import platform
 import statistics
+import sys
 import threading
 import time
 from collections import defaultdict
@@ -68,7 +71,7 @@ import numpy as np
 
 from serenity.device import cpu_threads, init_warp
 from serenity.io.results import machine_info
-from serenity.kernels.kdtree import CPU_RAYS_PER_THREAD, KdTree, intersect_rays, ray_order
+from serenity.kernels.kdtree import CPU_RAYS_PER_THREAD, PACKET_LANES, KdTree, intersect_rays, ray_order
 from serenity.kernels.launch import launch
 from serenity.scene.procedural import lumpy_mesh
 
@@ -278,8 +281,75 @@ def save_charts(prefix: str, figures: dict, sweep: list[dict], thread_counts: li
     return paths
 
 
+#: goals of the README's table (issue 17): row → (threshold, the ray sets it is set for)
+GOALS = {"embree": (0.5, ("coherent", "incoherent")), "warp": (1.5, ("incoherent",)),
+         "scaling": (1.8, ("coherent", "incoherent"))}
+
+
+def _goal(key: str, per_set: dict[str, list[float]]) -> str:
+    """``≥ x``, then per ray set the goal is set for whether the runs meet it."""
+    threshold, names = GOALS[key]
+    parts = []
+    for name in names:
+        vals = per_set[name]
+        met = sum(v >= threshold for v in vals)
+        status = "met" if met == len(vals) else "not met" if met == 0 else f"met in {met} of {len(vals)} runs"
+        parts.append(f"{'camera rays' if name == 'coherent' else 'incoherent rays'} {status}")
+    return f"≥ {threshold} — " + ", ".join(parts)
+
+
+def markdown_table(runs: list[dict]) -> str:
+    """The README's table of ``runs`` (this script's JSONs, the first the main run): per figure each
+    run's value, separated by '; ', and the goal's status."""
+    sets = ("coherent", "incoherent")
+    fig = [r["figures"] for r in runs]
+
+    def per_set(fn) -> dict[str, list[float]]:
+        return {name: [fn(f, name) for f in fig] for name in sets}
+
+    def suffix(name: str) -> str:
+        return "" if name == "incoherent" else "_coherent"
+
+    rows = [
+        ("ours, Mrays/s, 1 thread", per_set(lambda f, n: f[n]["mrays_per_s"]["ours_1t"]), "{:.2f}", None),
+        ("ours / Embree, 1 thread each (paired wall time)",
+         per_set(lambda f, n: f["ratio_vs_embree_1t" + suffix(n)]), "{:.2f}", "embree"),
+        ("ours / Warp `wp.Mesh` BVH, 1 thread each (paired)",
+         per_set(lambda f, n: f["speedup_vs_warp_bvh_1t" + suffix(n)]), "{:.2f}", "warp"),
+        ("ours / Embree, all threads each", per_set(lambda f, n: f["ratio_vs_embree_all_threads" + suffix(n)]),
+         "{:.2f}", None),
+        ("ours, 2 threads / 1 thread (paired wall time)",
+         per_set(lambda f, n: statistics.median(f[n]["paired_ratios_per_round"]["ours_1t_over_ours_2t"])),
+         "{:.2f}", "scaling"),
+        ("Mrays per CPU-s, 2 threads ÷ 1 thread (1.0: the threads do not slow each other)",
+         per_set(lambda f, n: f[n]["thread_cpu_efficiency"]), "{:.2f}", None),
+        ("Σ thread CPU-s / busiest thread in the launches (16 chunks per thread, handed out dynamically)",
+         per_set(lambda f, n: f[n]["thread_scaling_cpu_bound"]), "{:.2f}", None),
+        ("agreement with Embree (same triangle, or same t at a shared edge)",
+         per_set(lambda f, n: f[n]["agreement_with_embree"]), "{:.6f}", None),
+    ]
+    lines = ["| figure (run; earlier run) | coherent (camera) | incoherent (random, from the hits) | goal |",
+             "| --- | --- | --- | --- |"]
+    for label, vals, fmt, goal in rows:
+        cells = ["; ".join(fmt.format(v) for v in vals[name]) for name in sets]
+        lines.append(f"| {label} | {cells[0]} | {cells[1]} | {_goal(goal, vals) if goal else ''} |")
+    if "build_1m_s" in fig[0]:
+        lines.append(f"| build of 1 M triangles, measured (s, wall) | {fig[0]['build_1m_s']:.2f} | | ≤ 5 — "
+                     f"{'met' if fig[0]['build_1m_s'] <= 5.0 else 'not met'} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    if argv is None:
+        argv = sys.argv[1:]
+    if argv[:1] == ["--table"]:
+        runs = []
+        for path in argv[1:]:
+            with open(path) as fh:
+                runs.append(json.load(fh))
+        print(markdown_table(runs))
+        return {}
     ap.add_argument("--json", required=True, help="write the figures here")
     ap.add_argument("--size", default="1280x720", help="camera rays WxH (default 1280x720)")
     ap.add_argument("--subdivisions", type=int, default=6, help="icosphere subdivisions (6: 164k tris, 7: 655k)")
@@ -356,8 +426,9 @@ def main(argv=None) -> dict:
         data = tree.device_data("cpu")
         reordered = ray_order(data.box_lo, data.box_hi, wp.array(o, dtype=wp.vec3, device="cpu"),
                               wp.array(d, dtype=wp.vec3, device="cpu"), n, None, "cpu").shape[0] > 0
+        # interleaved slots for a reordered batch, packet lanes for a coherent one (the default query)
         figures[name] = {"rays": n, "reordered": reordered,
-                         "rays_per_thread": CPU_RAYS_PER_THREAD if reordered else 1,  # interleaved slots
+                         "rays_per_thread": CPU_RAYS_PER_THREAD if reordered else PACKET_LANES,
                          "hit_fraction": float(ours.hit.mean()),
                          "mrays_per_s": rates,
                          "mrays_per_cpu_s": cpu_rates, "paired_ratios_per_round": paired,

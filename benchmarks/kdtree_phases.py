@@ -16,8 +16,9 @@ call's median. Phases:
 - ``sample_key_changes``: whether the batch is coherent (keys of 4096 pairs of consecutive rays);
 - ``sort_keys``: each ray's 16-bit reordering key; ``counting_order``: the keys' stable order;
 - ``gather_array``: the rays' origins and directions in that order (one launch per array);
-- ``trace``: the traversal (``trace_rays``, interleaved, for a reordered batch; ``intersect_rays``,
-  one ray per kernel thread, for one in the caller's order);
+- ``trace``: the traversal (``trace_rays``, interleaved, for a reordered batch; ``trace_packets``,
+  16-ray packets, for a coherent one in the caller's order; ``intersect_rays``, one ray per kernel
+  thread, for any other);
 - ``scatter_array``: the four results back at their rays' own indices (one launch per array).
 """
 
@@ -40,7 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_kdtree import ray_sets  # noqa: E402
 
 #: the kernels that are the traversal itself
-TRACE_KERNELS = ("trace_rays", "intersect_rays")
+TRACE_KERNELS = ("trace_rays", "trace_packets", "intersect_rays")
 #: the launches made inside counting_order, which is timed as a whole
 SORT_PARTS = ("count_keys", "place_keys")
 
@@ -74,7 +75,7 @@ def instrument(kd, times: dict) -> None:
 
 #: the README table's rows: (label, the phases summed into it)
 TABLE_ROWS = [
-    ("traversal (`trace_rays` / `intersect_rays`)", ("trace",)),
+    ("traversal (`trace_rays` / `trace_packets`)", ("trace",)),
     ("gather of origins and directions", ("gather_array",)),
     ("scatter of the four results", ("scatter_array",)),
     ("sort keys", ("sort_keys",)),
