@@ -328,7 +328,8 @@ def markdown_table(runs: list[dict]) -> str:
         ("agreement with Embree (same triangle, or same t at a shared edge)",
          per_set(lambda f, n: f[n]["agreement_with_embree"]), "{:.6f}", None),
     ]
-    lines = ["| figure (run; earlier run) | coherent (camera) | incoherent (random, from the hits) | goal |",
+    lines = ["| figure (one value per run, in the order given) | coherent (camera) "
+             "| incoherent (random, from the hits) | goal |",
              "| --- | --- | --- | --- |"]
     for label, vals, fmt, goal in rows:
         cells = ["; ".join(fmt.format(v) for v in vals[name]) for name in sets]
