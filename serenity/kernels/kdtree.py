@@ -42,13 +42,14 @@ below ~1e-30), a NaN origin, tmax ≤ tmin or NaN — are misses.
 Ray reordering (``sort`` in :meth:`KdTree.intersect` / :meth:`KdTree.occluded`, :func:`ray_order`;
 Pharr et al., "Rendering complex scenes with memory-coherent ray tracing", 1997; Garanzha & Loop,
 "Fast ray sorting and breadth-first packet traversal for GPU ray tracing", 2010): a batch of
-incoherent rays is traced in the order of a 16-bit key — the Morton code of the origin's cell on
-an 8³ grid over the root box, then the direction's octant, then its cell on a 4×4 grid of that
-octant's octahedral map — so that consecutive rays on a thread start in the same cell and head the
-same way, and walk the same nodes and triangles while they are still in the caches. The keys are a Warp kernel,
-the sort a counting sort of the 16-bit keys on the CPU (:func:`counting_order`, about 4.5 ms per
-0.92 M rays against numpy's radix sort's 8.2: most of the serial part of a batch traced on several
-threads) and numpy's radix sort on CUDA; the rays are gathered into the sorted order (a
+incoherent rays is traced in the order of a 28-bit key (:func:`ray_sort_key`) — the Morton code of
+the origin's cell on an 8³ grid over the root box, the direction's octant, the origin's cell on a
+4³ grid within that cell, then the direction's cell on a 32×32 grid of the octant's octahedral map
+— so that consecutive rays start near each other and head the same way, walk the same nodes and
+triangles while they are still in the caches, and 16 of them make a packet whose lanes share
+nodes (below, "Packets"). The keys are a Warp kernel, the sort a radix sort of two 14-bit digits
+by counting on the CPU (:func:`counting_order`: most of the serial part of a batch traced on
+several threads) and numpy's stable sort on CUDA; the rays are gathered into the sorted order (a
 separate pass: a random read per ray inside the traversal costs more than the pass; tmax only when
 it differs between rays), traced with their results written in that order, and the results
 scattered back to each ray's own index by a pass of their own (:func:`scatter_in_order`), so the results
@@ -60,9 +61,11 @@ changes along the batch) and batches below ``SORT_MIN_RAYS`` are traced as they 
 benchmark's incoherent rays: +14-18 % rays per CPU-second, sort and gather included
 (``benchmarks/results/kdtree_ab_final.json``, with the earlier key: octant, then origin); the origin
 first with the finer direction cells, a further ~5-10 % on the interleaved kernel
-(``benchmarks/results/kdtree_ab_sortkey.json``).
+(``benchmarks/results/kdtree_ab_sortkey.json``); this key and packets instead of the interleaved
+kernel, +5 % (README, "The kd-tree ray tracer", round 28).
 
-Interleaved rays (CPU, reordered batches: :func:`trace_rays_kernel`). Warp runs a CPU launch as a
+Interleaved rays (CPU, ``rays_per_thread`` 2 or 4: :func:`trace_rays_kernel`; the default for a
+reordered batch until round 28, when packets with a finer sort key overtook it). Warp runs a CPU launch as a
 loop over the kernel's threads, so one ray per thread is one chain of dependent node loads at a
 time, and the traversal's data-dependent branches (which child, push or not) mispredict often on
 incoherent rays, each flush discarding the work in flight. The interleaved kernel gives each kernel
@@ -93,10 +96,11 @@ the packet visits a node's children in the order of its lanes' direction sign on
 which is the order of every lane that visits both (a packet whose lanes head into different
 octants is traced once per octant, with those lanes), so every ray visits trace_kd's nodes and
 triangles in trace_kd's order: the same hits, bit for bit (tests). A node's load, step and
-branches are shared by the lanes that visit it: many on camera rays, few on reordered incoherent
-rays, where packets were measured no faster than the interleaved kernel, so a batch is traced in
-packets only when :func:`batch_is_coherent` finds it coherent (README, "The kd-tree ray tracer",
-round 28).
+branches are shared by the lanes that visit it: many on camera rays (1.5 times the rays per second
+of one ray per kernel thread), fewer on reordered incoherent rays, where packets beat the
+interleaved kernel only once the sort key told nearby origins and directions apart finely enough
+(README, "The kd-tree ray tracer", round 28). Reordered batches and coherent ones in the caller's
+order (:func:`batch_is_coherent`) are traced in packets; anything else one ray per kernel thread.
 
 On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
 ``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
@@ -180,30 +184,36 @@ TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is
 #: at 1.45-1.48x one on the benchmark's rays, 1.95-1.99x with 16 (``serenity.kernels.launch``)
 CHUNKS_PER_THREAD = 16
 #: ray reordering (``sort=None`` in the queries): batches of at least this many rays are traced in
-#: the order of a 16-bit key, the origin's Morton code on a ``SORT_ORIGIN_BITS``-bit grid per axis
-#: over the root box, then the direction's octant and its cell on a ``SORT_DIRECTION_BITS``-bit grid
-#: per coordinate of the octant's octahedral map, so that consecutive rays walk the same nodes and
-#: triangles (module docstring, "Ray reordering")
+#: the order of a 31-bit key (:func:`ray_sort_key`): the Morton code of the origin's cell on a
+#: ``SORT_COARSE_BITS``-bit grid per axis over the root box, the direction's octant, the origin's
+#: cell on the finer ``SORT_ORIGIN_BITS``-bit grid within the coarse cell, then the direction's cell
+#: on a ``SORT_DIRECTION_BITS``-bit grid per coordinate of the octant's octahedral map, so that
+#: consecutive rays walk the same nodes and triangles (module docstring, "Ray reordering")
 SORT_MIN_RAYS = 1 << 15
 SORT_MIN_RUN = 4  # ... whose keys change on average more often than every this many rays (``ray_order``)
 #: ... estimated from this many evenly spaced pairs of consecutive rays (a coherent batch is then
 #: traced without a key per ray: 3 % of a camera batch's time)
 SORT_SAMPLE_PAIRS = 4096
-#: interleaved CPU queries (module docstring, "Interleaved rays"): the slot counts the kernel
-#: factory ``trace_rays_kernel`` compiles, the default for a reordered batch, and the most rays a
+#: interleaved CPU queries (module docstring, "Interleaved rays"; ``rays_per_thread``): the slot
+#: counts the kernel factory ``trace_rays_kernel`` compiles, the usual slot count, and the most rays a
 #: slot takes in turn in one kernel thread (fewer when that would leave a launch too few chunks to
 #: balance the threads: ``_slot_rays``)
 INTERLEAVE_FACTORS = (2, 4)
 CPU_RAYS_PER_THREAD = 2
 RAYS_PER_SLOT = 8
-SORT_ORIGIN_BITS = 3
-SORT_DIRECTION_BITS = 2
-
-#: the key must fit the 16-bit integers numpy radix-sorts (CUDA) and the counting sort's bins (CPU)
-SORT_KEY_BITS = 16
-assert 3 * SORT_ORIGIN_BITS + 3 + 2 * SORT_DIRECTION_BITS <= SORT_KEY_BITS
+SORT_COARSE_BITS = 3
+SORT_ORIGIN_BITS = 5
+SORT_DIRECTION_BITS = 5
+#: the key's bits, sorted on the CPU as two digits of ``SORT_DIGIT_BITS`` (``counting_order``)
+SORT_KEY_BITS = 3 * SORT_ORIGIN_BITS + 3 + 2 * SORT_DIRECTION_BITS
+SORT_DIGIT_BITS = 14
+assert SORT_KEY_BITS <= 2 * SORT_DIGIT_BITS and SORT_KEY_BITS < 32 and SORT_COARSE_BITS <= SORT_ORIGIN_BITS
+#: :func:`batch_is_coherent` compares keys without their low bits: the origin's fine cell and the
+#: octant stay, the direction's cell only to its 2 top bits per coordinate (a camera's neighbouring
+#: pixels share it)
+SORT_SAMPLE_SHIFT = 2 * (SORT_DIRECTION_BITS - 2)
 #: the CPU counting sort's count gives each thread a contiguous run of at least this many keys (below
-#: it, one thread: zeroing and summing a thread's 2^16 bins costs about as much as counting them)
+#: it, one thread: zeroing and summing a thread's bins costs about as much as counting them)
 SORT_MIN_KEYS_PER_THREAD = 1 << 16
 assert STACK_SIZE & (STACK_SIZE - 1) == 0  # a power of 2: the stack index is masked (``_STACK_MASK``)
 _STACK_MASK = wp.constant(STACK_SIZE - 1)
@@ -215,9 +225,12 @@ _TOL = wp.constant(T_TOLERANCE)
 _TINY = wp.constant(TINY_DIRECTION)
 _FLT_MAX = wp.constant(float(np.finfo(np.float32).max))
 _SORT_CELLS = wp.constant(float(1 << SORT_ORIGIN_BITS))
-_SORT_DIR_BITS = wp.constant(SORT_DIRECTION_BITS)
+_SORT_FINE = wp.constant(3 * (SORT_ORIGIN_BITS - SORT_COARSE_BITS))
 _SORT_DIR_CELLS = wp.constant(float(1 << SORT_DIRECTION_BITS))
-_SORT_BINS = wp.constant(1 << SORT_KEY_BITS)
+_SORT_BINS = wp.constant(1 << SORT_DIGIT_BITS)
+_SORT_DIGIT = wp.constant(SORT_DIGIT_BITS)
+_SORT_DIGIT_MASK = wp.constant((1 << SORT_DIGIT_BITS) - 1)
+_SORT_SAMPLE_SHIFT = wp.constant(SORT_SAMPLE_SHIFT)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -669,17 +682,30 @@ def spread_bits(q: int) -> int:
 
 
 @wp.func
+def spread_bits2(q: int) -> int:
+    """Bit b of ``q`` (b < SORT_DIRECTION_BITS) moved to bit 2b: one coordinate's share of a 2-D
+    Morton code."""
+    out = int(0)
+    for b in range(wp.static(SORT_DIRECTION_BITS)):
+        out = out | (((q >> b) & 1) << (2 * b))
+    return out
+
+
+@wp.func
 def ray_sort_key(box_lo: wp.vec3, scale: wp.vec3, o: wp.vec3, d: wp.vec3) -> int:
-    """The reordering key of a ray: the Morton code of its origin's cell on a 2^SORT_ORIGIN_BITS grid
-    per axis over the root box (the high bits; ``scale`` = cells / the box's extent per axis,
-    :func:`sort_scale`; origins outside the box, or NaN, clamp to the border cells), then its
-    direction's octant, then the direction's cell on a 2^SORT_DIRECTION_BITS grid per coordinate of
-    the octahedral map of that octant (|d| / (|dx| + |dy| + |dz|), x and y). Straight-line code: the
-    loops over axes with a run-time index and the five divisions it had cost 8.8 ms of a 0.92 M-ray
-    batch on one thread, this 4.7 ms."""
-    key = (spread_bits(origin_cell(o[0], box_lo[0], scale[0]))
-           | (spread_bits(origin_cell(o[1], box_lo[1], scale[1])) << 1)
-           | (spread_bits(origin_cell(o[2], box_lo[2], scale[2])) << 2))
+    """The reordering key of a ray (``SORT_KEY_BITS`` bits, high to low): the Morton code of its
+    origin's cell on a 2^SORT_COARSE_BITS grid per axis over the root box, its direction's octant,
+    the Morton code of its origin's cell on the 2^SORT_ORIGIN_BITS grid within that coarse cell
+    (``scale`` = fine cells / the box's extent per axis, :func:`sort_scale`; origins outside the box,
+    or NaN, clamp to the border cells), then the Morton code of the direction's cell on a 2^SORT_DIRECTION_BITS grid per
+    coordinate of the octahedral map of its octant (|d| / (|dx| + |dy| + |dz|), x and y). So rays of
+    one coarse cell heading into one octant are together, and within them rays from nearby points
+    in nearby directions: 16 neighbours in the order make a packet whose lanes share nodes
+    (module docstring, "Ray reordering"). Straight-line code (loops over axes with a run-time index
+    cost 8.8 ms of a 0.92 M-ray batch on one thread in round 24, this kind of code 4.7)."""
+    origin = (spread_bits(origin_cell(o[0], box_lo[0], scale[0]))
+              | (spread_bits(origin_cell(o[1], box_lo[1], scale[1])) << 1)
+              | (spread_bits(origin_cell(o[2], box_lo[2], scale[2])) << 2))
     ax = wp.abs(d[0])
     ay = wp.abs(d[1])
     octant = wp.where(d[0] < 0.0, 1, 0) | wp.where(d[1] < 0.0, 2, 0) | wp.where(d[2] < 0.0, 4, 0)
@@ -688,8 +714,10 @@ def ray_sort_key(box_lo: wp.vec3, scale: wp.vec3, o: wp.vec3, d: wp.vec3) -> int
     s = wp.where((wp.where(l1 > 0.0, 1, 0) & wp.where(l1 <= _FLT_MAX, 1, 0)) != 0, _SORT_DIR_CELLS / l1, 0.0)
     qu = int(wp.min(wp.where(s > 0.0, ax * s, 0.0), _SORT_DIR_CELLS - 1.0))
     qv = int(wp.min(wp.where(s > 0.0, ay * s, 0.0), _SORT_DIR_CELLS - 1.0))
-    direction = (((octant << _SORT_DIR_BITS) | qu) << _SORT_DIR_BITS) | qv
-    return (key << (3 + 2 * _SORT_DIR_BITS)) | direction
+    direction = spread_bits2(qu) | (spread_bits2(qv) << 1)
+    coarse = origin >> _SORT_FINE
+    fine = origin & ((1 << _SORT_FINE) - 1)
+    return (((((coarse << 3) | octant) << _SORT_FINE) | fine) << wp.static(2 * SORT_DIRECTION_BITS)) | direction
 
 
 def sort_scale(box_lo: wp.vec3, box_hi: wp.vec3) -> wp.vec3:
@@ -708,11 +736,11 @@ def sort_keys(
     origins: wp.array(dtype=wp.vec3),
     directions: wp.array(dtype=wp.vec3),
     # outputs
-    keys: wp.array(dtype=wp.uint16),
+    keys: wp.array(dtype=wp.uint32),
     offset: int,
 ):
     i = wp.tid() + offset
-    keys[i] = wp.uint16(ray_sort_key(box_lo, scale, origins[i], directions[i]))
+    keys[i] = wp.uint32(ray_sort_key(box_lo, scale, origins[i], directions[i]))
 
 
 @wp.kernel(enable_backward=False)
@@ -731,15 +759,15 @@ def sample_key_changes(
     a sample of consecutive pairs, from which :func:`ray_order` estimates how coherent a batch is."""
     j = wp.tid() + offset
     a = j * stride
-    ka = ray_sort_key(box_lo, scale, origins[a], directions[a])
-    kb = ray_sort_key(box_lo, scale, origins[a + 1], directions[a + 1])
+    ka = ray_sort_key(box_lo, scale, origins[a], directions[a]) >> _SORT_SAMPLE_SHIFT
+    kb = ray_sort_key(box_lo, scale, origins[a + 1], directions[a + 1]) >> _SORT_SAMPLE_SHIFT
     changes[j] = wp.where(ka != kb, 1, 0)
 
 
 @wp.kernel(enable_backward=False)
 def count_keys(
     # inputs
-    keys: wp.array(dtype=wp.uint16),
+    keys: wp.array(dtype=wp.uint32),
     n: int,
     per_run: int,
     # outputs
@@ -747,55 +775,76 @@ def count_keys(
     offset: int,
 ):
     """Run r = tid + offset of :func:`counting_order`: how many of keys ``[r·per_run, (r+1)·per_run)``
-    fall in each bin, into ``counts[r·2^16 + key]`` (its own bins: zeroed first, no atomics)."""
+    have each low digit, into ``counts[2r·2^16 + digit]``, and each high digit, into
+    ``counts[(2r+1)·2^16 + digit]`` (its own bins: zeroed first, no atomics; 2^16 stands for
+    2^SORT_DIGIT_BITS)."""
     r = wp.tid() + offset
-    base = r * _SORT_BINS
-    for b in range(_SORT_BINS):
-        counts[base + b] = 0
+    low = 2 * r * _SORT_BINS
+    high = low + _SORT_BINS
+    for b in range(2 * _SORT_BINS):
+        counts[low + b] = 0
     for i in range(r * per_run, wp.min(n, (r + 1) * per_run)):
-        k = base + int(keys[i])
-        counts[k] = counts[k] + 1
+        k = int(keys[i])
+        a = low + (k & _SORT_DIGIT_MASK)
+        counts[a] = counts[a] + 1
+        c = high + (k >> _SORT_DIGIT)
+        counts[c] = counts[c] + 1
 
 
 @wp.kernel(enable_backward=False)
 def place_keys(
     # inputs
-    keys: wp.array(dtype=wp.uint16),
+    keys: wp.array(dtype=wp.uint32),
     n: int,
     # outputs
     starts: wp.array(dtype=wp.int32),
+    first: wp.array(dtype=wp.int32),
+    high: wp.array(dtype=wp.uint16),
     order: wp.array(dtype=wp.int32),
     offset: int,
 ):
-    """The second pass of :func:`counting_order`, on one thread: each key's index, in the keys'
-    order, at the next free place of its bin (``starts[key]``, advanced): a stable sort."""
+    """The placing passes of :func:`counting_order`, on one thread (a stable LSD radix sort of two
+    digits): each key's index, in the keys' order, at the next free place of its low digit's bin
+    (``starts[digit]``, advanced), into ``first``, its high digit beside it into ``high`` (so that the
+    second pass reads them in order, not at random); then each of those, in that order, at the next
+    free place of its high digit's bin (``starts[2^SORT_DIGIT_BITS + digit]``), into ``order``."""
     for i in range(n):
         k = int(keys[i])
-        j = starts[k]
-        order[j] = i
-        starts[k] = j + 1
+        b = k & _SORT_DIGIT_MASK
+        j = starts[b]
+        first[j] = i
+        high[j] = wp.uint16(k >> _SORT_DIGIT)
+        starts[b] = j + 1
+    for j in range(n):
+        b = _SORT_BINS + int(high[j])
+        p = starts[b]
+        order[p] = first[j]
+        starts[b] = p + 1
 
 
 def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: Staging | None = None) -> wp.array:
-    """The stable ascending order of ``n`` 16-bit ``keys`` on the CPU: a counting sort. The threads
-    count contiguous runs of the keys per bin (:func:`count_keys`), numpy sums the runs' counts into
-    each bin's first place, and one thread places the keys (:func:`place_keys`). The same order as
-    ``np.argsort(keys, kind="stable")`` (numpy's radix sort of 16-bit keys, which it replaced): on
-    0.92 M clustered keys 4.5 ms on one thread, 4.8-4.9 with the count on two, against 8.2-8.3 ms
-    for numpy's with its cast to int32 (round 26's host, a scratch timing; the kd-tree bench in the
-    README measures the whole query). The placing stays on one thread: split by runs of rays the
-    threads shared every bin's cache lines, split by spans of bins each thread read every key
-    behind a branch it could not predict, and both were slower on 2 threads than on 1."""
+    """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU: a
+    radix sort of two digits by counting. The threads count contiguous runs of the keys per digit and bin
+    (:func:`count_keys`), numpy sums the runs' counts into each bin's first place, and one thread
+    places the keys by the low digit, then by the high one (:func:`place_keys`). The same order as
+    ``np.argsort(keys, kind="stable")`` (tests). With one 16-bit digit (round 26's 16-bit key) it
+    took 4.5 ms on 0.92 M keys on one thread against 8.2-8.3 ms for numpy's radix sort; the placing
+    stays on one thread: split by runs of rays the threads shared every bin's cache lines, split by
+    spans of bins each thread read every key behind a branch it could not predict, and both were
+    slower on 2 threads than on 1 (round 26's host, scratch timings; the kd-tree bench in the
+    README measures the whole query)."""
     runs = max(1, min(threads or cpu_threads(), n // SORT_MIN_KEYS_PER_THREAD))
     per_run = -(-n // runs)
-    bins = 1 << SORT_KEY_BITS
-    counts = scratch_buffer(scratch, "sort_counts", runs * bins, wp.int32, "cpu")
+    bins = 1 << SORT_DIGIT_BITS
+    counts = scratch_buffer(scratch, "sort_counts", runs * 2 * bins, wp.int32, "cpu")
     launch(count_keys, runs, [keys, n, per_run, counts], device="cpu", threads=runs, min_items=1)
-    totals = counts.numpy().reshape(runs, bins).sum(axis=0, dtype=np.int64)
-    starts = scratch_buffer(scratch, "sort_starts", bins, wp.int32, "cpu")
-    starts.numpy()[:] = np.cumsum(totals) - totals  # where each bin starts in the order
+    totals = counts.numpy().reshape(runs, 2, bins).sum(axis=0, dtype=np.int64)
+    starts = scratch_buffer(scratch, "sort_starts", 2 * bins, wp.int32, "cpu")
+    starts.numpy()[:] = (np.cumsum(totals, axis=1) - totals).reshape(-1)  # where each bin starts
+    first = scratch_buffer(scratch, "sort_first", n, wp.int32, "cpu")
+    high = scratch_buffer(scratch, "sort_high", n, wp.uint16, "cpu")
     order = scratch_buffer(scratch, "order", n, wp.int32, "cpu")
-    launch(place_keys, 1, [keys, n, starts, order], device="cpu", threads=1)
+    launch(place_keys, 1, [keys, n, starts, first, high, order], device="cpu", threads=1)
     return order
 
 
@@ -1392,7 +1441,7 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
     if sort is None and batch_is_coherent(box_lo, box_hi, origins, directions, n, device):
         return wp.empty(0, dtype=wp.int32, device=device)
     scale = sort_scale(box_lo, box_hi)
-    keys = scratch_buffer(scratch, "keys", n, wp.uint16, device)
+    keys = scratch_buffer(scratch, "keys", n, wp.uint32, device)
     launch(sort_keys, n, [box_lo, scale, origins, directions, keys], device=device, threads=threads)
     if device.startswith("cpu"):
         return counting_order(keys, n, threads, scratch)
@@ -1474,7 +1523,7 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
     reordered = order.shape[0] > 0
     k = rays_per_thread
     if k is None:
-        k = (CPU_RAYS_PER_THREAD if reordered else PACKET_LANES if coherent else 1) if on_cpu else 1
+        k = (PACKET_LANES if reordered or coherent else 1) if on_cpu else 1
     if k != 1 and k not in INTERLEAVE_FACTORS and k != PACKET_LANES:
         raise SerenityError(f"rays_per_thread={k}: 1, one of {INTERLEAVE_FACTORS} or {PACKET_LANES} (packets)")
     traced = buffers_like(outputs, "traced", device, scratch) if reordered else outputs

@@ -15,6 +15,8 @@ from serenity.kernels.kdtree import (
     CPU_RAYS_PER_THREAD,
     INTERLEAVE_FACTORS,
     PACKET_LANES,
+    SORT_COARSE_BITS,
+    SORT_DIRECTION_BITS,
     SORT_MIN_RAYS,
     SORT_ORIGIN_BITS,
     TRACE_MODULE_OPTIONS,
@@ -213,16 +215,19 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
         for threads in (1, 3):
             assert _hits_equal(tree.intersect(o, d, device="cpu", threads=threads, sort=True), plain), threads
             assert np.array_equal(tree.occluded(o, d, 1.5, device="cpu", threads=threads, sort=True), occ), threads
-    # the order is a permutation, grouped by the origin's cell first, then by the direction's octant
+    # the order is a permutation, grouped by the origin's coarse cell first, then by the direction's
+    # octant, then by the origin's fine cell (Morton order), then by the direction's cell
     order = ray_order(data.box_lo, data.box_hi, wp.array(o2, dtype=wp.vec3, device="cpu"),
                       wp.array(d2, dtype=wp.vec3, device="cpu"), len(o2),
                       True, "cpu").numpy()
     assert np.array_equal(np.sort(order), np.arange(len(o2)))
     lo, hi = np.array(data.box_lo), np.array(data.box_hi)
-    cells = 1 << SORT_ORIGIN_BITS
+    fine_cells = 1 << SORT_ORIGIN_BITS
     scale = np.array(sort_scale(data.box_lo, data.box_hi), np.float32)  # cells / extent, as the kernel has it
-    assert np.allclose(scale, cells / (hi - lo), rtol=1e-6)
-    q = np.clip(np.floor((o2[order] - lo) * scale), 0, cells - 1).astype(np.int64)
+    assert np.allclose(scale, fine_cells / (hi - lo), rtol=1e-6)
+    q_fine = np.clip(np.floor((o2[order] - lo) * scale), 0, fine_cells - 1).astype(np.int64)
+    q = q_fine >> (SORT_ORIGIN_BITS - SORT_COARSE_BITS)
+    cells = 1 << SORT_COARSE_BITS
     cell = (q[:, 0] * cells + q[:, 1]) * cells + q[:, 2]
     octant = (d2[order] < 0) @ np.array([1, 2, 4])
     runs = np.flatnonzero(np.diff(cell) != 0)  # where the origin's cell changes along the order
@@ -231,23 +236,40 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
     within[runs] = False
     assert np.all(np.diff(octant)[within] >= 0)  # and sorted by octant inside its run
 
+    def morton(c, bits):  # Morton code of (N,3) cells
+        out = np.zeros(len(c), np.int64)
+        for b in range(bits):
+            for a in range(3):
+                out |= ((c[:, a] >> b) & 1) << (3 * b + a)
+        return out
+
+    fine_bits = SORT_ORIGIN_BITS - SORT_COARSE_BITS
+    group = cell * 8 + octant  # (coarse cell, octant) runs
+    inside = np.diff(group) == 0
+    fine = morton(q_fine & ((1 << fine_bits) - 1), fine_bits)
+    assert np.all(np.diff(fine)[inside] >= 0) and np.any(np.diff(fine)[inside] > 0)
+    assert SORT_DIRECTION_BITS >= 2
+
 
 
 
 def test_counting_order_is_numpys_stable_argsort():
-    """The CPU's counting sort of the 16-bit keys (``counting_order``) gives the order numpy's stable
-    argsort gives, on one thread and on several (runs of uneven length, keys at both ends of the
-    range, many ties, a batch too small to split), into fresh arrays and into reused scratch."""
-    from serenity.kernels.kdtree import SORT_MIN_KEYS_PER_THREAD, counting_order
+    """The CPU's radix sort of the keys by counting (``counting_order``, two digits) gives the order
+    numpy's stable argsort gives, on one thread and on several (runs of uneven length, keys at both
+    ends of the range and of each digit, many ties, a batch too small to split), into fresh arrays
+    and into reused scratch."""
+    from serenity.kernels.kdtree import SORT_DIGIT_BITS, SORT_KEY_BITS, SORT_MIN_KEYS_PER_THREAD, counting_order
     from serenity.kernels.launch import Staging
 
     rng = np.random.default_rng(3)
     scratch = Staging("cpu")
+    top = (1 << SORT_KEY_BITS) - 1
     for n in (1, 1000, 3 * SORT_MIN_KEYS_PER_THREAD + 17):
-        keys = rng.integers(0, 1 << 16, n).astype(np.uint16)
-        keys[: n // 3] = rng.choice(np.array([0, 7, 65535], np.uint16), n // 3)  # ties and both ends
+        keys = rng.integers(0, top + 1, n).astype(np.uint32)
+        ends = np.array([0, 7, top, (1 << SORT_DIGIT_BITS) - 1, 1 << SORT_DIGIT_BITS], np.uint32)
+        keys[: n // 3] = rng.choice(ends, n // 3)  # ties, both ends, a digit's ends
         expected = np.argsort(keys, kind="stable")
-        wk = wp.array(keys, dtype=wp.uint16, device="cpu")
+        wk = wp.array(keys, dtype=wp.uint32, device="cpu")
         for threads in (1, 2, 3, 8):
             assert np.array_equal(counting_order(wk, n, threads).numpy(), expected), (n, threads)
             assert np.array_equal(counting_order(wk, n, threads, scratch).numpy(), expected), (n, threads)
@@ -414,11 +436,10 @@ def test_branch_free_step_makes_trace_kd_s_choices():
     assert ref[:, 2].mean() > 0.05 and (ref[:, 0] != (head >> 4)).mean() > 0.1  # pushes, right children
     assert np.array_equal(flat, ref)
 
-def test_default_cpu_kernels_interleave_incoherent_batches_and_packet_coherent_ones(monkeypatch):
-    """The default CPU query: a reordered (incoherent) batch goes to the interleaved kernel with
-    ``CPU_RAYS_PER_THREAD`` slots and its results to the scatter, camera rays (left in their order,
-    coherent) to packets, with the one-ray kernel's bits, and a small batch of random rays (not
-    reordered, not coherent) to one ray per thread."""
+def test_default_cpu_kernels_trace_reordered_and_coherent_batches_in_packets(monkeypatch):
+    """The default CPU query: a reordered (incoherent) batch goes to packets and its results to the
+    scatter, camera rays (left in their order, coherent) to packets, with the one-ray kernel's bits,
+    and a small batch of random rays (not reordered, not coherent) to one ray per thread."""
     import serenity.kernels.kdtree as K
 
     v, f = lumpy_mesh(3)
@@ -439,9 +460,11 @@ def test_default_cpu_kernels_interleave_incoherent_batches_and_packet_coherent_o
     assert launched[-1] is K.intersect_rays
     # a reordered batch is traced in its order, then its results are scattered back in a pass of their own
     tree.intersect(o2, d2, device="cpu")
-    assert launched[-5:] == [K.trace_rays_kernel(CPU_RAYS_PER_THREAD, False)] + [K.scatter_array] * 4
+    assert launched[-5:] == [K.trace_packets_kernel(False)] + [K.scatter_array] * 4
     tree.occluded(o2, d2, device="cpu")
-    assert launched[-2:] == [K.trace_rays_kernel(CPU_RAYS_PER_THREAD, True), K.scatter_array]
+    assert launched[-2:] == [K.trace_packets_kernel(True), K.scatter_array]
+    tree.intersect(o2, d2, device="cpu", rays_per_thread=CPU_RAYS_PER_THREAD)
+    assert launched[-5:] == [K.trace_rays_kernel(CPU_RAYS_PER_THREAD, False)] + [K.scatter_array] * 4
 
 def test_build_does_not_depend_on_the_thread_count():
     from serenity.kernels.kdtree_build import build_arrays
