@@ -12,9 +12,9 @@ Rays (the same arrays for every tracer):
 Tracers: ours (:class:`serenity.kernels.kdtree.KdTree`, closest hit; the default call, which
 reorders incoherent batches before the launch — ``sort=None``, ``serenity.kernels.kdtree.ray_order``
 — with the sort, the gather and the write-back inside the timed call; ``reordered`` per ray set says
-whether it did, and ``rays_per_thread`` how many rays each kernel thread traces at once: a reordered
-batch is traced by the interleaved kernel, ``serenity.kernels.kdtree.trace_rays_kernel``, a coherent
-one in the caller's order in packets, ``trace_packets_kernel``),
+whether it did, and ``rays_per_thread`` how many rays each kernel thread traces at once: both sets
+are traced in packets, ``serenity.kernels.kdtree.trace_packets_kernel``, the incoherent one in its
+sorted order, the camera rays in theirs),
 Embree (``embreex``, closest hit, one ``run`` call over all rays) and Warp's BVH
 (``wp.mesh_query_ray``, SAH constructor; both take the rays as they come). Ours and Warp's run on
 1, 2, ... all threads (through ``serenity.kernels.launch``); Embree on 1 thread, and its calls
@@ -71,7 +71,7 @@ import numpy as np
 
 from serenity.device import cpu_threads, init_warp
 from serenity.io.results import machine_info
-from serenity.kernels.kdtree import CPU_RAYS_PER_THREAD, PACKET_LANES, KdTree, intersect_rays, ray_order
+from serenity.kernels.kdtree import PACKET_LANES, KdTree, intersect_rays, ray_order
 from serenity.kernels.launch import launch
 from serenity.scene.procedural import lumpy_mesh
 
@@ -427,9 +427,8 @@ def main(argv=None) -> dict:
         data = tree.device_data("cpu")
         reordered = ray_order(data.box_lo, data.box_hi, wp.array(o, dtype=wp.vec3, device="cpu"),
                               wp.array(d, dtype=wp.vec3, device="cpu"), n, None, "cpu").shape[0] > 0
-        # interleaved slots for a reordered batch, packet lanes for a coherent one (the default query)
-        figures[name] = {"rays": n, "reordered": reordered,
-                         "rays_per_thread": CPU_RAYS_PER_THREAD if reordered else PACKET_LANES,
+        # the default query traces a reordered batch and a coherent one in packets
+        figures[name] = {"rays": n, "reordered": reordered, "rays_per_thread": PACKET_LANES,
                          "hit_fraction": float(ours.hit.mean()),
                          "mrays_per_s": rates,
                          "mrays_per_cpu_s": cpu_rates, "paired_ratios_per_round": paired,

@@ -14,11 +14,11 @@ inputs, the arrays' allocation, the results' copy back, Python. Per phase the me
 ``--rounds`` calls (after one warm-up call) of its milliseconds per call, and its share of the
 call's median. Phases:
 - ``sample_key_changes``: whether the batch is coherent (keys of 4096 pairs of consecutive rays);
-- ``sort_keys``: each ray's 16-bit reordering key; ``counting_order``: the keys' stable order;
+- ``sort_keys``: each ray's reordering key; ``counting_order``: the keys' stable order;
 - ``gather_array``: the rays' origins and directions in that order (one launch per array);
-- ``trace``: the traversal (``trace_rays``, interleaved, for a reordered batch; ``trace_packets``,
-  16-ray packets, for a coherent one in the caller's order; ``intersect_rays``, one ray per kernel
-  thread, for any other);
+- ``trace``: the traversal (``trace_packets``, 16-ray packets, for a reordered batch and for a
+  coherent one in the caller's order; ``trace_rays``, interleaved, when asked for; ``intersect_rays``,
+  one ray per kernel thread, for any other batch);
 - ``scatter_array``: the four results back at their rays' own indices (one launch per array).
 """
 
