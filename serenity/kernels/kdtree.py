@@ -85,9 +85,10 @@ slots as a loop instead of unrolled, the push as a branch, the pop after an empt
 branches (it lengthens every step's chain), two steps per turn, the slots' rays far apart, a
 float32 pre-reject in the leaves, one ray per kernel thread in a loop of several.
 
-Packets (CPU, batches in a coherent order: :func:`trace_packets_kernel`; Wald's thesis traced
-SSE packets of four rays). A kernel thread traces ``PACKET_LANES`` consecutive rays together: the
-packet walks the tree once for all of them, one node's step for every lane is a few SIMD
+Packets (CPU, reordered batches and batches already in a coherent order:
+:func:`trace_packets_kernel`; Wald's thesis traced SSE packets of four rays). A kernel thread
+traces ``PACKET_LANES`` consecutive rays together: the packet walks the tree once for all of
+them, one node's step for every lane is a few SIMD
 instructions (:func:`packet_step`, a native snippet in clang's vector extensions, since Warp's CPU
 code is scalar), lane masks say which lanes go to each child, the second child's lanes keep their
 intervals on the packet's stack, and a leaf's triangles are tested lane by lane
@@ -184,7 +185,7 @@ TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is
 #: at 1.45-1.48x one on the benchmark's rays, 1.95-1.99x with 16 (``serenity.kernels.launch``)
 CHUNKS_PER_THREAD = 16
 #: ray reordering (``sort=None`` in the queries): batches of at least this many rays are traced in
-#: the order of a 31-bit key (:func:`ray_sort_key`): the Morton code of the origin's cell on a
+#: the order of a ``SORT_KEY_BITS``-bit key (:func:`ray_sort_key`): the Morton code of the origin's cell on a
 #: ``SORT_COARSE_BITS``-bit grid per axis over the root box, the direction's octant, the origin's
 #: cell on the finer ``SORT_ORIGIN_BITS``-bit grid within the coarse cell, then the direction's cell
 #: on a ``SORT_DIRECTION_BITS``-bit grid per coordinate of the octant's octahedral map, so that
@@ -697,8 +698,9 @@ def ray_sort_key(box_lo: wp.vec3, scale: wp.vec3, o: wp.vec3, d: wp.vec3) -> int
     origin's cell on a 2^SORT_COARSE_BITS grid per axis over the root box, its direction's octant,
     the Morton code of its origin's cell on the 2^SORT_ORIGIN_BITS grid within that coarse cell
     (``scale`` = fine cells / the box's extent per axis, :func:`sort_scale`; origins outside the box,
-    or NaN, clamp to the border cells), then the Morton code of the direction's cell on a 2^SORT_DIRECTION_BITS grid per
-    coordinate of the octahedral map of its octant (|d| / (|dx| + |dy| + |dz|), x and y). So rays of
+    or NaN, clamp to the border cells), then the Morton code of the direction's cell on a
+    2^SORT_DIRECTION_BITS grid per coordinate of the octahedral map of its octant
+    (|d| / (|dx| + |dy| + |dz|), x and y). So rays of
     one coarse cell heading into one octant are together, and within them rays from nearby points
     in nearby directions: 16 neighbours in the order make a packet whose lanes share nodes
     (module docstring, "Ray reordering"). Straight-line code (loops over axes with a run-time index
@@ -775,9 +777,8 @@ def count_keys(
     offset: int,
 ):
     """Run r = tid + offset of :func:`counting_order`: how many of keys ``[r·per_run, (r+1)·per_run)``
-    have each low digit, into ``counts[2r·2^16 + digit]``, and each high digit, into
-    ``counts[(2r+1)·2^16 + digit]`` (its own bins: zeroed first, no atomics; 2^16 stands for
-    2^SORT_DIGIT_BITS)."""
+    have each low digit, into ``counts[2r·B + digit]``, and each high digit, into
+    ``counts[(2r+1)·B + digit]``, B = 2^SORT_DIGIT_BITS (its own bins: zeroed first, no atomics)."""
     r = wp.tid() + offset
     low = 2 * r * _SORT_BINS
     high = low + _SORT_BINS
@@ -823,9 +824,9 @@ def place_keys(
 
 
 def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: Staging | None = None) -> wp.array:
-    """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU: a
-    radix sort of two digits by counting. The threads count contiguous runs of the keys per digit and bin
-    (:func:`count_keys`), numpy sums the runs' counts into each bin's first place, and one thread
+    """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU:
+    a radix sort of two digits by counting. The threads count contiguous runs of the keys per digit
+    and bin (:func:`count_keys`), numpy sums the runs' counts into each bin's first place, and one thread
     places the keys by the low digit, then by the high one (:func:`place_keys`). The same order as
     ``np.argsort(keys, kind="stable")`` (tests). With one 16-bit digit (round 26's 16-bit key) it
     took 4.5 ms on 0.92 M keys on one thread against 8.2-8.3 ms for numpy's radix sort; the placing
@@ -1097,14 +1098,14 @@ def trace_rays_kernel(rays: int, any_hit: bool):
 
 
 # ----------------------------------------------------------------------------------------------
-# packets (CPU, batches in a coherent order)
+# packets (CPU: reordered batches and batches in a coherent order)
 # ----------------------------------------------------------------------------------------------
 
 #: rays per packet (module docstring, "Packets"): the lanes of one SIMD node step, and the bits of
 #: the lane masks (an int32 holds them)
 PACKET_LANES = 16
-#: a batch in the caller's order is traced in packets when it has at least this many rays and is
-#: coherent (``sample_key_changes``: the same test as ``ray_order``'s; below it, one ray per thread)
+#: a batch left in the caller's order is traced in packets when it has at least this many rays and
+#: is coherent (:func:`batch_is_coherent`, the test ``ray_order`` makes; else one ray per thread)
 PACKET_MIN_RAYS = 4 * PACKET_LANES
 # a packet's scratch (float32 per lane, per worker thread): origin and inverse direction per axis,
 # interval tolerance, current interval (t0, t1), best hit t, then a (t0, t1) pair per stack level
