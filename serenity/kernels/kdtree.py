@@ -1511,12 +1511,12 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
     [occluded]) over ``n`` rays ``inputs`` (tree, origins, directions, tmin, tmax) given in the trace
     order ``order`` (empty: the caller's; else ray i is the caller's ray ``order[i]``: the results
     are traced into scratch arrays in that order and scattered back by :func:`scatter_in_order`).
-    On the CPU a reordered batch goes to the interleaved kernel with ``CPU_RAYS_PER_THREAD`` slots
-    (:func:`trace_rays_kernel`), a ``coherent`` batch in the caller's order (camera rays:
-    :func:`batch_is_coherent`) to packets of ``PACKET_LANES`` rays (:func:`trace_packets_kernel`),
+    On the CPU a reordered batch and a ``coherent`` one in the caller's order (camera rays:
+    :func:`batch_is_coherent`) go to packets of ``PACKET_LANES`` rays (:func:`trace_packets_kernel`),
     any other batch to one ray per kernel thread (``intersect_rays`` / ``occlude_rays``; module
-    docstring); ``rays_per_thread`` forces 1 (one ray), a slot count of ``INTERLEAVE_FACTORS`` or
-    ``PACKET_LANES`` (packets). CUDA traces one ray per thread (its parallelism is threads).
+    docstring); ``rays_per_thread`` forces 1 (one ray), a slot count of ``INTERLEAVE_FACTORS``
+    (interleaved rays, :func:`trace_rays_kernel`) or ``PACKET_LANES`` (packets). CUDA traces one
+    ray per thread (its parallelism is threads).
     ``scratch``: where the reordered results are traced and the packets keep their lanes
     (:meth:`KdTree.scratch`), else new arrays."""
     one_ray = occlude_rays if any_hit else intersect_rays
