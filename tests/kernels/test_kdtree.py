@@ -17,6 +17,7 @@ from serenity.kernels.kdtree import (
     PACKET_LANES,
     SORT_COARSE_BITS,
     SORT_DIRECTION_BITS,
+    SORT_KEY_BITS,
     SORT_MIN_RAYS,
     SORT_ORIGIN_BITS,
     TRACE_MODULE_OPTIONS,
@@ -25,7 +26,9 @@ from serenity.kernels.kdtree import (
     inner_step_flat,
     intersect_triangle,
     ray_order,
+    ray_sort_key,
     setup_ray,
+    sort_keys,
     sort_scale,
 )
 from serenity.scene.procedural import lumpy_mesh
@@ -251,6 +254,69 @@ def test_reordered_rays_give_the_same_bits_in_the_callers_order():
     assert SORT_DIRECTION_BITS >= 2
 
 
+
+
+@wp.kernel(enable_backward=False, module="unique", module_options={"cpu_compiler_flags": ""})
+def _generic_cpu_keys(box_lo: wp.vec3, scale: wp.vec3, origins: wp.array(dtype=wp.vec3),
+                      directions: wp.array(dtype=wp.vec3), keys: wp.array(dtype=wp.uint32)):
+    i = wp.tid()
+    keys[i] = wp.uint32(ray_sort_key(box_lo, scale, origins[i], directions[i]))
+
+
+def test_sort_keys_are_the_documented_key_with_and_without_bmi2():
+    """The reordering key of every ray (``sort_keys``: Morton spreads by BMI2 ``pdep`` on a CPU that
+    has it) is the key the docstring of ``ray_sort_key`` defines, computed here in numpy from the
+    same float32 arithmetic, and the same as the key of the portable spreads (shifts and masks: a
+    kernel compiled for a generic x86-64 CPU, as CUDA and other CPUs compile it). Origins inside,
+    on and outside the box, NaN origins, zero, NaN and axis-parallel directions."""
+    v, f = lumpy_mesh(2)
+    data = KdTree.build(v, f).device_data("cpu")
+    rng = np.random.default_rng(5)
+    n = 5000
+    lo = np.array(data.box_lo, np.float32)
+    hi = np.array(data.box_hi, np.float32)
+    o = (lo + (hi - lo) * rng.uniform(-0.2, 1.2, (n, 3))).astype(np.float32)
+    o[:10] = lo
+    o[10:20] = hi
+    o[20, 1] = np.nan
+    d = rng.normal(size=(n, 3)).astype(np.float32)
+    d[30] = 0.0
+    d[31, 2] = np.nan
+    d[40:46] = np.repeat(np.eye(3, dtype=np.float32), 2, axis=0) * np.array([1, -1] * 3, np.float32)[:, None]
+    scale = sort_scale(data.box_lo, data.box_hi)
+    wo, wd = wp.array(o, dtype=wp.vec3, device="cpu"), wp.array(d, dtype=wp.vec3, device="cpu")
+    native = wp.empty(n, dtype=wp.uint32, device="cpu")
+    wp.launch(sort_keys, dim=n, inputs=[data.box_lo, scale, wo, wd, native, 0], device="cpu")
+    generic = wp.empty(n, dtype=wp.uint32, device="cpu")
+    wp.launch(_generic_cpu_keys, dim=n, inputs=[data.box_lo, scale, wo, wd, generic], device="cpu")
+
+    def morton(q, axes, bits):
+        out = np.zeros(len(q), np.int64)
+        for b in range(bits):
+            for a in range(axes):
+                out |= ((q[:, a] >> b) & 1) << (axes * b + a)
+        return out
+
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        cells = np.float32(1 << SORT_ORIGIN_BITS)
+        fo = (o - lo) * np.array(scale, np.float32)
+        q = np.minimum(np.where(fo >= 0, fo, np.float32(0)), cells - 1).astype(np.int64)
+        a = np.abs(d)
+        l1 = (a[:, 0] + a[:, 1]) + a[:, 2]
+        dir_cells = np.float32(1 << SORT_DIRECTION_BITS)
+        ok = (l1 > 0) & (l1 <= np.finfo(np.float32).max)
+        s = np.where(ok, dir_cells / np.where(ok, l1, 1), np.float32(0)).astype(np.float32)
+        quv = np.minimum(np.where(s[:, None] > 0, a[:, :2] * s[:, None], np.float32(0)), dir_cells - 1)
+    quv = quv.astype(np.int64)
+    fine_bits = SORT_ORIGIN_BITS - SORT_COARSE_BITS
+    origin = morton(q, 3, SORT_ORIGIN_BITS)
+    octant = (d < 0) @ np.array([1, 2, 4])
+    key = (origin >> (3 * fine_bits)) << 3 | octant
+    key = (key << (3 * fine_bits)) | (origin & ((1 << (3 * fine_bits)) - 1))
+    key = (key << (2 * SORT_DIRECTION_BITS)) | morton(quv, 2, SORT_DIRECTION_BITS)
+    assert key.max() < 1 << SORT_KEY_BITS
+    assert np.array_equal(native.numpy().astype(np.int64), key)
+    assert np.array_equal(generic.numpy(), native.numpy())
 
 
 def test_counting_order_is_numpys_stable_argsort():
