@@ -767,6 +767,104 @@ def sort_keys(
     keys[i] = wp.uint32(ray_sort_key(box_lo, scale, origins[i], directions[i]))
 
 
+#: rays per thread of the CPU's key kernel (:func:`sort_keys_simd`)
+KEY_LANES = 16
+_KEY_FINE_MASK = (1 << (3 * (SORT_ORIGIN_BITS - SORT_COARSE_BITS))) - 1
+
+
+def _deinterleave(out: str, array: str) -> str:
+    """C for :func:`keys_simd`: ``KEY_LANES`` vec3 of ``array`` from ray ``first`` on, loaded as three
+    vectors and split by shuffles into ``out[0]``, ``out[1]``, ``out[2]`` (x, y, z of every lane)."""
+    n = KEY_LANES
+    lines = [f"{{ kf v0_, v1_, v2_; const float* p_ = (const float*){array}.data + 3 * (size_t)first;",
+             "__builtin_memcpy(&v0_, p_, sizeof(kf)); __builtin_memcpy(&v1_, p_ + " + str(n) + ", sizeof(kf));",
+             "__builtin_memcpy(&v2_, p_ + " + str(2 * n) + ", sizeof(kf));"]
+    for a in range(3):
+        idx = [3 * r + a for r in range(n)]
+        head = [i for i in idx if i < 2 * n]
+        tail = [i - 2 * n + n for i in idx if i >= 2 * n]
+        first_pass = ", ".join(str(i) for i in head + [0] * (n - len(head)))
+        second = ", ".join([str(i) for i in range(len(head))] + [str(i) for i in tail])
+        lines.append(f"{{ kf t_ = __builtin_shufflevector(v0_, v1_, {first_pass});"
+                     f" {out}[{a}] = __builtin_shufflevector(t_, v2_, {second}); }}")
+    lines.append("}")
+    return "\n".join(lines)
+
+
+
+
+@wp.func_native(f"""
+#if !defined(__CUDA_ARCH__)
+typedef float kf __attribute__((ext_vector_type({KEY_LANES})));
+typedef int ki __attribute__((ext_vector_type({KEY_LANES})));
+kf o[3], d[3];
+{_deinterleave("o", "origins")}
+{_deinterleave("d", "directions")}
+const kf zero = 0.0f;
+const kf cells = {float((1 << SORT_ORIGIN_BITS) - 1)!r}f;
+const kf dcells = {float((1 << SORT_DIRECTION_BITS) - 1)!r}f;
+ki q[3];
+for (int a = 0; a < 3; ++a) {{
+    kf f = (o[a] - box_lo.c[a]) * scale.c[a];
+    f = f >= zero ? f : zero;
+    f = f < cells ? f : cells;
+    ki x = __builtin_convertvector(f, ki) & {(1 << SORT_ORIGIN_BITS) - 1};
+    x = (x | (x << 16)) & 0x030000FF;
+    x = (x | (x << 8)) & 0x0300F00F;
+    x = (x | (x << 4)) & 0x030C30C3;
+    x = (x | (x << 2)) & 0x09249249;
+    q[a] = x;
+}}
+ki origin = q[0] | (q[1] << 1) | (q[2] << 2);
+kf ax = (kf)((ki)d[0] & 0x7FFFFFFF);
+kf ay = (kf)((ki)d[1] & 0x7FFFFFFF);
+kf az = (kf)((ki)d[2] & 0x7FFFFFFF);
+ki octant = ((d[0] < zero) & 1) | ((d[1] < zero) & 2) | ((d[2] < zero) & 4);
+kf l1 = (ax + ay) + az;
+kf s = ((l1 > zero) & (l1 <= {float(np.finfo(np.float32).max)!r}f)) ? {float(1 << SORT_DIRECTION_BITS)!r}f / l1 : zero;
+kf fu = s > zero ? ax * s : zero;
+kf fv = s > zero ? ay * s : zero;
+fu = fu < dcells ? fu : dcells;
+fv = fv < dcells ? fv : dcells;
+ki uv[2] = {{__builtin_convertvector(fu, ki), __builtin_convertvector(fv, ki)}};
+for (int a = 0; a < 2; ++a) {{
+    ki x = uv[a] & {(1 << SORT_DIRECTION_BITS) - 1};
+    x = (x | (x << 8)) & 0x00FF00FF;
+    x = (x | (x << 4)) & 0x0F0F0F0F;
+    x = (x | (x << 2)) & 0x33333333;
+    x = (x | (x << 1)) & 0x55555555;
+    uv[a] = x;
+}}
+ki direction = uv[0] | (uv[1] << 1);
+ki coarse = origin >> {3 * (SORT_ORIGIN_BITS - SORT_COARSE_BITS)};
+ki key = ((((coarse << 3) | octant) << {3 * (SORT_ORIGIN_BITS - SORT_COARSE_BITS)}) | (origin & {_KEY_FINE_MASK}))
+         << {2 * SORT_DIRECTION_BITS} | direction;
+__builtin_memcpy((unsigned int*)keys.data + (size_t)first, &key, sizeof(key));
+#endif
+""")
+def keys_simd(box_lo: wp.vec3, scale: wp.vec3, origins: wp.array(dtype=wp.vec3), directions: wp.array(dtype=wp.vec3),
+              keys: wp.array(dtype=wp.uint32), first: int):
+    """:func:`ray_sort_key` of rays ``first`` … ``first + KEY_LANES - 1`` into ``keys``, the rays as
+    SIMD lanes (clang's vector extensions; CPU only, contiguous arrays): the same float32
+    operations and the same bits (tests), the Morton spreads as shifts and masks of all lanes."""
+    ...
+
+
+@wp.kernel(enable_backward=False)
+def sort_keys_simd(
+    # inputs
+    box_lo: wp.vec3,
+    scale: wp.vec3,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    # outputs
+    keys: wp.array(dtype=wp.uint32),
+    offset: int,
+):
+    """:func:`sort_keys` for ``KEY_LANES`` rays per thread (:func:`keys_simd`; CPU)."""
+    keys_simd(box_lo, scale, origins, directions, keys, (wp.tid() + offset) * KEY_LANES)
+
+
 @wp.kernel(enable_backward=False)
 def sample_key_changes(
     # inputs
@@ -1465,7 +1563,12 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
         return wp.empty(0, dtype=wp.int32, device=device)
     scale = sort_scale(box_lo, box_hi)
     keys = scratch_buffer(scratch, "keys", n, wp.uint32, device)
-    launch(sort_keys, n, [box_lo, scale, origins, directions, keys], device=device, threads=threads)
+    simd = 0
+    if device.startswith("cpu") and origins.is_contiguous and directions.is_contiguous:
+        simd = n // KEY_LANES
+        launch(sort_keys_simd, simd, [box_lo, scale, origins, directions, keys], device=device, threads=threads)
+    launch(sort_keys, n - simd * KEY_LANES, [box_lo, scale, origins, directions, keys], device=device, threads=threads,
+           start=simd * KEY_LANES)
     if device.startswith("cpu"):
         return counting_order(keys, n, threads, scratch)
     order = np.argsort(keys.numpy(), kind="stable").astype(np.int32)
@@ -1745,12 +1848,13 @@ class KdTree:
         return out.numpy().astype(bool)
 
 
-__all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS",
+__all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS", "KEY_LANES",
            "PACKET_LANES", "PACKET_MIN_RAYS", "PACKET_SCRATCH", "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS",
            "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
            "KdTreeData", "batch_is_coherent", "buffers_like", "cache_dir", "finite", "gather_array",
            "gather_in_order", "inner_step_flat", "intersect_rays", "intersect_triangle", "intersect_triangle_fixed",
            "leaf_hits", "lowest_lane", "node_head", "node_split", "occlude_rays", "origin_cell", "packet_pop",
            "packet_step", "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2",
-           "sample_key_changes", "scatter_array", "scatter_in_order", "setup_ray", "sort_keys", "sort_scale",
+           "sample_key_changes", "scatter_array", "scatter_in_order", "setup_ray", "sort_keys", "sort_keys_simd",
+           "sort_scale",
            "spread_bits", "start_ray", "trace_kd", "trace_packets_kernel", "trace_rays_kernel"]

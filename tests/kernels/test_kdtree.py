@@ -14,6 +14,7 @@ from serenity.errors import SerenityError
 from serenity.kernels.kdtree import (
     CPU_RAYS_PER_THREAD,
     INTERLEAVE_FACTORS,
+    KEY_LANES,
     PACKET_LANES,
     SORT_COARSE_BITS,
     SORT_DIRECTION_BITS,
@@ -29,6 +30,7 @@ from serenity.kernels.kdtree import (
     ray_sort_key,
     setup_ray,
     sort_keys,
+    sort_keys_simd,
     sort_scale,
 )
 from serenity.scene.procedural import lumpy_mesh
@@ -267,8 +269,10 @@ def test_sort_keys_are_the_documented_key_with_and_without_bmi2():
     """The reordering key of every ray (``sort_keys``: Morton spreads by BMI2 ``pdep`` on a CPU that
     has it) is the key the docstring of ``ray_sort_key`` defines, computed here in numpy from the
     same float32 arithmetic, and the same as the key of the portable spreads (shifts and masks: a
-    kernel compiled for a generic x86-64 CPU, as CUDA and other CPUs compile it). Origins inside,
-    on and outside the box, NaN origins, zero, NaN and axis-parallel directions."""
+    kernel compiled for a generic x86-64 CPU, as CUDA and other CPUs compile it) and as the key of
+    the SIMD kernel that computes 16 rays' keys at once (``sort_keys_simd``, which ``ray_order``
+    uses on the CPU). Origins inside, on and outside the box, NaN origins, zero, NaN and
+    axis-parallel directions."""
     v, f = lumpy_mesh(2)
     data = KdTree.build(v, f).device_data("cpu")
     rng = np.random.default_rng(5)
@@ -289,6 +293,10 @@ def test_sort_keys_are_the_documented_key_with_and_without_bmi2():
     wp.launch(sort_keys, dim=n, inputs=[data.box_lo, scale, wo, wd, native, 0], device="cpu")
     generic = wp.empty(n, dtype=wp.uint32, device="cpu")
     wp.launch(_generic_cpu_keys, dim=n, inputs=[data.box_lo, scale, wo, wd, generic], device="cpu")
+    simd = wp.zeros(n, dtype=wp.uint32, device="cpu")
+    wp.launch(sort_keys_simd, dim=n // KEY_LANES, inputs=[data.box_lo, scale, wo, wd, simd, 0], device="cpu")
+    lanes = n // KEY_LANES * KEY_LANES
+    assert 0 < lanes < n
 
     def morton(q, axes, bits):
         out = np.zeros(len(q), np.int64)
@@ -317,6 +325,10 @@ def test_sort_keys_are_the_documented_key_with_and_without_bmi2():
     assert key.max() < 1 << SORT_KEY_BITS
     assert np.array_equal(native.numpy().astype(np.int64), key)
     assert np.array_equal(generic.numpy(), native.numpy())
+    assert np.array_equal(simd.numpy()[:lanes], native.numpy()[:lanes])
+    # ray_order's keys: the SIMD kernel for whole groups of lanes, the one-ray kernel for the rest
+    order = ray_order(data.box_lo, data.box_hi, wo, wd, n, True, "cpu")
+    assert np.array_equal(order.numpy(), np.argsort(key, kind="stable"))
 
 
 def test_counting_order_is_numpys_stable_argsort():
