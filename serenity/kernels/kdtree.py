@@ -772,20 +772,21 @@ KEY_LANES = 16
 _KEY_FINE_MASK = (1 << (3 * (SORT_ORIGIN_BITS - SORT_COARSE_BITS))) - 1
 
 
-def _deinterleave(out: str, array: str) -> str:
-    """C for :func:`keys_simd`: ``KEY_LANES`` vec3 of ``array`` from ray ``first`` on, loaded as three
-    vectors and split by shuffles into ``out[0]``, ``out[1]``, ``out[2]`` (x, y, z of every lane)."""
-    n = KEY_LANES
-    lines = [f"{{ kf v0_, v1_, v2_; const float* p_ = (const float*){array}.data + 3 * (size_t)first;",
-             "__builtin_memcpy(&v0_, p_, sizeof(kf)); __builtin_memcpy(&v1_, p_ + " + str(n) + ", sizeof(kf));",
-             "__builtin_memcpy(&v2_, p_ + " + str(2 * n) + ", sizeof(kf));"]
+def _deinterleave(out: str, ptr: str, lanes: int, vtype: str) -> str:
+    """C for the SIMD snippets: ``lanes`` vec3 from the float pointer ``ptr`` (x, y, z of each in
+    turn), loaded as three vectors of type ``vtype`` and split by shuffles into ``out[0]``,
+    ``out[1]``, ``out[2]`` (x, y, z of every lane)."""
+    n = lanes
+    lines = [f"{{ {vtype} v0_, v1_, v2_; const float* p_ = {ptr};",
+             f"__builtin_memcpy(&v0_, p_, sizeof({vtype})); __builtin_memcpy(&v1_, p_ + {n}, sizeof({vtype}));",
+             f"__builtin_memcpy(&v2_, p_ + {2 * n}, sizeof({vtype}));"]
     for a in range(3):
         idx = [3 * r + a for r in range(n)]
         head = [i for i in idx if i < 2 * n]
         tail = [i - 2 * n + n for i in idx if i >= 2 * n]
         first_pass = ", ".join(str(i) for i in head + [0] * (n - len(head)))
         second = ", ".join([str(i) for i in range(len(head))] + [str(i) for i in tail])
-        lines.append(f"{{ kf t_ = __builtin_shufflevector(v0_, v1_, {first_pass});"
+        lines.append(f"{{ {vtype} t_ = __builtin_shufflevector(v0_, v1_, {first_pass});"
                      f" {out}[{a}] = __builtin_shufflevector(t_, v2_, {second}); }}")
     lines.append("}")
     return "\n".join(lines)
@@ -798,8 +799,8 @@ def _deinterleave(out: str, array: str) -> str:
 typedef float kf __attribute__((ext_vector_type({KEY_LANES})));
 typedef int ki __attribute__((ext_vector_type({KEY_LANES})));
 kf o[3], d[3];
-{_deinterleave("o", "origins")}
-{_deinterleave("d", "directions")}
+{_deinterleave("o", "(const float*)origins.data + 3 * (size_t)first", KEY_LANES, "kf")}
+{_deinterleave("d", "(const float*)directions.data + 3 * (size_t)first", KEY_LANES, "kf")}
 const kf zero = 0.0f;
 const kf cells = {float((1 << SORT_ORIGIN_BITS) - 1)!r}f;
 const kf dcells = {float((1 << SORT_DIRECTION_BITS) - 1)!r}f;
@@ -1235,7 +1236,14 @@ _PK_TE = 6 * PACKET_LANES
 _PK_T0 = 7 * PACKET_LANES
 _PK_T1 = 8 * PACKET_LANES
 _PK_BT = 9 * PACKET_LANES
-_PK_STACK = 10 * PACKET_LANES
+# ... the lanes' set-up (packet_setup): interval at the root box (t0, t1), Woop's axes (kx, ky, kz,
+# as floats) and shears (sx, sy, sz), the octant (as a float), then the stack
+_PK_S0 = 10 * PACKET_LANES
+_PK_S1 = 11 * PACKET_LANES
+_PK_KX = 12 * PACKET_LANES
+_PK_SX = 15 * PACKET_LANES
+_PK_OCT = 18 * PACKET_LANES
+_PK_STACK = 19 * PACKET_LANES
 PACKET_SCRATCH = _PK_STACK + 2 * STACK_SIZE * PACKET_LANES  # floats per worker
 _PK_ALL = wp.constant(wp.int32((1 << PACKET_LANES) - 1))
 _PK_LANE_MASK = wp.constant(wp.int32(PACKET_LANES - 1))
@@ -1334,6 +1342,134 @@ def lowest_lane(x: int) -> int:
     ...
 
 
+_FLT_MAX_C = f"{float(np.finfo(np.float32).max)!r}f"
+
+
+@wp.func_native(f"""
+#if defined(__CUDA_ARCH__)
+return 0;
+#else
+{_PK_VEC}
+typedef int pk_i __attribute__((ext_vector_type({PACKET_LANES})));
+pk_f o[3], d[3], tm;
+if (count == {PACKET_LANES}) {{
+{_deinterleave("o", "(const float*)origins.data + 3 * (size_t)first", PACKET_LANES, "pk_f")}
+{_deinterleave("d", "(const float*)directions.data + 3 * (size_t)first", PACKET_LANES, "pk_f")}
+    __builtin_memcpy(&tm, (const float*)tmax.data + (size_t)first, sizeof(pk_f));
+}} else {{
+    float ob[3 * {PACKET_LANES}] = {{0}}, db[3 * {PACKET_LANES}] = {{0}}, tb[{PACKET_LANES}] = {{0}};
+    __builtin_memcpy(ob, (const float*)origins.data + 3 * (size_t)first, 12 * (size_t)count);
+    __builtin_memcpy(db, (const float*)directions.data + 3 * (size_t)first, 12 * (size_t)count);
+    __builtin_memcpy(tb, (const float*)tmax.data + (size_t)first, 4 * (size_t)count);
+{_deinterleave("o", "ob", PACKET_LANES, "pk_f")}
+{_deinterleave("d", "db", PACKET_LANES, "pk_f")}
+    __builtin_memcpy(&tm, tb, sizeof(pk_f));
+}}
+const pk_f zero = 0.0f, one = 1.0f, fmax_ = {_FLT_MAX_C}, inf_ = __builtin_inff();
+pk_i lane;
+for (int r = 0; r < {PACKET_LANES}; ++r) lane[r] = r;
+#define PK_ABS(x) ((pk_f)((pk_i)(x) & 0x7FFFFFFF))
+#define PK_FINITE(x) (PK_ABS(x) <= fmax_)
+pk_f ad[3] = {{PK_ABS(d[0]), PK_ABS(d[1]), PK_ABS(d[2])}};
+/* setup_ray: the dominant axis kz, kx and ky after it (swapped when d[kz] < 0), the shears */
+pk_i c0 = (ad[0] >= ad[1]) & (ad[0] >= ad[2]);
+pk_i c1 = ~c0 & (ad[1] >= ad[2]);
+pk_i kz = (~c0 & ~c1 & 2) | (c1 & 1);
+pk_i kx = (kz == 2) ? 0 : kz + 1;
+pk_i ky = (kx == 2) ? 0 : kx + 1;
+#define PK_PICK(v, k) (((k) == 0) ? (v)[0] : (((k) == 1) ? (v)[1] : (v)[2]))
+pk_f dkz = PK_PICK(d, kz);
+pk_i neg = dkz < zero;
+pk_i kx2 = neg ? ky : kx;
+pk_i ky2 = neg ? kx : ky;
+pk_f sx = PK_PICK(d, kx2) / dkz;
+pk_f sy = PK_PICK(d, ky2) / dkz;
+pk_f sz = one / dkz;
+/* start_ray: validity, the inverse direction (0 where parallel), the root box clip */
+pk_f tlo = tmin_ > 0.0f ? tmin_ : 0.0f;
+pk_f t0 = tlo, t1 = tm;
+pk_i valid = lane < count;
+valid &= PK_FINITE(o[0]) & PK_FINITE(o[1]) & PK_FINITE(o[2]) & PK_FINITE(d[0]) & PK_FINITE(d[1]) & PK_FINITE(d[2]);
+valid &= (PK_ABS(dkz) >= {float(np.float32(TINY_DIRECTION))!r}f) & PK_FINITE(sz) & (t1 > t0);
+pk_f inv[3];
+pk_i clip = valid;
+for (int a = 0; a < 3; ++a) {{
+    pk_f r = one / d[a];
+    inv[a] = (clip & (d[a] != zero) & PK_FINITE(r)) ? r : zero;
+}}
+for (int a = 0; a < 3; ++a) {{
+    pk_i par = inv[a] == zero;
+    valid &= ~(clip & par & ((o[a] < lo.c[a]) | (o[a] > hi.c[a])));
+    pk_f ta = (lo.c[a] - o[a]) * inv[a];
+    pk_f tb = (hi.c[a] - o[a]) * inv[a];
+    pk_f mn = ta < tb ? ta : tb;
+    pk_f mx = ta > tb ? ta : tb;
+    pk_i upd = clip & ~par;
+    t0 = (upd & (mn > t0)) ? mn : t0;
+    t1 = (upd & (mx < t1)) ? mx : t1;
+}}
+pk_f ao = PK_ABS(o[0]) > PK_ABS(o[1]) ? PK_ABS(o[0]) : PK_ABS(o[1]);
+ao = PK_ABS(o[2]) > ao ? PK_ABS(o[2]) : ao;
+pk_f te = ({float(np.float32(T_TOLERANCE))!r}f * (scale + ao)) * PK_ABS(sz);
+pk_i live = valid & ~(t0 > t1 + te);
+/* the packet's lanes: child order (octant) per axis, inverse direction +-inf where parallel */
+pk_i oc = 0;
+for (int a = 0; a < 3; ++a) {{
+    pk_i side = (inv[a] != zero) ? ((inv[a] < zero) & 1) : ((d[a] > zero) & 1);
+    oc |= side << a;
+    PK_ST({_PK_O} + a * {PACKET_LANES}, o[a]);
+    PK_ST({_PK_IA} + a * {PACKET_LANES}, (inv[a] != zero) ? inv[a] : ((side != 0) ? -inf_ : inf_));
+}}
+PK_ST({_PK_TE}, te);
+PK_ST({_PK_BT}, tm);
+PK_ST({_PK_S0}, t0);
+PK_ST({_PK_S1}, t1);
+PK_ST({_PK_KX}, __builtin_convertvector(kx2, pk_f));
+PK_ST({_PK_KX} + {PACKET_LANES}, __builtin_convertvector(ky2, pk_f));
+PK_ST({_PK_KX} + {2 * PACKET_LANES}, __builtin_convertvector(kz, pk_f));
+PK_ST({_PK_SX}, sx);
+PK_ST({_PK_SX} + {PACKET_LANES}, sy);
+PK_ST({_PK_SX} + {2 * PACKET_LANES}, sz);
+PK_ST({_PK_OCT}, __builtin_convertvector(oc, pk_f));
+long long octants = (long long)__builtin_reduce_or(live ? (1 << oc) : 0);
+long long m = PK_MASK(live) | (octants << 20);
+#undef PK_ABS
+#undef PK_FINITE
+#undef PK_PICK
+{_PK_VEC_END}
+return m;
+#endif
+""")
+def packet_setup(lo: wp.vec3, hi: wp.vec3, scale: float, origins: wp.array(dtype=wp.vec3),
+                 directions: wp.array(dtype=wp.vec3), tmax: wp.array(dtype=float), tmin_: float, first: int,
+                 count: int, s: wp.array(dtype=float), base: int) -> wp.int64:
+    """:func:`start_ray` for a packet's ``count`` rays from ``first`` on (contiguous arrays), the rays
+    as SIMD lanes: the same float32 operations lane by lane (tests: the packets' hits are the one-ray
+    traversal's bit for bit). Writes each lane's origin, inverse direction (+-inf where parallel,
+    see the kernel), tolerance, tmax as its best t, interval at the root box, Woop's axes and
+    shears and octant into the scratch ``s`` from ``base``; returns the mask of the lanes with
+    something to trace (bits 0 …) and, from bit 20, the octants among them (a bit per octant)."""
+    ...
+
+
+@wp.func_native(f"""
+#if defined(__CUDA_ARCH__)
+return 0;
+#else
+{_PK_VEC}
+PK_ST({_PK_T0}, PK_LD({_PK_S0}));
+PK_ST({_PK_T1}, PK_LD({_PK_S1}));
+int m = (int)PK_MASK(PK_LD({_PK_OCT}) == (float)oc);
+{_PK_VEC_END}
+return m;
+#endif
+""")
+def packet_octant(s: wp.array(dtype=float), base: int, oc: int) -> int:
+    """Start the trace of octant ``oc``'s lanes: every lane's interval reset to the root box's
+    (:func:`packet_setup`); returns the mask of the lanes whose octant is ``oc``."""
+    ...
+
+
 @kernel_factory(any_hit=(False, True))
 def trace_packets_kernel(any_hit: bool):
     """The CPU query kernel for batches in a coherent order (module docstring, "Packets"): kernel
@@ -1372,67 +1508,21 @@ def trace_packets_kernel(any_hit: bool):
         prim = vec_i()
         hu = vec_f()
         hv = vec_f()
-        octant = vec_i()
-        kxs = vec_i()
-        kys = vec_i()
-        kzs = vec_i()
-        sxs = vec_f()
-        sys_ = vec_f()
-        szs = vec_f()
-        t0s = vec_f()
-        t1s = vec_f()
         st_node = stack_v()
         st_lanes = stack_v()
         tlo = wp.max(tmin, 0.0)
-        live = int(0)  # lanes with a ray to trace
-        octants = int(0)  # the octants among them (bit per octant)
+        m0 = packet_setup(tree.box_lo, tree.box_hi, tree.scale, origins, directions, tmax, tmin, first, count,
+                          scratch, base)
+        live = wp.int32(m0 & wp.int64(_PK_FIELD))  # lanes with a ray to trace
+        octants = wp.int32(m0 >> wp.int64(20))  # the octants among them (bit per octant)
         for r in range(PACKET_LANES):
-            if r < count:
-                i = first + r
-                o = origins[i]
-                d = directions[i]
-                tm = tmax[i]
-                kx, ky, kz, sx, sy, sz, inv, t0, t1, teps, _tlo, done = start_ray(tree, o, d, tmin, tm)
-                kxs[r] = kx
-                kys[r] = ky
-                kzs[r] = kz
-                sxs[r] = sx
-                sys_[r] = sy
-                szs[r] = sz
-                t0s[r] = t0
-                t1s[r] = t1
-                oc = int(0)
-                for a in range(3):
-                    # the packet's child order on axis a: 1 = the right child first, as the ray's
-                    # direction says; a ray parallel to the axis (inv 0) goes to its origin's side,
-                    # on the plane first to where d points (trace_kd), and its inverse becomes +-inf:
-                    # ts is then +-inf off the plane (its origin's side) and NaN on it (both sides)
-                    side = wp.where(inv[a] != 0.0, wp.where(inv[a] < 0.0, 1, 0), wp.where(d[a] > 0.0, 1, 0))
-                    oc = oc | (side << a)
-                    scratch[base + _PK_O + a * PACKET_LANES + r] = o[a]
-                    scratch[base + _PK_IA + a * PACKET_LANES + r] = wp.where(
-                        inv[a] != 0.0, inv[a], wp.where(side != 0, -_INF, _INF))
-                scratch[base + _PK_TE + r] = teps
-                scratch[base + _PK_BT + r] = tm
-                prim[r] = -1
-                hu[r] = 0.0
-                hv[r] = 0.0
-                octant[r] = oc
-                if not done:
-                    live = live | (1 << r)
-                    octants = octants | (1 << oc)
+            prim[r] = -1
         hits = int(0)  # lanes with a hit
         finished = int(0)  # lanes whose search is over
         oc = int(0)
         while octants != 0:
             if (octants & 1) != 0:
-                lanes = int(0)
-                for r in range(PACKET_LANES):
-                    if r < count:
-                        if octant[r] == oc:
-                            lanes = lanes | (((live >> r) & 1) << r)
-                            scratch[base + _PK_T0 + r] = t0s[r]
-                            scratch[base + _PK_T1 + r] = t1s[r]
+                lanes = packet_octant(scratch, base, oc) & live
                 node = int(0)
                 sp = int(0)
                 tracing = int(1)
@@ -1473,8 +1563,13 @@ def trace_packets_kernel(any_hit: bool):
                         while todo != 0:
                             r = lowest_lane(todo) & _PK_LANE_MASK
                             todo = todo & (todo - 1)
-                            rp, rt, ru, rv = intersect_leaf(tree, first_ref, count_tris, origins[first + r], kxs[r],
-                                                            kys[r], kzs[r], sxs[r], sys_[r], szs[r], tlo,
+                            rp, rt, ru, rv = intersect_leaf(tree, first_ref, count_tris, origins[first + r],
+                                                            int(scratch[base + _PK_KX + r]),
+                                                            int(scratch[base + _PK_KX + PACKET_LANES + r]),
+                                                            int(scratch[base + _PK_KX + 2 * PACKET_LANES + r]),
+                                                            scratch[base + _PK_SX + r],
+                                                            scratch[base + _PK_SX + PACKET_LANES + r],
+                                                            scratch[base + _PK_SX + 2 * PACKET_LANES + r], tlo,
                                                             scratch[base + _PK_BT + r], prim[r], hu[r], hv[r],
                                                             wp.static(any_hit))
                             prim[r] = rp
