@@ -944,6 +944,61 @@ def place_keys(
         starts[b] = p + 1
 
 
+@wp.kernel(enable_backward=False)
+def place_low_runs(
+    # inputs
+    keys: wp.array(dtype=wp.uint32),
+    n: int,
+    per_run: int,
+    # outputs
+    starts: wp.array(dtype=wp.int32),
+    first: wp.array(dtype=wp.int32),
+    high: wp.array(dtype=wp.uint16),
+    high_counts: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """:func:`place_keys`' first pass for run r = tid + offset of the keys, at the run's own places in
+    each bin (``starts[r·B + digit]``); also counts the high digits of the run of pass-1 places
+    ``[r·per_run, (r+1)·per_run)``... of this run's keys, per run of places they land in, into
+    ``high_counts[(r·R + run)·B + digit]`` (R runs; zeroed by the caller)."""
+    r = wp.tid() + offset
+    base = r * _SORT_BINS
+    runs = (n + per_run - 1) // per_run
+    hbase = r * runs * _SORT_BINS
+    for i in range(r * per_run, wp.min(n, (r + 1) * per_run)):
+        k = int(keys[i])
+        b = base + (k & _SORT_DIGIT_MASK)
+        j = starts[b]
+        first[j] = i
+        h = k >> _SORT_DIGIT
+        high[j] = wp.uint16(h)
+        starts[b] = j + 1
+        c = hbase + (j // per_run) * _SORT_BINS + h
+        high_counts[c] = high_counts[c] + 1
+
+
+@wp.kernel(enable_backward=False)
+def place_high_runs(
+    # inputs
+    first: wp.array(dtype=wp.int32),
+    high: wp.array(dtype=wp.uint16),
+    n: int,
+    per_run: int,
+    # outputs
+    starts: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """:func:`place_keys`' second pass for run r of the first pass's places."""
+    r = wp.tid() + offset
+    base = r * _SORT_BINS
+    for j in range(r * per_run, wp.min(n, (r + 1) * per_run)):
+        b = base + int(high[j])
+        p = starts[b]
+        order[p] = first[j]
+        starts[b] = p + 1
+
+
 def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: Staging | None = None) -> wp.array:
     """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU:
     a radix sort of two digits by counting. The threads count contiguous runs of the keys per digit
@@ -961,12 +1016,26 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
     counts = scratch_buffer(scratch, "sort_counts", runs * 2 * bins, wp.int32, "cpu")
     launch(count_keys, runs, [keys, n, per_run, counts], device="cpu", threads=runs, min_items=1)
     totals = counts.numpy().reshape(runs, 2, bins).sum(axis=0, dtype=np.int64)
-    starts = scratch_buffer(scratch, "sort_starts", 2 * bins, wp.int32, "cpu")
-    starts.numpy()[:] = (np.cumsum(totals, axis=1) - totals).reshape(-1)  # where each bin starts
     first = scratch_buffer(scratch, "sort_first", n, wp.int32, "cpu")
     high = scratch_buffer(scratch, "sort_high", n, wp.uint16, "cpu")
     order = scratch_buffer(scratch, "order", n, wp.int32, "cpu")
-    launch(place_keys, 1, [keys, n, starts, first, high, order], device="cpu", threads=1)
+    if runs == 1:
+        starts = scratch_buffer(scratch, "sort_starts", 2 * bins, wp.int32, "cpu")
+        starts.numpy()[:] = (np.cumsum(totals, axis=1) - totals).reshape(-1)  # where each bin starts
+        launch(place_keys, 1, [keys, n, starts, first, high, order], device="cpu", threads=1)
+        return order
+    # several runs: each places its own keys at its own places in every bin (run r after runs < r)
+    low = counts.numpy().reshape(runs, 2, bins)[:, 0, :].astype(np.int64)
+    bin_start = np.cumsum(totals[0]) - totals[0]
+    starts = scratch_buffer(scratch, "sort_starts", runs * bins, wp.int32, "cpu")
+    starts.numpy()[:] = (bin_start[None, :] + np.cumsum(low, axis=0) - low).reshape(-1)
+    hc = scratch_buffer(scratch, "sort_high_counts", runs * runs * bins, wp.int32, "cpu")
+    hc.zero_()
+    launch(place_low_runs, runs, [keys, n, per_run, starts, first, high, hc], device="cpu", threads=runs, min_items=1)
+    per_place_run = hc.numpy().reshape(runs, runs, bins).sum(axis=0, dtype=np.int64)  # (run of places, digit)
+    hbin_start = np.cumsum(totals[1]) - totals[1]
+    starts.numpy()[:] = (hbin_start[None, :] + np.cumsum(per_place_run, axis=0) - per_place_run).reshape(-1)
+    launch(place_high_runs, runs, [first, high, n, per_run, starts, order], device="cpu", threads=runs, min_items=1)
     return order
 
 
