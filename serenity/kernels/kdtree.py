@@ -1723,7 +1723,7 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
     where the keys go (a grow-only buffer, :meth:`KdTree.scratch`), else a new array."""
     if (sort is False) or n < 2 or (sort is None and n < SORT_MIN_RAYS):
         return wp.empty(0, dtype=wp.int32, device=device)
-    if sort is None and batch_is_coherent(box_lo, box_hi, origins, directions, n, device):
+    if sort is None and batch_is_coherent(box_lo, box_hi, origins, directions, n, device, threads):
         return wp.empty(0, dtype=wp.int32, device=device)
     scale = sort_scale(box_lo, box_hi)
     keys = scratch_buffer(scratch, "keys", n, wp.uint32, device)
@@ -1740,7 +1740,7 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
 
 
 def batch_is_coherent(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: wp.array, n: int,
-                      device: str) -> bool:
+                      device: str, threads: int | None = None) -> bool:
     """Are ``n`` rays (n ≥ 2) already in a coherent order? True when :func:`ray_sort_key` changes, on
     ``SORT_SAMPLE_PAIRS`` evenly spaced pairs of consecutive rays, less often than every
     ``SORT_MIN_RUN`` rays (camera rays, reflections of a smooth surface in pixel order): such a batch
@@ -1748,7 +1748,7 @@ def batch_is_coherent(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, direc
     m = min(SORT_SAMPLE_PAIRS, n - 1)
     changes = wp.empty(m, dtype=wp.int32, device=device)
     launch(sample_key_changes, m, [box_lo, sort_scale(box_lo, box_hi), origins, directions, (n - 1) // m, changes],
-           device=device, threads=1)
+           device=device, threads=threads)
     return int(np.count_nonzero(changes.numpy())) * SORT_MIN_RUN < m
 
 
@@ -1816,6 +1816,8 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         k = (PACKET_LANES if reordered or coherent else 1) if on_cpu else 1
     if k != 1 and k not in INTERLEAVE_FACTORS and k != PACKET_LANES:
         raise SerenityError(f"rays_per_thread={k}: 1, one of {INTERLEAVE_FACTORS} or {PACKET_LANES} (packets)")
+    if k == PACKET_LANES and not all(a.is_contiguous for a in inputs[1:3] + inputs[4:5]):
+        k = 1  # packet_setup loads its lanes' rays as contiguous vectors
     traced = buffers_like(outputs, "traced", device, scratch) if reordered else outputs
     none_f = wp.empty(0, dtype=float, device=device)
     none_i = wp.empty(0, dtype=wp.int32, device=device)
@@ -1972,7 +1974,7 @@ class KdTree:
         elif dev.startswith("cpu") and n >= PACKET_MIN_RAYS:
             # with sort=None, ray_order leaves a big batch in its order only when it found it coherent
             coherent = (sort is None and n >= SORT_MIN_RAYS) or batch_is_coherent(
-                data.box_lo, data.box_hi, origins, directions, n, dev)
+                data.box_lo, data.box_hi, origins, directions, n, dev, threads)
         return [data, origins, directions, tmin, tmax], order, coherent
 
     def intersect(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
