@@ -47,9 +47,10 @@ the origin's cell on an 8³ grid over the root box, the direction's octant, the 
 4³ grid within that cell, then the direction's cell on a 32×32 grid of the octant's octahedral map
 — so that consecutive rays start near each other and head the same way, walk the same nodes and
 triangles while they are still in the caches, and 16 of them make a packet whose lanes share
-nodes (below, "Packets"). The keys are a Warp kernel, the sort a radix sort of two 14-bit digits
-by counting on the CPU (:func:`counting_order`: most of the serial part of a batch traced on
-several threads) and numpy's stable sort on CUDA; the rays are gathered into the sorted order (a
+nodes (below, "Packets"). The keys are a Warp kernel (on the CPU 16 rays per kernel thread as
+SIMD lanes, :func:`sort_keys_simd`), the sort a radix sort of two 14-bit digits by counting on the
+CPU (:func:`counting_order`, its placing passes split by runs of keys over the threads) and numpy's
+stable sort on CUDA; the rays are gathered into the sorted order (a
 separate pass: a random read per ray inside the traversal costs more than the pass; tmax only when
 it differs between rays), traced with their results written in that order, and the results
 scattered back to each ray's own index by a pass of their own (:func:`scatter_in_order`), so the results
@@ -100,8 +101,11 @@ triangles in trace_kd's order: the same hits, bit for bit (tests). A node's load
 branches are shared by the lanes that visit it: many on camera rays (1.5 times the rays per second
 of one ray per kernel thread), fewer on reordered incoherent rays, where packets beat the
 interleaved kernel only once the sort key told nearby origins and directions apart finely enough
-(README, "The kd-tree ray tracer", round 28). Reordered batches and coherent ones in the caller's
-order (:func:`batch_is_coherent`) are traced in packets; anything else one ray per kernel thread.
+(README, "The kd-tree ray tracer", round 28). The lanes' set-up — trace_kd's ``start_ray``: Woop's
+axes and shears, the inverse direction, the root-box clip — is SIMD too (:func:`packet_setup`):
+as 16 scalar calls it cost a quarter of a camera batch's traversal time (round 29). Reordered
+batches and coherent ones in the caller's order (:func:`batch_is_coherent`) are traced in packets
+(their arrays contiguous, as the queries make them); anything else one ray per kernel thread.
 
 On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
 ``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
@@ -1003,13 +1007,16 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
     """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU:
     a radix sort of two digits by counting. The threads count contiguous runs of the keys per digit
     and bin (:func:`count_keys`), numpy sums the runs' counts into each bin's first place, and one thread
-    places the keys by the low digit, then by the high one (:func:`place_keys`). The same order as
-    ``np.argsort(keys, kind="stable")`` (tests). With one 16-bit digit (round 26's 16-bit key) it
-    took 4.5 ms on 0.92 M keys on one thread against 8.2-8.3 ms for numpy's radix sort; the placing
-    stays on one thread: split by runs of rays the threads shared every bin's cache lines, split by
-    spans of bins each thread read every key behind a branch it could not predict, and both were
-    slower on 2 threads than on 1 (round 26's host, scratch timings; the kd-tree bench in the
-    README measures the whole query)."""
+    places the keys by the low digit, then by the high one (:func:`place_keys`); on several threads
+    each run of keys is placed by its own thread at the run's own places in every bin
+    (:func:`place_low_runs`, which also counts the high digits per run of places for the second
+    pass, :func:`place_high_runs`). The same order as ``np.argsort(keys, kind="stable")`` (tests).
+    With one 16-bit digit (round 26's 16-bit key) it took 4.5 ms on 0.92 M keys on one thread
+    against 8.2-8.3 ms for numpy's radix sort. The threads' runs meet in every bin, so they share
+    its border cache lines: 2 threads place 0.92 M keys in 8.5 ms against 9.9 for one thread beside
+    an idle one, inside the incoherent query (round 29; split by spans of bins instead, each thread
+    reading every key and placing its own, branch-free, it was no faster than one thread; a radix
+    sort of three 9-10-bit digits, 1.7x slower on one thread: scratch timings)."""
     runs = max(1, min(threads or cpu_threads(), n // SORT_MIN_KEYS_PER_THREAD))
     per_run = -(-n // runs)
     bins = 1 << SORT_DIGIT_BITS
