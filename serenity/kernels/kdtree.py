@@ -1836,7 +1836,8 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         lanes = scratch_buffer(scratch, "packets", workers * PACKET_SCRATCH, float, device)
         lanes.zero_()
         launch(trace_packets_kernel(any_hit), -(-n // PACKET_LANES), [*inputs, n, lanes, *outs], device=device,
-               threads=threads, chunks_per_thread=CHUNKS_PER_THREAD, worker_arg=True)
+               threads=threads, chunks_per_thread=CHUNKS_PER_THREAD, worker_arg=True,
+               min_chunk=MIN_ITEMS_PER_CHUNK // PACKET_LANES)  # a packet is 16 rays' work
     else:
         per = k * _slot_rays(n, k, threads)
         launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device,

@@ -80,7 +80,8 @@ def chunk_ranges(dim: int, threads: int, min_items: int = MIN_ITEMS_PER_THREAD) 
 
 
 def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None = None, start: int = 0,
-           chunks_per_thread: int = 1, min_items: int = MIN_ITEMS_PER_THREAD, worker_arg: bool = False) -> None:
+           chunks_per_thread: int = 1, min_items: int = MIN_ITEMS_PER_THREAD, worker_arg: bool = False,
+           min_chunk: int = MIN_ITEMS_PER_CHUNK) -> None:
     """Launch ``kernel`` over ``[start, start + dim)``; the kernel's trailing ``offset: int`` is appended.
 
     On ``cpu`` the range is split over ``threads`` worker threads (default: all usable CPUs,
@@ -93,6 +94,8 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     ``worker_arg``: the kernel's trailing parameters are ``worker: int, offset: int``; ``worker`` is
     the index (0 … threads − 1) of the worker thread running the chunk, so that a kernel can keep
     per-worker scratch memory (no two chunks with the same index run at once; 0 on CUDA).
+    ``min_chunk``: with ``chunks_per_thread`` > 1, chunks are not made smaller than this many items
+    (``MIN_ITEMS_PER_CHUNK`` for items of about one ray's work; fewer for items that each do more).
     """
     wp = init_warp()
     dim = int(dim)
@@ -108,7 +111,7 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     workers = threads or cpu_threads()
     n_chunks = workers
     if chunks_per_thread > 1:
-        n_chunks = max(workers, min(workers * int(chunks_per_thread), dim // MIN_ITEMS_PER_CHUNK))
+        n_chunks = max(workers, min(workers * int(chunks_per_thread), dim // max(1, min_chunk)))
     chunks = chunk_ranges(dim, n_chunks, min_items if chunks_per_thread <= 1 else MIN_ITEMS_PER_THREAD)
     if len(chunks) == 1:
         wp.launch(kernel, dim=dim, inputs=args(0, int(start)), device=device)
