@@ -148,3 +148,19 @@ def test_worker_arg_names_the_worker_thread_of_each_chunk():
             assert len(np.unique(got[got[:, 1] == start, 0])) == 1, (threads, k, start)
         if threads == 1:
             assert np.all(got[:, 0] == 0)
+
+
+def test_min_chunk_sets_the_smallest_chunk_of_a_balanced_launch():
+    """With ``chunks_per_thread`` > 1 a launch gets that many chunks per thread unless they would be
+    smaller than ``min_chunk`` items (default ``MIN_ITEMS_PER_CHUNK``, about one ray's work per
+    item): 57,600 packets of 16 rays got 14 chunks under the default, 32 with a floor of 256."""
+    from serenity.kernels.launch import MIN_ITEMS_PER_CHUNK
+
+    n = 57_600
+    for min_chunk, chunks in ((MIN_ITEMS_PER_CHUNK, n // MIN_ITEMS_PER_CHUNK), (256, 32)):
+        out = wp.full(n, wp.vec2i(-1, -1), dtype=wp.vec2i, device="cpu")
+        launch(_worker_and_chunk, n, [out], device="cpu", threads=2, chunks_per_thread=16, worker_arg=True,
+               min_chunk=min_chunk)
+        got = out.numpy()
+        assert got[:, 1].min() >= 0
+        assert len(np.unique(got[:, 1])) == chunks, min_chunk
