@@ -11,15 +11,18 @@ Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`
     nodes (nodes,) KdNode, 8 bytes: inner node: ``head`` = (first child << 4) | (right child is an
         empty leaf) << 3 | (left child is an empty leaf) << 2 | axis (children are consecutive: left
         at first child, right at first child + 1), ``split`` = the split position (world units);
-        leaf: ``head`` = (first reference << 2) | 3, ``split`` = its triangle count (a small
+        leaf: ``head`` = (its block's first word in ``refs`` << 2) | 3, ``split`` = its triangle count (a small
         integer, exact in float32), so a leaf costs no extra load before its triangles. The empty
         flags let the traversal skip empty leaves (most leaves a ray meets: 6 of 7 on the
         benchmark's camera rays) without loading them or pushing them on the stack.
-    refs (P,) KdRef: reference r = slot r of the build's leaf blocks (``prims``: a count, then that
-        many triangle indices; a leaf's references are the slots after its count): the triangle's
-        three vertices and its index, 40 bytes — a leaf's triangles lie next to each other in memory
-        (the traversal's time goes mostly into cache misses on nodes and triangles: a copy per
-        reference trades memory for one miss per leaf, not one per triangle and its index).
+    refs (W,) float32: one block of 10·k words per non-empty leaf of k triangles (the build's leaf
+        blocks in ``prims``: a count, then that many triangle indices): the triangles' vertex
+        coordinates one after the other — the k x of v0, the k y of v0, …, the k z of v2 — then
+        their indices (as int32 bits), 40 bytes per reference; padded by ``REF_PAD`` words. A
+        leaf's triangles lie next to each other in memory (the traversal's time goes much into
+        cache misses on nodes and triangles: a copy per reference trades memory for one miss per
+        leaf, not one per triangle and its index), and a coordinate of up to 8 of them is one
+        vector load (the packets' SIMD leaf test, :func:`leaf_simd`).
     tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2 (for shading a hit).
 
 Traversal (Warp, ``trace_kd``): rays with origin ``o`` (N,3) and direction ``d`` (N,3) float32,
@@ -181,6 +184,8 @@ wp.set_module_options(TRACE_MODULE_OPTIONS)
 #: of the current node's ancestors), so a tree of depth <= KD_MAX_DEPTH never overflows it and the
 #: traversal does not test for that (``KdTree.device_data`` refuses a deeper tree)
 STACK_SIZE = KD_MAX_DEPTH + 2
+#: words of padding after the last leaf block (``refs``): SIMD leaf tests load 8 or 16 words at a time
+REF_PAD = 16
 T_TOLERANCE = 1e-6  # relative (to the scene scale) overlap of near/far traversal intervals
 BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest extent
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
@@ -254,22 +259,11 @@ class KdNode:
 
 
 @wp.struct
-class KdRef:
-    """One triangle reference of a leaf, 40 bytes: its three vertices and its triangle index,
-    together so that a leaf's references cost one stream of cache lines."""
-
-    v0: wp.vec3
-    v1: wp.vec3
-    v2: wp.vec3
-    prim: wp.int32
-
-
-@wp.struct
 class KdTreeData:
     """The tree on one device (see the module docstring for the layout)."""
 
     nodes: wp.array(dtype=KdNode)
-    refs: wp.array(dtype=KdRef)
+    refs: wp.array(dtype=wp.float32)
     tri_verts: wp.array(dtype=wp.vec3)
     box_lo: wp.vec3  # padded root box
     box_hi: wp.vec3
@@ -299,27 +293,16 @@ def node_split(nodes: wp.array(dtype=KdNode), i: int) -> float:
     ...
 
 
-@wp.func_native("return refs.data[(unsigned)i].v0;")
-def ref_v0(refs: wp.array(dtype=KdRef), i: int) -> wp.vec3:
-    """``refs[i].v0`` (see the note above)."""
+@wp.func_native("const float* p = refs.data + (unsigned)i; return wp::vec3(p[0], p[k], p[2 * k]);")
+def ref_vertex(refs: wp.array(dtype=float), i: int, k: int) -> wp.vec3:
+    """A vertex of a leaf's block (module docstring, ``refs``): its x at word ``i``, y and z ``k``
+    and ``2k`` words on (``k`` = the leaf's triangle count)."""
     ...
 
 
-@wp.func_native("return refs.data[(unsigned)i].v1;")
-def ref_v1(refs: wp.array(dtype=KdRef), i: int) -> wp.vec3:
-    """``refs[i].v1`` (see the note above)."""
-    ...
-
-
-@wp.func_native("return refs.data[(unsigned)i].v2;")
-def ref_v2(refs: wp.array(dtype=KdRef), i: int) -> wp.vec3:
-    """``refs[i].v2`` (see the note above)."""
-    ...
-
-
-@wp.func_native("return refs.data[(unsigned)i].prim;")
-def ref_prim(refs: wp.array(dtype=KdRef), i: int) -> int:
-    """``refs[i].prim`` (see the note above)."""
+@wp.func_native("return ((const int*)refs.data)[(unsigned)i];")
+def ref_prim(refs: wp.array(dtype=float), i: int) -> int:
+    """The triangle index stored (as its bits) at word ``i`` of a leaf's block."""
     ...
 
 
@@ -625,13 +608,13 @@ def intersect_leaf(
     best_t, hit_u, hit_v), which it returns updated (the lower primitive index wins a tie)."""
     for j in range(count):
         r = first_ref + j
-        p0 = ref_v0(tree.refs, r)
-        p1 = ref_v1(tree.refs, r)
-        p2 = ref_v2(tree.refs, r)
+        p0 = ref_vertex(tree.refs, r, count)
+        p1 = ref_vertex(tree.refs, r + 3 * count, count)
+        p2 = ref_vertex(tree.refs, r + 6 * count, count)
         hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, p0, p1, p2, tlo, best_t)
         f = int(-1)
         if hit:
-            f = ref_prim(tree.refs, r)
+            f = ref_prim(tree.refs, r + 9 * count)
         if hit and (t < best_t or f < prim):
             best_t = t
             prim = f
@@ -1908,26 +1891,33 @@ class KdTree:
             empty = leaf & (count == 0)
             if len(head) >= 1 << 27:
                 raise SerenityError(f"kd-tree of {len(head):,} nodes: at most 2^27 fit the 8-byte node")
-            if len(self.prims) >= 1 << 29:
-                raise SerenityError(f"kd-tree of {len(self.prims):,} leaf slots: at most 2^29 fit the 8-byte node")
             if self.stats.depth >= STACK_SIZE:
                 raise SerenityError(f"kd-tree of depth {self.stats.depth}: the traversal stack has {STACK_SIZE} slots")
             right = np.minimum(child + 1, len(head) - 1)
             flags = (empty[child].astype(np.int64) << 2) | (empty[right].astype(np.int64) << 3)
-            nodes["head"] = np.where(leaf, ((off + 1) << 2) | 3, (child << 4) | flags | (head & 3))
+            tri = np.ascontiguousarray(self.vertices[self.faces], np.float32)  # (F, 3, 3)
+            # each non-empty leaf's block of 10 k words: its k triangles' 9 vertex coordinates, one
+            # coordinate after the other (x of v0 for all k, y of v0, ...), then their indices
+            full = np.flatnonzero(leaf & (count > 0))
+            k = count[full].astype(np.int64)
+            block = np.concatenate([[0], np.cumsum(10 * k)]).astype(np.int64)
+            if block[-1] >= 1 << 29:
+                raise SerenityError(f"kd-tree of {block[-1]:,} leaf words: at most 2^29 fit the 8-byte node")
+            leaf_word = np.zeros(len(head), np.int64)
+            leaf_word[full] = block[:-1]
+            nodes["head"] = np.where(leaf, (leaf_word << 2) | 3, (child << 4) | flags | (head & 3))
             nodes["split"] = np.where(leaf, count, self.node_split).astype(np.float32)
             data.nodes = wp_.array(nodes, dtype=KdNode, device=device)
-            tri = np.ascontiguousarray(self.vertices[self.faces], np.float32)  # (F, 3, 3)
-            slots = np.zeros(len(self.prims), bool)  # the slots that hold a triangle index (not a count)
-            blocks = off[leaf & (count > 0)]
-            counts = self.prims[blocks]
-            first = blocks + 1 - np.cumsum(np.concatenate([[0], counts[:-1]]))
-            slots[np.repeat(first, counts) + np.arange(counts.sum())] = True
-            refs = np.zeros(len(self.prims), dtype=KdRef.numpy_dtype())
-            for k, name in enumerate(("v0", "v1", "v2")):
-                refs[name][slots] = tri[self.prims[slots], k]
-            refs["prim"][slots] = self.prims[slots]
-            data.refs = wp_.array(refs, dtype=KdRef, device=device)
+            j = np.arange(k.sum()) - np.repeat(block[:-1] // 10, k)  # the triangle's place in its leaf
+            tri_ids = self.prims[np.repeat(off[full] + 1, k) + j]
+            at = np.repeat(block[:-1], k) + j
+            kk = np.repeat(k, k)
+            words = np.zeros(block[-1] + REF_PAD, np.float32)  # padded: SIMD loads may read past a leaf
+            coords = tri[tri_ids].reshape(-1, 9)
+            for c in range(9):
+                words[at + c * kk] = coords[:, c]
+            words.view(np.int32)[at + 9 * kk] = tri_ids
+            data.refs = wp_.array(words, dtype=wp.float32, device=device)
             data.tri_verts = wp_.array(tri.reshape(-1, 3), dtype=wp.vec3, device=device)
             lo = self.box[0].astype(np.float64)
             hi = self.box[1].astype(np.float64)
@@ -2028,7 +2018,7 @@ __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "I
            "KdTreeData", "batch_is_coherent", "buffers_like", "cache_dir", "finite", "gather_array",
            "gather_in_order", "inner_step_flat", "intersect_rays", "intersect_triangle", "intersect_triangle_fixed",
            "leaf_hits", "lowest_lane", "node_head", "node_split", "occlude_rays", "origin_cell", "packet_pop",
-           "packet_step", "ray_order", "ray_sort_key", "ref_prim", "ref_v0", "ref_v1", "ref_v2",
+           "packet_step", "ray_order", "ray_sort_key", "ref_prim", "ref_vertex",
            "sample_key_changes", "scatter_array", "scatter_in_order", "setup_ray", "sort_keys", "sort_keys_simd",
            "sort_scale",
            "spread_bits", "start_ray", "trace_kd", "trace_packets_kernel", "trace_rays_kernel"]
