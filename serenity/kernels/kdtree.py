@@ -1302,7 +1302,8 @@ _PK_S1 = 11 * PACKET_LANES
 _PK_KX = 12 * PACKET_LANES
 _PK_SX = 15 * PACKET_LANES
 _PK_OCT = 18 * PACKET_LANES
-_PK_STACK = 19 * PACKET_LANES
+_PK_HIT = 19 * PACKET_LANES  # leaf_simd's best hit: t, u, v (3 floats)
+_PK_STACK = 20 * PACKET_LANES
 PACKET_SCRATCH = _PK_STACK + 2 * STACK_SIZE * PACKET_LANES  # floats per worker
 _PK_ALL = wp.constant(wp.int32((1 << PACKET_LANES) - 1))
 _PK_LANE_MASK = wp.constant(wp.int32(PACKET_LANES - 1))
@@ -1529,6 +1530,85 @@ def packet_octant(s: wp.array(dtype=float), base: int, oc: int) -> int:
     ...
 
 
+@wp.func_native(f"""
+#if defined(__CUDA_ARCH__)
+return prim;
+#else
+typedef float f8 __attribute__((ext_vector_type(8)));
+typedef double d8 __attribute__((ext_vector_type(8)));
+typedef int i8 __attribute__((ext_vector_type(8)));
+const float* R = refs.data + (unsigned)first;
+const int* P = (const int*)R + 9 * (size_t)k;
+const float oc[3] = {{o.c[0], o.c[1], o.c[2]}};
+const d8 dz = 0.0;
+typedef __typeof__(dz < dz) l8;  /* the mask type of a float64 comparison */
+float best = best_t;
+int found = -1;
+float bu = 0.0f, bv = 0.0f;
+for (int b = 0; b < k; b += 8) {{
+    f8 w[3][3];  /* [vertex][axis]: the vertex minus the origin, as trace_kd's a = p0 - o */
+    for (int v = 0; v < 3; ++v)
+        for (int a = 0; a < 3; ++a) {{
+            f8 x;
+            __builtin_memcpy(&x, R + (3 * v + a) * (size_t)k + b, sizeof(f8));
+            w[v][a] = x - oc[a];
+        }}
+    d8 ex[3], ey[3];
+    f8 ez[3];
+    for (int v = 0; v < 3; ++v) {{
+        ex[v] = __builtin_convertvector(w[v][kx] - sx * w[v][kz], d8);
+        ey[v] = __builtin_convertvector(w[v][ky] - sy * w[v][kz], d8);
+        ez[v] = w[v][kz];
+    }}
+    /* Woop's edge functions in float64 (a = vertex 0, b = vertex 1, c = vertex 2) */
+    d8 eu = ex[2] * ey[1] - ey[2] * ex[1];
+    d8 ev = ex[0] * ey[2] - ey[0] * ex[2];
+    d8 ew = ex[1] * ey[0] - ey[1] * ex[0];
+    l8 neg = (eu < dz) | (ev < dz) | (ew < dz);
+    l8 pos = (eu > dz) | (ev > dz) | (ew > dz);
+    d8 det = eu + ev + ew;
+    l8 ok = ~(neg & pos) & (det != dz);
+    d8 tt = (eu * __builtin_convertvector(sz * ez[0], d8) + ev * __builtin_convertvector(sz * ez[1], d8)
+             + ew * __builtin_convertvector(sz * ez[2], d8)) / det;
+    f8 t = __builtin_convertvector(tt, f8);
+    i8 in = __builtin_convertvector(ok, i8) & (t > tlo) & (t <= best);
+    unsigned int m = 0;
+    for (int j = 0; j < 8; ++j) m |= (in[j] != 0 && b + j < k) ? (1u << j) : 0u;
+    while (m) {{
+        int j = __builtin_ctz(m);
+        m &= m - 1;
+        int f = P[b + j];
+        float tj = t[j];
+        if (tj <= best && (tj < best || f < prim)) {{
+            best = tj;
+            prim = f;
+            found = b + j;
+            bu = (float)(ev[j] / det[j]);
+            bv = (float)(ew[j] / det[j]);
+            if (any_hit) {{ m = 0; b = k; }}
+        }}
+    }}
+}}
+if (found >= 0) {{
+    s.data[base + {_PK_HIT}] = best;
+    s.data[base + {_PK_HIT} + 1] = bu;
+    s.data[base + {_PK_HIT} + 2] = bv;
+}}
+return prim;
+#endif
+""")
+def leaf_simd(refs: wp.array(dtype=float), first: int, k: int, o: wp.vec3, kx: int, ky: int, kz: int, sx: float,
+              sy: float, sz: float, tlo: float, best_t: float, prim: int, any_hit: int, s: wp.array(dtype=float),
+              base: int) -> int:
+    """:func:`intersect_leaf` for one ray, 8 triangles at a time as SIMD lanes (the leaf's block at
+    word ``first`` of ``refs``, ``k`` triangles): Woop's test in the same float32 and float64
+    operations per triangle, then the hits in the triangles' order under intersect_leaf's rule
+    (closer, or as close with a lower index; the first one for ``any_hit``), so the same triangle,
+    t, u and v. Returns the best triangle after the leaf (``prim`` if none beat it) and, when one
+    did, writes its t, u, v at the packet scratch's ``_PK_HIT``. CPU only."""
+    ...
+
+
 @kernel_factory(any_hit=(False, True))
 def trace_packets_kernel(any_hit: bool):
     """The CPU query kernel for batches in a coherent order (module docstring, "Packets"): kernel
@@ -1622,15 +1702,20 @@ def trace_packets_kernel(any_hit: bool):
                         while todo != 0:
                             r = lowest_lane(todo) & _PK_LANE_MASK
                             todo = todo & (todo - 1)
-                            rp, rt, ru, rv = intersect_leaf(tree, first_ref, count_tris, origins[first + r],
-                                                            int(scratch[base + _PK_KX + r]),
-                                                            int(scratch[base + _PK_KX + PACKET_LANES + r]),
-                                                            int(scratch[base + _PK_KX + 2 * PACKET_LANES + r]),
-                                                            scratch[base + _PK_SX + r],
-                                                            scratch[base + _PK_SX + PACKET_LANES + r],
-                                                            scratch[base + _PK_SX + 2 * PACKET_LANES + r], tlo,
-                                                            scratch[base + _PK_BT + r], prim[r], hu[r], hv[r],
-                                                            wp.static(any_hit))
+                            rt = scratch[base + _PK_BT + r]
+                            rp = leaf_simd(tree.refs, first_ref, count_tris, origins[first + r],
+                                           int(scratch[base + _PK_KX + r]),
+                                           int(scratch[base + _PK_KX + PACKET_LANES + r]),
+                                           int(scratch[base + _PK_KX + 2 * PACKET_LANES + r]),
+                                           scratch[base + _PK_SX + r], scratch[base + _PK_SX + PACKET_LANES + r],
+                                           scratch[base + _PK_SX + 2 * PACKET_LANES + r], tlo, rt, prim[r],
+                                           wp.static(1 if any_hit else 0), scratch, base)
+                            ru = hu[r]
+                            rv = hv[r]
+                            if rp != prim[r]:
+                                rt = scratch[base + _PK_HIT]
+                                ru = scratch[base + _PK_HIT + 1]
+                                rv = scratch[base + _PK_HIT + 2]
                             prim[r] = rp
                             scratch[base + _PK_BT + r] = rt
                             hu[r] = ru

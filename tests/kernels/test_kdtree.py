@@ -410,15 +410,19 @@ def test_interleaved_and_packet_traversals_give_the_one_ray_bits(device):
     """The CPU's interleaved kernels (every slot count shipped) and packets (``PACKET_LANES``), closest
     and any hit, reordered or not, one thread or several, give the one-ray traversal's hits bit for
     bit, on rays that hit split planes, run inside them, are axis-parallel or invalid, on a soup, a
-    closed mesh and a flat grid of coplanar triangles; random rays put every octant into one packet
-    (on CUDA ``rays_per_thread`` is accepted and one ray per thread is traced)."""
+    closed mesh, a flat grid of coplanar triangles and a soup of 12 copies of each triangle (leaves
+    of more triangles than the packets' SIMD leaf test takes at once, and every hit a tie that the
+    lower index wins); random rays put every octant into one packet (on CUDA ``rays_per_thread`` is
+    accepted and one ray per thread is traced)."""
     rng = np.random.default_rng(21)
     torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=40, minor_sections=20)
     grid = trimesh.creation.box((4.0, 4.0, 4.0)).subdivide().subdivide()
     gv = grid.vertices.astype(np.float32).copy()
     gv[:, 1] = 0.0
+    sv, sf = random_soup(rng, 100, size=0.4)
+    dup = rng.permutation(np.repeat(sf, 12, axis=0))  # 12 copies of each triangle: leaves of 12 and more, all ties
     scenes = [random_soup(rng, 800), (torus.vertices.astype(np.float32), torus.faces.astype(np.int32)),
-              (gv, grid.faces.astype(np.int32))]
+              (gv, grid.faces.astype(np.int32)), (sv, dup.astype(np.int32))]
     for v, f in scenes:
         tree = KdTree.build(v, f)
         o, d, tmax = _edge_case_rays(rng, tree, 12_000)
