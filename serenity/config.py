@@ -625,8 +625,11 @@ class KdBuildConfig:
     """The kd-tree's binned SAH build (paper §9; ``serenity/kernels/kdtree_build.py``). Every field is
     part of the tree's disk-cache key. Costs are relative units (only their ratio matters)."""
 
-    traversal_cost: float = 2.0
-    """C_trav: cost of one inner-node step, relative to ``intersection_cost``."""
+    traversal_cost: float = 3.0
+    """C_trav: cost of one inner-node step, relative to ``intersection_cost``. 3 since round 29, when
+    the CPU's packets began testing a leaf's triangles 8 at a time (more triangles per leaf cost
+    little more): against 2, incoherent rays 1.05x, camera rays 0.97x; 4 read 1.08-1.10x and
+    0.93-0.94x (``benchmarks/results/kdtree_ab_sah.json``)."""
     intersection_cost: float = 1.0
     """C_isect: cost of one ray–triangle test."""
     empty_bonus: float = 0.8
