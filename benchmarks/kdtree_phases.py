@@ -8,13 +8,16 @@ Rays and scene as in ``bench_kdtree.py`` (coherent camera rays; incoherent rando
 hits). The default call is timed as it runs: every Warp launch the query makes through
 ``serenity.kernels.launch.launch`` is timed by wrapping ``serenity.kernels.kdtree``'s reference to
 it (the query itself is not changed), and so is the counting sort as a whole
-(``counting_order``: its two launches, ``count_keys`` and ``place_keys``, plus numpy's prefix sum of
+(``counting_order``: its launches, ``count_keys`` and the placing passes, plus numpy's prefix sum of
 the bins). ``other`` is the call's wall time less its timed parts: the conversion of the numpy
 inputs, the arrays' allocation, the results' copy back, Python. Per phase the median over
 ``--rounds`` calls (after one warm-up call) of its milliseconds per call, and its share of the
 call's median. Phases:
 - ``sample_key_changes``: whether the batch is coherent (keys of 4096 pairs of consecutive rays);
-- ``sort_keys``: each ray's reordering key; ``counting_order``: the keys' stable order;
+- ``sort_keys_simd``, ``sort_keys``: each ray's reordering key (16 rays per kernel thread as SIMD
+  lanes, the one-ray kernel for the last few); ``counting_order``: the keys' stable order (its
+  launches, ``count_keys`` and ``place_keys`` or, on several threads, ``place_low_runs`` and
+  ``place_high_runs``, are inside it);
 - ``gather_array``: the rays' origins and directions in that order (one launch per array);
 - ``trace``: the traversal (``trace_packets``, 16-ray packets, for a reordered batch and for a
   coherent one in the caller's order; ``trace_rays``, interleaved, when asked for; ``intersect_rays``,
@@ -43,7 +46,7 @@ from bench_kdtree import ray_sets  # noqa: E402
 #: the kernels that are the traversal itself
 TRACE_KERNELS = ("trace_rays", "trace_packets", "intersect_rays")
 #: the launches made inside counting_order, which is timed as a whole
-SORT_PARTS = ("count_keys", "place_keys")
+SORT_PARTS = ("count_keys", "place_keys", "place_low_runs", "place_high_runs")
 
 
 def phase_name(kernel) -> str:
@@ -78,7 +81,7 @@ TABLE_ROWS = [
     ("traversal (`trace_rays` / `trace_packets`)", ("trace",)),
     ("gather of origins and directions", ("gather_array",)),
     ("scatter of the four results", ("scatter_array",)),
-    ("sort keys", ("sort_keys",)),
+    ("sort keys", ("sort_keys_simd", "sort_keys")),
     ("counting sort", ("counting_order",)),
     ("coherence sample, Python, allocation", ("sample_key_changes", "other")),
 ]
