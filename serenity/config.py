@@ -628,8 +628,9 @@ class KdBuildConfig:
     traversal_cost: float = 3.0
     """C_trav: cost of one inner-node step, relative to ``intersection_cost``. 3 since round 29, when
     the CPU's packets began testing a leaf's triangles 8 at a time (more triangles per leaf cost
-    little more): against 2, incoherent rays 1.05x, camera rays 0.97x; 4 read 1.08-1.10x and
-    0.93-0.94x (``benchmarks/results/kdtree_ab_sah.json``)."""
+    little more): against 2, the benchmark's incoherent rays 1.06x (paired), camera rays 0.97x, on
+    a tree of 301k nodes instead of 500k; 3.5 read 1.06x / 0.94x, 4 1.09x / 0.93x
+    (``benchmarks/results/kdtree_ab_sah.json``)."""
     intersection_cost: float = 1.0
     """C_isect: cost of one ray–triangle test."""
     empty_bonus: float = 0.8
