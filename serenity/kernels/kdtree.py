@@ -22,7 +22,7 @@ Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`
         leaf's triangles lie next to each other in memory (the traversal's time goes much into
         cache misses on nodes and triangles: a copy per reference trades memory for one miss per
         leaf, not one per triangle and its index), and a coordinate of up to 8 of them is one
-        vector load (the packets' SIMD leaf test, :func:`leaf_simd`).
+        vector load (the packets' SIMD leaf test, :func:`leaf_pick`).
     tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2 (for shading a hit).
 
 Traversal (Warp, ``trace_kd``): rays with origin ``o`` (N,3) and direction ``d`` (N,3) float32,
@@ -584,6 +584,81 @@ def inner_step_flat(head: int, split: float, oa: float, ia: float, axis_flags: i
     return child + pick, new_t1, push, child + 1 - swap, pushed_t0, (head >> (2 + pick)) & 1
 
 
+# The SIMD leaf test's C, shared by leaf_pick and leaf_simd: Woop's test on 8 triangles of a leaf at a
+# time, then their hits in order under intersect_leaf's rule; ends with the best's triangle index
+# ``prim``, its t ``best`` and its place in the leaf ``found`` (-1: none beat the best so far).
+_LEAF_SIMD = """
+typedef float f8 __attribute__((ext_vector_type(8)));
+typedef double d8 __attribute__((ext_vector_type(8)));
+typedef int i8 __attribute__((ext_vector_type(8)));
+const float* R = refs.data + (unsigned)first;
+const int* P = (const int*)R + 9 * (size_t)k;
+const float oc[3] = {o.c[0], o.c[1], o.c[2]};
+const d8 dz = 0.0;
+typedef __typeof__(dz < dz) l8;  /* the mask type of a float64 comparison */
+float best = best_t;
+int found = -1;
+double ev_found = 0.0, ew_found = 0.0, det_found = 1.0;
+for (int b = 0; b < k; b += 8) {
+    f8 w[3][3];  /* [vertex][axis]: the vertex minus the origin, as trace_kd's a = p0 - o */
+    for (int v = 0; v < 3; ++v)
+        for (int a = 0; a < 3; ++a) {
+            f8 x;
+            __builtin_memcpy(&x, R + (3 * v + a) * (size_t)k + b, sizeof(f8));
+            w[v][a] = x - oc[a];
+        }
+    d8 ex[3], ey[3];
+    f8 ez[3];
+    for (int v = 0; v < 3; ++v) {
+        ex[v] = __builtin_convertvector(w[v][kx] - sx * w[v][kz], d8);
+        ey[v] = __builtin_convertvector(w[v][ky] - sy * w[v][kz], d8);
+        ez[v] = w[v][kz];
+    }
+    /* Woop's edge functions in float64 (a = vertex 0, b = vertex 1, c = vertex 2) */
+    d8 eu = ex[2] * ey[1] - ey[2] * ex[1];
+    d8 ev = ex[0] * ey[2] - ey[0] * ex[2];
+    d8 ew = ex[1] * ey[0] - ey[1] * ex[0];
+    l8 neg = (eu < dz) | (ev < dz) | (ew < dz);
+    l8 pos = (eu > dz) | (ev > dz) | (ew > dz);
+    d8 det = eu + ev + ew;
+    l8 ok = ~(neg & pos) & (det != dz);
+    d8 tt = (eu * __builtin_convertvector(sz * ez[0], d8) + ev * __builtin_convertvector(sz * ez[1], d8)
+             + ew * __builtin_convertvector(sz * ez[2], d8)) / det;
+    f8 t = __builtin_convertvector(tt, f8);
+    i8 in = __builtin_convertvector(ok, i8) & (t > tlo) & (t <= best);
+    unsigned int m = 0;
+    for (int j = 0; j < 8; ++j) m |= (in[j] != 0 && b + j < k) ? (1u << j) : 0u;
+    while (m) {
+        int j = __builtin_ctz(m);
+        m &= m - 1;
+        int f = P[b + j];
+        float tj = t[j];
+        if (tj <= best && (tj < best || f < prim)) {
+            best = tj;
+            prim = f;
+            found = b + j;
+            ev_found = ev[j];
+            ew_found = ew[j];
+            det_found = det[j];
+            if (any_hit) { m = 0; b = k; }
+        }
+    }
+}
+"""
+
+
+@wp.func_native("#if defined(__CUDA_ARCH__)\nreturn -2;\n#else\n" + _LEAF_SIMD + "return found;\n#endif\n")
+def leaf_pick(refs: wp.array(dtype=float), first: int, k: int, o: wp.vec3, kx: int, ky: int, kz: int, sx: float,
+              sy: float, sz: float, tlo: float, best_t: float, prim: int, any_hit: int) -> int:
+    """Which of a leaf's ``k`` triangles (its block at word ``first`` of ``refs``) :func:`intersect_leaf`'s
+    loop would end on: Woop's test for 8 triangles at a time as SIMD lanes, in the loop's float32 and
+    float64 operations per triangle, then the hits in the triangles' order under its rule (closer,
+    or as close with a lower index than the best so far, ``best_t`` and ``prim``; the first such for
+    ``any_hit``). Returns the triangle's place in the leaf, -1 if none beats the best so far, and -2
+    on CUDA, where the loop runs as it is."""
+    ...
+
+
 @wp.func
 def intersect_leaf(
     tree: KdTreeData,
@@ -605,7 +680,24 @@ def intersect_leaf(
 ):
     """A leaf of :func:`trace_kd`'s walk: its ``count`` triangles from reference ``first_ref`` on,
     against the ray's Woop set-up (:func:`setup_ray`), tested against the best hit so far (prim,
-    best_t, hit_u, hit_v), which it returns updated (the lower primitive index wins a tie)."""
+    best_t, hit_u, hit_v), which it returns updated (the lower primitive index wins a tie). On the
+    CPU :func:`leaf_pick` finds the triangle the loop below would end on, 8 at a time in SIMD, and
+    that one triangle's test gives its t, u, v: the loop's bits."""
+    pick = leaf_pick(tree.refs, first_ref, count, o, kx, ky, kz, sx, sy, sz, tlo, best_t, prim,
+                     wp.where(any_hit, 1, 0))
+    if pick >= 0:
+        r = first_ref + pick
+        p0 = ref_vertex(tree.refs, r, count)
+        p1 = ref_vertex(tree.refs, r + 3 * count, count)
+        p2 = ref_vertex(tree.refs, r + 6 * count, count)
+        hit, t, u, v = intersect_triangle_fixed(o, kx, ky, kz, sx, sy, sz, p0, p1, p2, tlo, best_t)
+        best_t = t
+        prim = ref_prim(tree.refs, r + 9 * count)
+        hit_u = u
+        hit_v = v
+        count = 0  # done
+    elif pick == -1:
+        count = 0  # no triangle beats the best so far
     for j in range(count):
         r = first_ref + j
         p0 = ref_vertex(tree.refs, r, count)
@@ -1530,69 +1622,11 @@ def packet_octant(s: wp.array(dtype=float), base: int, oc: int) -> int:
     ...
 
 
-@wp.func_native(f"""
-#if defined(__CUDA_ARCH__)
-return prim;
-#else
-typedef float f8 __attribute__((ext_vector_type(8)));
-typedef double d8 __attribute__((ext_vector_type(8)));
-typedef int i8 __attribute__((ext_vector_type(8)));
-const float* R = refs.data + (unsigned)first;
-const int* P = (const int*)R + 9 * (size_t)k;
-const float oc[3] = {{o.c[0], o.c[1], o.c[2]}};
-const d8 dz = 0.0;
-typedef __typeof__(dz < dz) l8;  /* the mask type of a float64 comparison */
-float best = best_t;
-int found = -1;
-float bu = 0.0f, bv = 0.0f;
-for (int b = 0; b < k; b += 8) {{
-    f8 w[3][3];  /* [vertex][axis]: the vertex minus the origin, as trace_kd's a = p0 - o */
-    for (int v = 0; v < 3; ++v)
-        for (int a = 0; a < 3; ++a) {{
-            f8 x;
-            __builtin_memcpy(&x, R + (3 * v + a) * (size_t)k + b, sizeof(f8));
-            w[v][a] = x - oc[a];
-        }}
-    d8 ex[3], ey[3];
-    f8 ez[3];
-    for (int v = 0; v < 3; ++v) {{
-        ex[v] = __builtin_convertvector(w[v][kx] - sx * w[v][kz], d8);
-        ey[v] = __builtin_convertvector(w[v][ky] - sy * w[v][kz], d8);
-        ez[v] = w[v][kz];
-    }}
-    /* Woop's edge functions in float64 (a = vertex 0, b = vertex 1, c = vertex 2) */
-    d8 eu = ex[2] * ey[1] - ey[2] * ex[1];
-    d8 ev = ex[0] * ey[2] - ey[0] * ex[2];
-    d8 ew = ex[1] * ey[0] - ey[1] * ex[0];
-    l8 neg = (eu < dz) | (ev < dz) | (ew < dz);
-    l8 pos = (eu > dz) | (ev > dz) | (ew > dz);
-    d8 det = eu + ev + ew;
-    l8 ok = ~(neg & pos) & (det != dz);
-    d8 tt = (eu * __builtin_convertvector(sz * ez[0], d8) + ev * __builtin_convertvector(sz * ez[1], d8)
-             + ew * __builtin_convertvector(sz * ez[2], d8)) / det;
-    f8 t = __builtin_convertvector(tt, f8);
-    i8 in = __builtin_convertvector(ok, i8) & (t > tlo) & (t <= best);
-    unsigned int m = 0;
-    for (int j = 0; j < 8; ++j) m |= (in[j] != 0 && b + j < k) ? (1u << j) : 0u;
-    while (m) {{
-        int j = __builtin_ctz(m);
-        m &= m - 1;
-        int f = P[b + j];
-        float tj = t[j];
-        if (tj <= best && (tj < best || f < prim)) {{
-            best = tj;
-            prim = f;
-            found = b + j;
-            bu = (float)(ev[j] / det[j]);
-            bv = (float)(ew[j] / det[j]);
-            if (any_hit) {{ m = 0; b = k; }}
-        }}
-    }}
-}}
+@wp.func_native("#if defined(__CUDA_ARCH__)\nreturn prim;\n#else\n" + _LEAF_SIMD + f"""
 if (found >= 0) {{
     s.data[base + {_PK_HIT}] = best;
-    s.data[base + {_PK_HIT} + 1] = bu;
-    s.data[base + {_PK_HIT} + 2] = bv;
+    s.data[base + {_PK_HIT} + 1] = (float)(ev_found / det_found);
+    s.data[base + {_PK_HIT} + 2] = (float)(ew_found / det_found);
 }}
 return prim;
 #endif
@@ -1604,8 +1638,10 @@ def leaf_simd(refs: wp.array(dtype=float), first: int, k: int, o: wp.vec3, kx: i
     word ``first`` of ``refs``, ``k`` triangles): Woop's test in the same float32 and float64
     operations per triangle, then the hits in the triangles' order under intersect_leaf's rule
     (closer, or as close with a lower index; the first one for ``any_hit``), so the same triangle,
-    t, u and v. Returns the best triangle after the leaf (``prim`` if none beat it) and, when one
-    did, writes its t, u, v at the packet scratch's ``_PK_HIT``. CPU only."""
+    t, u and v (:func:`leaf_pick` for the one-ray traversal, which takes the winner's t, u, v from
+    its own test instead: slower for packets, whose lanes have their scratch). Returns the best
+    triangle after the leaf (``prim`` if none beat it) and, when one did, writes its t, u, v at the
+    packet scratch's ``_PK_HIT``. CPU only."""
     ...
 
 
@@ -1613,7 +1649,7 @@ def leaf_simd(refs: wp.array(dtype=float), first: int, k: int, o: wp.vec3, kx: i
 def trace_packets_kernel(any_hit: bool):
     """The CPU query kernel for batches in a coherent order (module docstring, "Packets"): kernel
     thread g traces rays g·PACKET_LANES … as one packet through the tree, the lanes' node steps as
-    SIMD (:func:`packet_step`), a leaf's triangles lane by lane (:func:`intersect_leaf`), each lane
+    SIMD (:func:`packet_step`), a leaf's triangles lane by lane (:func:`leaf_simd`), each lane
     with its own interval, best hit and entries on the packet's stack, so that every ray visits the
     nodes and triangles :func:`trace_kd` visits, in its order: the same hits, bit for bit. A packet
     whose lanes head into different octants is traced once per octant, with those lanes.

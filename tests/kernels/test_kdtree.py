@@ -144,6 +144,25 @@ def test_matches_brute_force_on_random_soups(device, seed):
     assert_same_hits(hits, brute_force(v, f, o, d))
 
 
+def test_matches_brute_force_on_leaves_of_copies(device):
+    """Each triangle 12 times under different indices: leaves of up to ~80 triangles (several of
+    the CPU's 8-triangle SIMD leaf tests each) and every hit a tie at equal t, which the lowest
+    index wins, as in a test of every triangle in order; the one-ray traversal (``leaf_pick``) and
+    packets (``leaf_simd``), closest and any hit."""
+    rng = np.random.default_rng(13)
+    v, f = random_soup(rng, 100, size=0.4)
+    f = rng.permutation(np.repeat(f, 12, axis=0)).astype(np.int32)
+    o, d = random_rays(rng, 20_000)
+    tree = KdTree.build(v, f)
+    ref = brute_force(v, f, o, d)
+    for k in (1, PACKET_LANES):
+        hits = tree.intersect(o, d, device=device, rays_per_thread=k)
+        assert 0.1 < hits.hit.mean() < 0.9
+        assert_same_hits(hits, ref)
+        for tmax in (math.inf, 0.7):
+            assert np.array_equal(tree.occluded(o, d, tmax, device=device, rays_per_thread=k), ref[0] < tmax)
+
+
 def test_matches_brute_force_on_a_closed_mesh_with_tmax(device):
     rng = np.random.default_rng(3)
     m = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=40, minor_sections=20)
