@@ -106,7 +106,9 @@ of one ray per kernel thread), fewer on reordered incoherent rays, where packets
 interleaved kernel only once the sort key told nearby origins and directions apart finely enough
 (README, "The kd-tree ray tracer", round 28). The lanes' set-up — trace_kd's ``start_ray``: Woop's
 axes and shears, the inverse direction, the root-box clip — is SIMD too (:func:`packet_setup`):
-as 16 scalar calls it cost a quarter of a camera batch's traversal time (round 29). Reordered
+as 16 scalar calls it cost a quarter of a camera batch's traversal time (round 29) — and so is a
+leaf's triangle test, 8 triangles of a lane at a time (:func:`leaf_simd`; the one-ray traversal's
+:func:`intersect_leaf` uses the same C through :func:`leaf_pick` on the CPU). Reordered
 batches and coherent ones in the caller's order (:func:`batch_is_coherent`) are traced in packets
 (their arrays contiguous, as the queries make them); anything else one ray per kernel thread.
 
