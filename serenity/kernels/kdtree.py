@@ -760,35 +760,43 @@ def origin_cell(o: float, lo: float, scale: float) -> int:
 # into chains of vector shuffles.
 
 
-@wp.func_native(f"""
+#: the Morton spreads' masks: (the pdep mask, then (shift, mask) per step of the portable spread) for
+#: 2 and 3 coordinates; bits b < 5 of the coordinate go to bit 2b or 3b
+_SPREAD = {
+    2: (0x55555555, ((8, 0x00FF00FF), (4, 0x0F0F0F0F), (2, 0x33333333), (1, 0x55555555))),
+    3: (0x49249249, ((16, 0x030000FF), (8, 0x0300F00F), (4, 0x030C30C3), (2, 0x09249249))),
+}
+assert SORT_ORIGIN_BITS <= 5 and SORT_DIRECTION_BITS <= 5
+
+
+def _spread_c(var: str, axes: int, suffix: str = "u") -> str:
+    """C that spreads the low bits of ``var`` (already masked to them) for a Morton code of ``axes``
+    coordinates, by shifts and masks (scalar with ``suffix`` "u", or a vector of ints with "")."""
+    steps = _SPREAD[axes][1]
+    return "\n".join(f"{var} = ({var} | ({var} << {shift})) & 0x{mask:08X}{suffix};" for shift, mask in steps)
+
+
+def _spread_native(bits: int, axes: int) -> str:
+    """The body of :func:`spread_bits` / :func:`spread_bits2`: one BMI2 ``pdep`` where the CPU has
+    it, else :func:`_spread_c`."""
+    return f"""
 #if defined(__BMI2__) && !defined(__CUDA_ARCH__)
-return (int)__builtin_ia32_pdep_si((unsigned int)q & {(1 << SORT_ORIGIN_BITS) - 1}u, 0x49249249u);
+return (int)__builtin_ia32_pdep_si((unsigned int)q & {(1 << bits) - 1}u, 0x{_SPREAD[axes][0]:08X}u);
 #else
-unsigned int x = (unsigned int)q & {(1 << SORT_ORIGIN_BITS) - 1}u;
-x = (x | (x << 16)) & 0x030000FFu;
-x = (x | (x << 8)) & 0x0300F00Fu;
-x = (x | (x << 4)) & 0x030C30C3u;
-x = (x | (x << 2)) & 0x09249249u;
+unsigned int x = (unsigned int)q & {(1 << bits) - 1}u;
+{_spread_c("x", axes)}
 return (int)x;
 #endif
-""")
+"""
+
+
+@wp.func_native(_spread_native(SORT_ORIGIN_BITS, 3))
 def spread_bits(q: int) -> int:
     """Bit b of ``q`` (b < SORT_ORIGIN_BITS) moved to bit 3b: one axis' share of a Morton code."""
     ...
 
 
-@wp.func_native(f"""
-#if defined(__BMI2__) && !defined(__CUDA_ARCH__)
-return (int)__builtin_ia32_pdep_si((unsigned int)q & {(1 << SORT_DIRECTION_BITS) - 1}u, 0x55555555u);
-#else
-unsigned int x = (unsigned int)q & {(1 << SORT_DIRECTION_BITS) - 1}u;
-x = (x | (x << 8)) & 0x00FF00FFu;
-x = (x | (x << 4)) & 0x0F0F0F0Fu;
-x = (x | (x << 2)) & 0x33333333u;
-x = (x | (x << 1)) & 0x55555555u;
-return (int)x;
-#endif
-""")
+@wp.func_native(_spread_native(SORT_DIRECTION_BITS, 2))
 def spread_bits2(q: int) -> int:
     """Bit b of ``q`` (b < SORT_DIRECTION_BITS) moved to bit 2b: one coordinate's share of a 2-D
     Morton code."""
@@ -891,10 +899,7 @@ for (int a = 0; a < 3; ++a) {{
     f = f >= zero ? f : zero;
     f = f < cells ? f : cells;
     ki x = __builtin_convertvector(f, ki) & {(1 << SORT_ORIGIN_BITS) - 1};
-    x = (x | (x << 16)) & 0x030000FF;
-    x = (x | (x << 8)) & 0x0300F00F;
-    x = (x | (x << 4)) & 0x030C30C3;
-    x = (x | (x << 2)) & 0x09249249;
+{_spread_c("x", 3, "")}
     q[a] = x;
 }}
 ki origin = q[0] | (q[1] << 1) | (q[2] << 2);
@@ -911,10 +916,7 @@ fv = fv < dcells ? fv : dcells;
 ki uv[2] = {{__builtin_convertvector(fu, ki), __builtin_convertvector(fv, ki)}};
 for (int a = 0; a < 2; ++a) {{
     ki x = uv[a] & {(1 << SORT_DIRECTION_BITS) - 1};
-    x = (x | (x << 8)) & 0x00FF00FF;
-    x = (x | (x << 4)) & 0x0F0F0F0F;
-    x = (x | (x << 2)) & 0x33333333;
-    x = (x | (x << 1)) & 0x55555555;
+{_spread_c("x", 2, "")}
     uv[a] = x;
 }}
 ki direction = uv[0] | (uv[1] << 1);
