@@ -38,7 +38,7 @@ Figures (ratios of this run's own measurements; incoherent rays unless ``_cohere
   the kernel launches — their speed-up on 2 threads when each has a core to itself (imbalance and
   overheads, not the load; the serial Python before and after the launches is not in it); per ray
   set also ``thread_scaling_cpu_bound_one_chunk_per_thread``, the same for one contiguous chunk per
-  thread (the split before ``chunks_per_thread``: uneven, sky above and ground below);
+  thread (the split of an unbalanced launch: uneven, sky above and ground below);
   ``thread_cpu_efficiency`` (per ray set): Mrays per CPU-second of the process on 2 threads / on 1
   (1.0: the second thread does its rays at the same CPU cost; below 1: the threads slow each other
   through the shared L3 and memory); ``thread_scaling_projected`` = ``thread_scaling_cpu_bound`` ×
@@ -183,7 +183,7 @@ def measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts: list[
     for nt in thread_counts:
         runs[f"ours_{nt}t"] = lambda nt=nt: tree.intersect(o, d, device="cpu", threads=nt)
         runs[f"warp_bvh_{nt}t"] = lambda nt=nt: launch(query_rays, n, [mesh.id, wo, wd, wt, wpr], device="cpu",
-                                                       threads=nt, chunks_per_thread=16)
+                                                       threads=nt, balanced=True)
     runs["embree_1t"] = lambda: embree(o, d, 1)
     if top > 1:
         runs[f"embree_{top}t"] = lambda: embree(o, d, top)
@@ -323,7 +323,7 @@ def markdown_table(runs: list[dict]) -> str:
          "{:.2f}", "scaling"),
         ("Mrays per CPU-s, 2 threads ÷ 1 thread (1.0: the threads do not slow each other)",
          per_set(lambda f, n: f[n]["thread_cpu_efficiency"]), "{:.2f}", None),
-        ("Σ thread CPU-s / busiest thread in the launches (16 chunks per thread, handed out dynamically)",
+        ("Σ thread CPU-s / busiest thread in the launches (balanced: shrinking chunks, handed out dynamically)",
          per_set(lambda f, n: f[n]["thread_scaling_cpu_bound"]), "{:.2f}", None),
         ("agreement with Embree (same triangle, or same t at a shared edge)",
          per_set(lambda f, n: f[n]["agreement_with_embree"]), "{:.6f}", None),
@@ -403,7 +403,7 @@ def main(argv=None) -> dict:
         rates, cpu_rates, paired = measure_rates(wp, tree, embree, query_rays, mesh, o, d, thread_counts,
                                                  args.repeats)
         cpu_bound = thread_cpu_split(wp, lambda o=o, d=d: tree.intersect(o, d, device="cpu", threads=2))
-        # the same with one contiguous chunk per thread (the split before chunks_per_thread)
+        # the same with one contiguous chunk per thread (an unbalanced launch)
         args_1 = [tree.device_data("cpu"), wp.array(o, dtype=wp.vec3, device="cpu"),
                   wp.array(d, dtype=wp.vec3, device="cpu"), 0.0,
                   wp.array(np.full(n, np.inf, np.float32), dtype=float, device="cpu")]  # unsorted

@@ -113,7 +113,8 @@ batches and coherent ones in the caller's order (:func:`batch_is_coherent`) are 
 (their arrays contiguous, as the queries make them); anything else one ray per kernel thread.
 
 On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
-``CHUNKS_PER_THREAD`` chunks per thread handed out as threads free up (rays differ a lot in cost).
+balanced chunks that shrink as the batch is used up, handed out as threads free up (rays differ a
+lot in cost).
 
 Where the time goes (``perf record -e cpu-clock`` on the Warp-generated CPU code, incoherent rays,
 samples mapped onto the JIT-loaded code): the largest stalls are the node load of each step and the
@@ -191,9 +192,10 @@ REF_PAD = 16
 T_TOLERANCE = 1e-6  # relative (to the scene scale) overlap of near/far traversal intervals
 BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest extent
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
-#: CPU launches of rays are cut into this many chunks per thread, handed out as threads free up:
-#: rays differ a lot in cost (sky vs geometry), and one contiguous chunk per thread left 2 threads
-#: at 1.45-1.48x one on the benchmark's rays, 1.95-1.99x with 16 (``serenity.kernels.launch``)
+#: CPU launches of rays are balanced (``launch(balanced=True)``): rays differ a lot in cost (sky vs
+#: geometry), and one contiguous chunk per thread left 2 threads at 1.45-1.48x one on the
+#: benchmark's rays. The interleaved kernel gives its kernel threads few enough rays that a launch
+#: still has this many ``MIN_ITEMS_PER_CHUNK``-item chunks' worth of them per worker (``_slot_rays``)
 CHUNKS_PER_THREAD = 16
 #: ray reordering (``sort=None`` in the queries): batches of at least this many rays are traced in
 #: the order of a ``SORT_KEY_BITS``-bit key (:func:`ray_sort_key`): the Morton code of the origin's cell on a
@@ -1938,18 +1940,18 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
     none_i = wp.empty(0, dtype=wp.int32, device=device)
     outs = [none_f, none_i, none_f, none_f, *traced] if any_hit else [*traced, none_i]
     if k == 1 or not on_cpu:
-        launch(one_ray, n, [*inputs, *traced], device=device, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+        launch(one_ray, n, [*inputs, *traced], device=device, threads=threads, balanced=True)
     elif k == PACKET_LANES:
         workers = threads or cpu_threads()
         lanes = scratch_buffer(scratch, "packets", workers * PACKET_SCRATCH, float, device)
         lanes.zero_()
         launch(trace_packets_kernel(any_hit), -(-n // PACKET_LANES), [*inputs, n, lanes, *outs], device=device,
-               threads=threads, chunks_per_thread=CHUNKS_PER_THREAD, worker_arg=True,
+               threads=threads, balanced=True, worker_arg=True,
                min_chunk=MIN_ITEMS_PER_CHUNK // PACKET_LANES)  # a packet is 16 rays' work
     else:
         per = k * _slot_rays(n, k, threads)
         launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device,
-               threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+               threads=threads, balanced=True)
     if reordered:
         scatter_in_order(order, traced, outputs, device, threads)
 

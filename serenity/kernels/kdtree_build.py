@@ -63,7 +63,6 @@ from serenity.kernels.launch import launch
 FORMAT_VERSION = 2  # bump when the build or the cached layout changes
 CACHE_MIN_TRIANGLES = 10_000  # cache=None caches builds of at least this many triangles
 PROGRESS_MIN_TRIANGLES = 200_000  # progress=None shows a bar from this many triangles
-_CHUNKS = 8  # per-node launches: chunks per CPU thread, handed out dynamically (nodes differ in cost)
 
 
 @dataclass
@@ -119,7 +118,7 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
     dev = "cpu"
 
     def run(kernel, dim: int, inputs: list) -> None:
-        launch(kernel, dim, inputs, device=dev, threads=threads, chunks_per_thread=_CHUNKS)
+        launch(kernel, dim, inputs, device=dev, threads=threads, balanced=True)
 
     w_verts = wp_.array(vertices, dtype=wp.vec3, device=dev)
     w_faces = wp_.array(faces, dtype=wp.vec3i, device=dev)

@@ -17,17 +17,20 @@ straight into the grid with real atomics. ``Staging`` turns numpy inputs into de
 zero-copy wrap on the CPU, a copy into a grow-only buffer on CUDA). Callers never branch on the
 device: those two differences live here.
 
-Balance (``chunks_per_thread`` > 1): when items cost very different amounts — rays into the sky
-beside rays into geometry, the upper half of a camera's image beside the lower — one chunk per
-thread leaves a thread idle while the other finishes: on the kd-tree benchmark's rays that caps 2
-threads at 1.45× one (``bench_kdtree``: Σ thread CPU / busiest thread), 1.95–1.99× with 16 chunks
-per thread. With k chunks per thread
-the workers take the next chunk as they finish one (dynamic scheduling), so they end together.
-Chunks stay contiguous and thousands of items long, so outputs share a cache line only at chunk
-borders (no false sharing to speak of), and each chunk costs one ``wp.launch`` (~0.1 ms of Python
-under the GIL, while the other workers run native code). With the default of 1 the chunks are
-exactly ``chunk_ranges(dim, threads)`` (callers that key per-worker buffers on the chunk offsets
-rely on that).
+Balance (``balanced=True``): when items cost very different amounts — rays into the sky beside
+rays into geometry, the upper half of a camera's image beside the lower — one chunk per thread
+leaves a thread idle while the other finishes: on the kd-tree benchmark's rays that caps 2
+threads at 1.45× one (``bench_kdtree``: Σ thread CPU / busiest thread). A balanced launch cuts the
+range into contiguous chunks that shrink as it is used up (guided scheduling,
+:func:`guided_ranges`), and the workers take the next chunk as they finish one, so they end
+together: the first chunks are big (few launches: each costs one ``wp.launch``, ~0.1 ms of Python
+under the GIL, while the other workers run native code), the last ones short (the worker that
+finishes first waits at most one short chunk). 16 equal chunks per thread, round 28's split, left
+a thread idle for up to a sixteenth of the launch at its end (round 29: the incoherent kd-tree
+query on 2 threads, 1.74× one thread with equal chunks, 1.79× guided, in one process). Chunks stay
+contiguous and at least ``min_chunk`` items long, so outputs share a cache line only at chunk
+borders (no false sharing to speak of). Unbalanced, the chunks are exactly ``chunk_ranges(dim,
+threads)`` (callers that key per-worker buffers on the chunk offsets rely on that).
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ _pool_size = 0
 
 #: below this many items per thread, splitting costs more than it saves
 MIN_ITEMS_PER_THREAD = 256
-#: with ``chunks_per_thread`` > 1, chunks are not made smaller than this (each is one ``wp.launch``)
+#: a balanced launch's chunks are not made smaller than this (each is one ``wp.launch``)
 MIN_ITEMS_PER_CHUNK = 4096
 #: ``min_items`` for kernels with ~0.1 µs of work per item (a volume's cells, VPLs scattered into
 #: it): a chunk handed to a worker costs ~0.2 ms of Python under the GIL, so a 3 x 12³ LPV
@@ -79,22 +82,39 @@ def chunk_ranges(dim: int, threads: int, min_items: int = MIN_ITEMS_PER_THREAD) 
     return out
 
 
+def guided_ranges(dim: int, workers: int, min_chunk: int = MIN_ITEMS_PER_CHUNK) -> list[tuple[int, int]]:
+    """Split ``[0, dim)`` into contiguous ``(start, count)`` chunks that shrink as the range is used
+    up (guided scheduling): each takes 1 / (2 · workers) of what is left, but at least ``min_chunk``
+    items; one chunk for one worker. Handed out in order to whichever worker is free, the first
+    chunks keep the launches few and the last ones short, so the workers end together."""
+    if dim <= 0:
+        return []
+    if workers <= 1:
+        return [(0, dim)]
+    out, start = [], 0
+    while start < dim:
+        count = min(dim - start, max(max(1, min_chunk), (dim - start) // (2 * workers)))
+        out.append((start, count))
+        start += count
+    return out
+
+
 def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None = None, start: int = 0,
-           chunks_per_thread: int = 1, min_items: int = MIN_ITEMS_PER_THREAD, worker_arg: bool = False,
+           balanced: bool = False, min_items: int = MIN_ITEMS_PER_THREAD, worker_arg: bool = False,
            min_chunk: int = MIN_ITEMS_PER_CHUNK) -> None:
     """Launch ``kernel`` over ``[start, start + dim)``; the kernel's trailing ``offset: int`` is appended.
 
     On ``cpu`` the range is split over ``threads`` worker threads (default: all usable CPUs,
-    ``SERENITY_THREADS`` overrides) and this call returns when every chunk is done; with
-    ``chunks_per_thread`` > 1 into that many contiguous chunks per thread, taken in order by
-    whichever worker is free (module docstring). A thread gets at least ``min_items`` items (fewer
+    ``SERENITY_THREADS`` overrides) and this call returns when every chunk is done; ``balanced``:
+    into contiguous chunks that shrink as the range is used up (:func:`guided_ranges`), taken in
+    order by whichever worker is free (module docstring). A thread gets at least ``min_items`` items (fewer
     threads when ``dim`` is small: ``MIN_CHEAP_ITEMS_PER_THREAD`` for cheap per-item kernels). On CUDA it
     is a single asynchronous launch, as ``wp.launch`` is.
 
     ``worker_arg``: the kernel's trailing parameters are ``worker: int, offset: int``; ``worker`` is
     the index (0 … threads − 1) of the worker thread running the chunk, so that a kernel can keep
     per-worker scratch memory (no two chunks with the same index run at once; 0 on CUDA).
-    ``min_chunk``: with ``chunks_per_thread`` > 1, chunks are not made smaller than this many items
+    ``min_chunk``: a balanced launch's chunks are not made smaller than this many items
     (``MIN_ITEMS_PER_CHUNK`` for items of about one ray's work; fewer for items that each do more).
     """
     wp = init_warp()
@@ -109,10 +129,7 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
         wp.launch(kernel, dim=dim, inputs=args(0, int(start)), device=device)
         return
     workers = threads or cpu_threads()
-    n_chunks = workers
-    if chunks_per_thread > 1:
-        n_chunks = max(workers, min(workers * int(chunks_per_thread), dim // max(1, min_chunk)))
-    chunks = chunk_ranges(dim, n_chunks, min_items if chunks_per_thread <= 1 else MIN_ITEMS_PER_THREAD)
+    chunks = guided_ranges(dim, workers, min_chunk) if balanced else chunk_ranges(dim, workers, min_items)
     if len(chunks) == 1:
         wp.launch(kernel, dim=dim, inputs=args(0, int(start)), device=device)
         return

@@ -65,7 +65,6 @@ from serenity.device import init_warp, resolve_device
 from serenity.errors import SerenityError
 from serenity.gbuffer_layout import RT_GBUFFER_KEYS
 from serenity.kernels.kdtree import (
-    CHUNKS_PER_THREAD,
     TRACE_MODULE_OPTIONS,
     KdTree,
     KdTreeData,
@@ -430,7 +429,7 @@ class RayTracer:
             args = [self.data, *rays, float(self.ray_epsilon if tmin is None else tmin), float(tmax),
                     int(max(0, transmissions)), wp.vec3(*(float(x) for x in sun)),
                     int(sun_direction is not None), *traced]
-            launch(trace_gbuffer, n, args, device=dev, threads=threads, chunks_per_thread=CHUNKS_PER_THREAD)
+            launch(trace_gbuffer, n, args, device=dev, threads=threads, balanced=True)
             if reordered:
                 scatter_in_order(order, traced, [*outs, back], dev, threads)
         out = {k: a.numpy().reshape(n, 4) for k, a in zip(RT_GBUFFER_KEYS, outs, strict=True)}

@@ -119,17 +119,17 @@ def test_staging_wraps_or_copies_and_checks_the_device(device):
 
 
 def test_balanced_launch_covers_exactly_once_in_any_order():
-    """chunks_per_thread > 1: many chunks handed out to whichever worker is free; every item once."""
+    """balanced: shrinking chunks handed out to whichever worker is free; every item once."""
     n = 100_003
     start = wp.array(np.arange(1, n + 1, dtype=np.int32), device="cpu")
     one = wp.zeros(n, dtype=wp.int32, device="cpu")
     launch(_collatz_steps, n, [start, one], device="cpu", threads=1)
-    for threads, k in ((2, 16), (3, 5), (8, 64)):
+    for threads, min_chunk in ((2, 4096), (3, 100), (8, 1)):
         out = wp.full(n, -1, dtype=wp.int32, device="cpu")
-        launch(_collatz_steps, n, [start, out], device="cpu", threads=threads, chunks_per_thread=k)
-        assert np.array_equal(out.numpy(), one.numpy()), (threads, k)
+        launch(_collatz_steps, n, [start, out], device="cpu", threads=threads, balanced=True, min_chunk=min_chunk)
+        assert np.array_equal(out.numpy(), one.numpy()), (threads, min_chunk)
     part = wp.full(n, -1, dtype=wp.int32, device="cpu")
-    launch(_collatz_steps, 50_000, [start, part], device="cpu", threads=2, start=7, chunks_per_thread=16)
+    launch(_collatz_steps, 50_000, [start, part], device="cpu", threads=2, start=7, balanced=True)
     got = part.numpy()
     assert np.all(got[:7] == -1) and np.all(got[50_007:] == -1)
     assert np.array_equal(got[7:50_007], one.numpy()[7:50_007])
@@ -139,9 +139,9 @@ def test_worker_arg_names_the_worker_thread_of_each_chunk():
     """``worker_arg``: every chunk gets the index of the worker that runs it, below the thread
     count (per-worker scratch memory relies on it), one index per chunk; 0 for a single chunk."""
     n = 200_000
-    for threads, k in ((1, 1), (2, 1), (2, 16), (3, 5), (8, 64)):
+    for threads, k in ((1, False), (2, False), (2, True), (3, True), (8, True)):
         out = wp.full(n, wp.vec2i(-1, -1), dtype=wp.vec2i, device="cpu")
-        launch(_worker_and_chunk, n, [out], device="cpu", threads=threads, chunks_per_thread=k, worker_arg=True)
+        launch(_worker_and_chunk, n, [out], device="cpu", threads=threads, balanced=k, worker_arg=True)
         got = out.numpy()
         assert got[:, 0].min() >= 0 and got[:, 0].max() < threads, (threads, k)
         for start in np.unique(got[:, 1]):
@@ -150,17 +150,22 @@ def test_worker_arg_names_the_worker_thread_of_each_chunk():
             assert np.all(got[:, 0] == 0)
 
 
-def test_min_chunk_sets_the_smallest_chunk_of_a_balanced_launch():
-    """With ``chunks_per_thread`` > 1 a launch gets that many chunks per thread unless they would be
-    smaller than ``min_chunk`` items (default ``MIN_ITEMS_PER_CHUNK``, about one ray's work per
-    item): 57,600 packets of 16 rays got 14 chunks under the default, 32 with a floor of 256."""
-    from serenity.kernels.launch import MIN_ITEMS_PER_CHUNK
+def test_balanced_launch_chunks_shrink_to_min_chunk():
+    """A balanced launch's chunks (guided scheduling) shrink as the range is used up: each takes
+    1 / (2 · workers) of what is left, none is smaller than ``min_chunk`` but the last; one chunk
+    for one worker. The launch runs every item in chunks of exactly those sizes."""
+    from serenity.kernels.launch import MIN_ITEMS_PER_CHUNK, guided_ranges
 
     n = 57_600
-    for min_chunk, chunks in ((MIN_ITEMS_PER_CHUNK, n // MIN_ITEMS_PER_CHUNK), (256, 32)):
-        out = wp.full(n, wp.vec2i(-1, -1), dtype=wp.vec2i, device="cpu")
-        launch(_worker_and_chunk, n, [out], device="cpu", threads=2, chunks_per_thread=16, worker_arg=True,
-               min_chunk=min_chunk)
-        got = out.numpy()
-        assert got[:, 1].min() >= 0
-        assert len(np.unique(got[:, 1])) == chunks, min_chunk
+    assert guided_ranges(n, 1, 256) == [(0, n)]
+    for workers, min_chunk in ((2, 256), (2, MIN_ITEMS_PER_CHUNK), (3, 1000)):
+        chunks = guided_ranges(n, workers, min_chunk)
+        starts = [a for a, _ in chunks]
+        counts = [c for _, c in chunks]
+        assert starts == list(np.cumsum([0] + counts[:-1])) and sum(counts) == n
+        assert counts[0] == n // (2 * workers) and all(a >= b for a, b in zip(counts, counts[1:], strict=False))
+        assert min(counts[:-1]) >= min_chunk
+    chunks = guided_ranges(n, 2, 256)
+    out = wp.full(n, wp.vec2i(-1, -1), dtype=wp.vec2i, device="cpu")
+    launch(_worker_and_chunk, n, [out], device="cpu", threads=2, balanced=True, worker_arg=True, min_chunk=256)
+    assert sorted(int(x) for x in np.unique(out.numpy()[:, 1])) == [a for a, _ in chunks]
