@@ -27,7 +27,8 @@ together: the first chunks are big (few launches: each costs one ``wp.launch``, 
 under the GIL, while the other workers run native code), the last ones short (the worker that
 finishes first waits at most one short chunk). 16 equal chunks per thread, round 28's split, left
 a thread idle for up to a sixteenth of the launch at its end (round 29: the incoherent kd-tree
-query on 2 threads, 1.74× one thread with equal chunks, 1.79× guided, in one process). Chunks stay
+query on 2 threads, 1.74× one thread with equal chunks, 1.79× guided, in one process: scratch
+timings). Chunks stay
 contiguous and at least ``min_chunk`` items long, so outputs share a cache line only at chunk
 borders (no false sharing to speak of). Unbalanced, the chunks are exactly ``chunk_ranges(dim,
 threads)`` (callers that key per-worker buffers on the chunk offsets rely on that).
