@@ -102,7 +102,7 @@ def guided_ranges(dim: int, workers: int, min_chunk: int = MIN_ITEMS_PER_CHUNK) 
 
 def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None = None, start: int = 0,
            balanced: bool = False, min_items: int = MIN_ITEMS_PER_THREAD, worker_arg: bool = False,
-           min_chunk: int = MIN_ITEMS_PER_CHUNK) -> None:
+           min_chunk: int = MIN_ITEMS_PER_CHUNK, chunks_per_thread: int | None = None) -> None:
     """Launch ``kernel`` over ``[start, start + dim)``; the kernel's trailing ``offset: int`` is appended.
 
     On ``cpu`` the range is split over ``threads`` worker threads (default: all usable CPUs,
@@ -117,6 +117,8 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     per-worker scratch memory (no two chunks with the same index run at once; 0 on CUDA).
     ``min_chunk``: a balanced launch's chunks are not made smaller than this many items
     (``MIN_ITEMS_PER_CHUNK`` for items of about one ray's work; fewer for items that each do more).
+    ``chunks_per_thread`` > 1 is the older spelling of ``balanced=True`` (kept for callers written
+    before round 29, such as earlier versions of the kd-tree that ``bench_kdtree_steps.py`` loads).
     """
     wp = init_warp()
     dim = int(dim)
@@ -130,6 +132,7 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
         wp.launch(kernel, dim=dim, inputs=args(0, int(start)), device=device)
         return
     workers = threads or cpu_threads()
+    balanced = balanced or (chunks_per_thread or 1) > 1
     chunks = guided_ranges(dim, workers, min_chunk) if balanced else chunk_ranges(dim, workers, min_items)
     if len(chunks) == 1:
         wp.launch(kernel, dim=dim, inputs=args(0, int(start)), device=device)
