@@ -628,8 +628,8 @@ class KdBuildConfig:
     traversal_cost: float = 3.0
     """C_trav: cost of one inner-node step, relative to ``intersection_cost``. 3 since round 29, when
     the CPU's packets began testing a leaf's triangles 8 at a time (more triangles per leaf cost
-    little more): against 2, the benchmark's incoherent rays 1.05x (paired), camera rays 0.99x, on
-    a tree of 301k nodes instead of 500k; 3.5 read 1.06x / 0.94x, 4 1.07x / 0.96x
+    little more): against 2, the benchmark's incoherent rays 1.06x (paired), camera rays 0.98x, on
+    a tree of 301k nodes instead of 500k; 3.5 and 4 read 1.09x / 0.93x
     (``benchmarks/results/kdtree_ab_sah.json``)."""
     intersection_cost: float = 1.0
     """C_isect: cost of one ray–triangle test."""
