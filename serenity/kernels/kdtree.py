@@ -22,7 +22,7 @@ Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`
         leaf's triangles lie next to each other in memory (the traversal's time goes much into
         cache misses on nodes and triangles: a copy per reference trades memory for one miss per
         leaf, not one per triangle and its index), and a coordinate of up to 8 of them is one
-        vector load (the packets' SIMD leaf test, :func:`leaf_pick`).
+        vector load (the CPU's SIMD leaf tests, :func:`leaf_simd` and :func:`leaf_pick`).
     tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2 (for shading a hit).
 
 Traversal (Warp, ``trace_kd``): rays with origin ``o`` (N,3) and direction ``d`` (N,3) float32,
@@ -861,6 +861,8 @@ def sort_keys(
 #: rays per thread of the CPU's key kernel (:func:`sort_keys_simd`)
 KEY_LANES = 16
 _KEY_FINE_MASK = (1 << (3 * (SORT_ORIGIN_BITS - SORT_COARSE_BITS))) - 1
+#: float32's largest finite value as a C literal, for the SIMD snippets' finiteness tests (:func:`finite`)
+_FLT_MAX_C = f"{float(np.finfo(np.float32).max)!r}f"
 
 
 def _deinterleave(out: str, ptr: str, lanes: int, vtype: str) -> str:
@@ -881,8 +883,6 @@ def _deinterleave(out: str, ptr: str, lanes: int, vtype: str) -> str:
                      f" {out}[{a}] = __builtin_shufflevector(t_, v2_, {second}); }}")
     lines.append("}")
     return "\n".join(lines)
-
-
 
 
 @wp.func_native(f"""
@@ -910,7 +910,7 @@ kf ay = (kf)((ki)d[1] & 0x7FFFFFFF);
 kf az = (kf)((ki)d[2] & 0x7FFFFFFF);
 ki octant = ((d[0] < zero) & 1) | ((d[1] < zero) & 2) | ((d[2] < zero) & 4);
 kf l1 = (ax + ay) + az;
-kf s = ((l1 > zero) & (l1 <= {float(np.finfo(np.float32).max)!r}f)) ? {float(1 << SORT_DIRECTION_BITS)!r}f / l1 : zero;
+kf s = ((l1 > zero) & (l1 <= {_FLT_MAX_C})) ? {float(1 << SORT_DIRECTION_BITS)!r}f / l1 : zero;
 kf fu = s > zero ? ax * s : zero;
 kf fv = s > zero ? ay * s : zero;
 fu = fu < dcells ? fu : dcells;
@@ -1043,9 +1043,10 @@ def place_low_runs(
     offset: int,
 ):
     """:func:`place_keys`' first pass for run r = tid + offset of the keys, at the run's own places in
-    each bin (``starts[r·B + digit]``); also counts the high digits of the run of pass-1 places
-    ``[r·per_run, (r+1)·per_run)``... of this run's keys, per run of places they land in, into
-    ``high_counts[(r·R + run)·B + digit]`` (R runs; zeroed by the caller)."""
+    each bin (``starts[r·B + digit]``). For the second pass, which splits the places into the same
+    runs ``[q·per_run, (q+1)·per_run)``, it also counts the high digits of this run's keys by the
+    run q of the place each lands in, into ``high_counts[(r·R + q)·B + digit]`` (R runs; zeroed by
+    the caller)."""
     r = wp.tid() + offset
     base = r * _SORT_BINS
     runs = (n + per_run - 1) // per_run
@@ -1103,7 +1104,8 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
     bins = 1 << SORT_DIGIT_BITS
     counts = scratch_buffer(scratch, "sort_counts", runs * 2 * bins, wp.int32, "cpu")
     launch(count_keys, runs, [keys, n, per_run, counts], device="cpu", threads=runs, min_items=1)
-    totals = counts.numpy().reshape(runs, 2, bins).sum(axis=0, dtype=np.int64)
+    per_run_counts = counts.numpy().reshape(runs, 2, bins).astype(np.int64)  # (run, digit, bin)
+    totals = per_run_counts.sum(axis=0)
     first = scratch_buffer(scratch, "sort_first", n, wp.int32, "cpu")
     high = scratch_buffer(scratch, "sort_high", n, wp.uint16, "cpu")
     order = scratch_buffer(scratch, "order", n, wp.int32, "cpu")
@@ -1113,7 +1115,7 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
         launch(place_keys, 1, [keys, n, starts, first, high, order], device="cpu", threads=1)
         return order
     # several runs: each places its own keys at its own places in every bin (run r after runs < r)
-    low = counts.numpy().reshape(runs, 2, bins)[:, 0, :].astype(np.int64)
+    low = per_run_counts[:, 0, :]
     bin_start = np.cumsum(totals[0]) - totals[0]
     starts = scratch_buffer(scratch, "sort_starts", runs * bins, wp.int32, "cpu")
     starts.numpy()[:] = (bin_start[None, :] + np.cumsum(low, axis=0) - low).reshape(-1)
@@ -1498,9 +1500,6 @@ return __builtin_ctz((unsigned)x);
 def lowest_lane(x: int) -> int:
     """The index of the lowest set bit of a non-zero lane mask."""
     ...
-
-
-_FLT_MAX_C = f"{float(np.finfo(np.float32).max)!r}f"
 
 
 @wp.func_native(f"""
