@@ -22,7 +22,8 @@ call's median. Phases:
 - ``trace``: the traversal (``trace_packets``, 16-ray packets, for a reordered batch and for a
   coherent one in the caller's order; ``trace_rays``, interleaved, when asked for; ``intersect_rays``,
   one ray per kernel thread, for any other batch);
-- ``scatter_array``: the four results back at their rays' own indices (one launch per array).
+- ``scatter_hits``: the four results back at their rays' own indices, as one 16-byte record per ray
+  (``scatter_array``, one launch per result array, before round 30).
 """
 
 from __future__ import annotations
@@ -80,7 +81,7 @@ def instrument(kd, times: dict) -> None:
 TABLE_ROWS = [
     ("traversal (`trace_rays` / `trace_packets`)", ("trace",)),
     ("gather of origins and directions", ("gather_array",)),
-    ("scatter of the four results", ("scatter_array",)),
+    ("scatter of the four results", ("scatter_hits", "scatter_array")),
     ("sort keys", ("sort_keys_simd", "sort_keys")),
     ("counting sort", ("counting_order",)),
     ("coherence sample, Python, allocation", ("sample_key_changes", "other")),

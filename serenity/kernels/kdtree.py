@@ -56,7 +56,8 @@ CPU (:func:`counting_order`, its placing passes split by runs of keys over the t
 stable sort on CUDA; the rays are gathered into the sorted order (a
 separate pass: a random read per ray inside the traversal costs more than the pass; tmax only when
 it differs between rays), traced with their results written in that order, and the results
-scattered back to each ray's own index by a pass of their own (:func:`scatter_in_order`), so the results
+scattered back to each ray's own index by a pass of their own (:func:`scatter_hits`: one 16-byte
+record per ray, :func:`hit_outputs`; :func:`scatter_in_order` for the any-hit flags), so the results
 do not depend on the order. (Written back from inside the traversal, the four random stores per ray
 cost 60-90 ms of a 0.92 M-ray batch's ~470 ms on one thread, the separate scatter 10 ms: README,
 "The kd-tree ray tracer", round 23; its A/Bs ``benchmarks/results/kdtree_ab_scatter*.json``.) Rays
@@ -1165,6 +1166,38 @@ def scatter_array(
     dst[order[i]] = src[i]
 
 
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+return __int_as_float(x);
+#else
+float f;
+__builtin_memcpy(&f, &x, sizeof(f));
+return f;
+#endif
+""")
+def int_bits_float(x: int) -> float:
+    """The float32 whose bits are those of the int32 ``x``."""
+    ...
+
+
+@wp.kernel(enable_backward=False)
+def scatter_hits(
+    # inputs
+    order: wp.array(dtype=wp.int32),
+    t: wp.array(dtype=float),
+    prim: wp.array(dtype=wp.int32),
+    u: wp.array(dtype=float),
+    v: wp.array(dtype=float),
+    # outputs
+    records: wp.array(dtype=wp.vec4),
+    offset: int,
+):
+    """The closest-hit query's four results, traced in the order of :func:`ray_order`, back at their
+    rays' own indices in one 16-byte record per ray (t, prim's bits, u, v; :func:`hit_outputs`)."""
+    i = wp.tid() + offset
+    records[order[i]] = wp.vec4(t[i], int_bits_float(prim[i]), u[i], v[i])
+
+
 #: the per-ray result types :func:`scatter_array` is compiled for (hits, flags, ray-traced G-buffers)
 SCATTER_DTYPES = (wp.int32, wp.float32, wp.vec4)
 for _dtype in SCATTER_DTYPES:
@@ -1805,7 +1838,9 @@ def trace_packets_kernel(any_hit: bool):
 @dataclass
 class Hits:
     """Closest hits of N rays: ``t`` (N,) float32 (inf = miss), ``prim`` (N,) int32 (−1 = miss),
-    barycentrics ``u``, ``v`` (N,) float32 (p = (1−u−v)·v0 + u·v1 + v·v2; 0 on a miss)."""
+    barycentrics ``u``, ``v`` (N,) float32 (p = (1−u−v)·v0 + u·v1 + v·v2; 0 on a miss). From
+    :meth:`KdTree.intersect` on the CPU the four are the columns of one (N, 4) block of records
+    (views with a 16-byte stride: :func:`hit_outputs`; ``np.ascontiguousarray`` packs one)."""
 
     t: np.ndarray
     prim: np.ndarray
@@ -1815,6 +1850,24 @@ class Hits:
     @property
     def hit(self) -> np.ndarray:
         return self.prim >= 0
+
+
+def hit_outputs(n: int, device: str) -> tuple[list, wp.array | None]:
+    """The closest-hit query's outputs for ``n`` rays: [t, prim, u, v], and on the CPU the (n,) vec4
+    array of 16-byte records (t, prim's bits, u, v) whose columns they are (prim's viewed as int32),
+    None on CUDA (four arrays there, coalesced per array). A reordered batch's results are
+    scattered back as records (:func:`scatter_hits`): one random store of 16 bytes per ray, where
+    four arrays took four of 4 bytes to four cache lines, the store buffer filling with misses (the
+    scatter of 0.92 M incoherent rays, 10.3 ms → 6.7 on one thread, 8.2 → 4.7 on two, round 30:
+    scratch timings, each phase timed in the query)."""
+    if not device.startswith("cpu"):
+        return [wp.empty(n, dtype=dt, device=device) for dt in (float, wp.int32, float, float)], None
+    block = np.empty((n, 4), np.float32)
+    columns = [wp.array(block[:, 0], dtype=float, device=device, copy=False),
+               wp.array(block[:, 1].view(np.int32), dtype=wp.int32, device=device, copy=False),
+               wp.array(block[:, 2], dtype=float, device=device, copy=False),
+               wp.array(block[:, 3], dtype=float, device=device, copy=False)]
+    return columns, wp.array(block, dtype=wp.vec4, device=device, copy=False)
 
 
 def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float) -> list:
@@ -1911,7 +1964,7 @@ def _slot_rays(n: int, slots: int, threads: int | None) -> int:
 
 def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs: list, device: str,
                   threads: int | None, rays_per_thread: int | None, scratch: Staging | None = None,
-                  coherent: bool = False) -> None:
+                  coherent: bool = False, records: wp.array | None = None) -> None:
     """Launch the closest-hit (``any_hit=False``; outputs t, prim, u, v) or occlusion query (outputs
     [occluded]) over ``n`` rays ``inputs`` (tree, origins, directions, tmin, tmax) given in the trace
     order ``order`` (empty: the caller's; else ray i is the caller's ray ``order[i]``: the results
@@ -1923,7 +1976,8 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
     (interleaved rays, :func:`trace_rays_kernel`) or ``PACKET_LANES`` (packets). CUDA traces one
     ray per thread (its parallelism is threads).
     ``scratch``: where the reordered results are traced and the packets keep their lanes
-    (:meth:`KdTree.scratch`), else new arrays."""
+    (:meth:`KdTree.scratch`), else new arrays. ``records``: the closest-hit outputs' record array
+    (:func:`hit_outputs`), into which a reordered batch's results are scattered in one pass."""
     one_ray = occlude_rays if any_hit else intersect_rays
     on_cpu = device.startswith("cpu")
     reordered = order.shape[0] > 0
@@ -1951,7 +2005,9 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         per = k * _slot_rays(n, k, threads)
         launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device,
                threads=threads, balanced=True)
-    if reordered:
+    if reordered and records is not None and not any_hit:
+        launch(scatter_hits, n, [order, *traced, records], device=device, threads=threads)
+    elif reordered:
         scatter_in_order(order, traced, outputs, device, threads)
 
 
@@ -2113,15 +2169,13 @@ class KdTree:
         dev = resolve_device(device)
         o, d, tm = self._rays(origins, directions, tmax)
         n = len(o)
-        out_t = wp.empty(n, dtype=float, device=dev)
-        out_p = wp.empty(n, dtype=wp.int32, device=dev)
-        out_u = wp.empty(n, dtype=float, device=dev)
-        out_v = wp.empty(n, dtype=float, device=dev)
+        columns, records = hit_outputs(n, dev)
         if n:
             args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
-            _launch_query(False, n, args, order, [out_t, out_p, out_u, out_v], dev, threads, rays_per_thread,
-                          self.scratch(dev), coherent)
-        return Hits(t=out_t.numpy(), prim=out_p.numpy(), u=out_u.numpy(), v=out_v.numpy())
+            _launch_query(False, n, args, order, columns, dev, threads, rays_per_thread, self.scratch(dev), coherent,
+                          records)
+        out_t, out_p, out_u, out_v = (a.numpy() for a in columns)
+        return Hits(t=out_t, prim=out_p, u=out_u, v=out_v)
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
                  threads: int | None = None, sort: bool | None = None,
@@ -2142,9 +2196,11 @@ __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "I
            "PACKET_LANES", "PACKET_MIN_RAYS", "PACKET_SCRATCH", "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS",
            "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
            "KdTreeData", "batch_is_coherent", "buffers_like", "cache_dir", "finite", "gather_array",
-           "gather_in_order", "inner_step_flat", "intersect_rays", "intersect_triangle", "intersect_triangle_fixed",
+           "gather_in_order", "hit_outputs", "inner_step_flat", "int_bits_float", "intersect_rays",
+           "intersect_triangle", "intersect_triangle_fixed",
            "leaf_hits", "lowest_lane", "node_head", "node_split", "occlude_rays", "origin_cell", "packet_pop",
            "packet_step", "ray_order", "ray_sort_key", "ref_prim", "ref_vertex",
-           "sample_key_changes", "scatter_array", "scatter_in_order", "setup_ray", "sort_keys", "sort_keys_simd",
+           "sample_key_changes", "scatter_array", "scatter_hits", "scatter_in_order", "setup_ray", "sort_keys",
+           "sort_keys_simd",
            "sort_scale",
            "spread_bits", "start_ray", "trace_kd", "trace_packets_kernel", "trace_rays_kernel"]
