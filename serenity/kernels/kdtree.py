@@ -1036,6 +1036,7 @@ def place_low_runs(
     keys: wp.array(dtype=wp.uint32),
     n: int,
     per_run: int,
+    owner: wp.array(dtype=wp.int32),
     # outputs
     starts: wp.array(dtype=wp.int32),
     first: wp.array(dtype=wp.int32),
@@ -1043,10 +1044,11 @@ def place_low_runs(
     high_counts: wp.array(dtype=wp.int32),
     offset: int,
 ):
-    """:func:`place_keys`' first pass for run r = tid + offset of the keys, at the run's own places in
-    each bin (``starts[r·B + digit]``). For the second pass, which splits the places into the same
-    runs ``[q·per_run, (q+1)·per_run)``, it also counts the high digits of this run's keys by the
-    run q of the place each lands in, into ``high_counts[(r·R + q)·B + digit]`` (R runs; zeroed by
+    """:func:`place_keys`' first pass for run r = tid + offset of the keys, within the run's own
+    places ``[r·per_run, (r+1)·per_run)``: its keys sorted by their low digit there (bin b's next free
+    place ``starts[r·B + b]``, advanced), so that no two threads write one cache line. For the second
+    pass, whose thread q takes the low digits' bins ``owner[b] = q``, it also counts the high digits
+    of this run's keys by that thread, into ``high_counts[(r·R + q)·B + digit]`` (R runs; zeroed by
     the caller)."""
     r = wp.tid() + offset
     base = r * _SORT_BINS
@@ -1054,13 +1056,13 @@ def place_low_runs(
     hbase = r * runs * _SORT_BINS
     for i in range(r * per_run, wp.min(n, (r + 1) * per_run)):
         k = int(keys[i])
-        b = base + (k & _SORT_DIGIT_MASK)
-        j = starts[b]
+        b = k & _SORT_DIGIT_MASK
+        j = starts[base + b]
         first[j] = i
         h = k >> _SORT_DIGIT
         high[j] = wp.uint16(h)
-        starts[b] = j + 1
-        c = hbase + (j // per_run) * _SORT_BINS + h
+        starts[base + b] = j + 1
+        c = hbase + owner[b] * _SORT_BINS + h
         high_counts[c] = high_counts[c] + 1
 
 
@@ -1069,37 +1071,48 @@ def place_high_runs(
     # inputs
     first: wp.array(dtype=wp.int32),
     high: wp.array(dtype=wp.uint16),
-    n: int,
-    per_run: int,
+    runs: int,
+    bin_lo: wp.array(dtype=wp.int32),
+    seg_lo: wp.array(dtype=wp.int32),
+    seg_hi: wp.array(dtype=wp.int32),
     # outputs
     starts: wp.array(dtype=wp.int32),
     order: wp.array(dtype=wp.int32),
     offset: int,
 ):
-    """:func:`place_keys`' second pass for run r of the first pass's places."""
-    r = wp.tid() + offset
-    base = r * _SORT_BINS
-    for j in range(r * per_run, wp.min(n, (r + 1) * per_run)):
-        b = base + int(high[j])
-        p = starts[b]
-        order[p] = first[j]
-        starts[b] = p + 1
+    """:func:`place_keys`' second pass for thread q = tid + offset: the low digits' bins
+    ``[bin_lo[q], bin_lo[q+1])``, each bin's keys run after run (run r's at places
+    ``[seg_lo[r·B + b], seg_hi[r·B + b])`` of the first pass, :func:`place_low_runs`): the keys in
+    the order of a one-thread first pass, each placed at the next free place of its high digit's
+    bin among thread q's (``starts[q·B + digit]``)."""
+    q = wp.tid() + offset
+    base = q * _SORT_BINS
+    for b in range(bin_lo[q], bin_lo[q + 1]):
+        for r in range(runs):
+            for j in range(seg_lo[r * _SORT_BINS + b], seg_hi[r * _SORT_BINS + b]):
+                c = base + int(high[j])
+                p = starts[c]
+                order[p] = first[j]
+                starts[c] = p + 1
 
 
 def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: Staging | None = None) -> wp.array:
     """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU:
     a radix sort of two digits by counting. The threads count contiguous runs of the keys per digit
-    and bin (:func:`count_keys`), numpy sums the runs' counts into each bin's first place, and one thread
-    places the keys by the low digit, then by the high one (:func:`place_keys`); on several threads
-    each run of keys is placed by its own thread at the run's own places in every bin
-    (:func:`place_low_runs`, which also counts the high digits per run of places for the second
-    pass, :func:`place_high_runs`). The same order as ``np.argsort(keys, kind="stable")`` (tests).
+    and bin (:func:`count_keys`), numpy sums the runs' counts into each bin's first place, and one
+    thread places the keys by the low digit, then by the high one (:func:`place_keys`). On several
+    threads each run of keys is sorted by its low digit within its own places
+    (:func:`place_low_runs`), then each thread takes a share of the low digits' bins and places their
+    keys, run after run, by the high digit (:func:`place_high_runs`: the order a one-thread first
+    pass gives, so the same result). The same order as ``np.argsort(keys, kind="stable")`` (tests).
     With one 16-bit digit (round 26's 16-bit key) it took 4.5 ms on 0.92 M keys on one thread
-    against 8.2-8.3 ms for numpy's radix sort. The threads' runs meet in every bin, so they share
-    its border cache lines: 2 threads place 0.92 M keys in 8.5 ms against 9.9 for one thread beside
-    an idle one, inside the incoherent query (round 29; split by spans of bins instead, each thread
-    reading every key and placing its own, branch-free, it was no faster than one thread; a radix
-    sort of three 9-10-bit digits, 1.7x slower on one thread: scratch timings)."""
+    against 8.2-8.3 ms for numpy's radix sort. Until round 29 the first pass put each run's keys at
+    the run's own places in every global bin, so the two threads' writes met at every bin's border
+    and shared most cache lines of the 2-byte high digits: that pass took 6.5-6.9 ms on 2 threads
+    inside the incoherent query, about what the whole one-thread sort's two passes take; within its
+    own places, 3.5-5.5 ms (round 30; split by spans of bins instead, each thread reading every key
+    and placing its own, branch-free, it was no faster than one thread; a radix sort of three 9-10-bit
+    digits, 1.7x slower on one thread: scratch timings)."""
     runs = max(1, min(threads or cpu_threads(), n // SORT_MIN_KEYS_PER_THREAD))
     per_run = -(-n // runs)
     bins = 1 << SORT_DIGIT_BITS
@@ -1115,18 +1128,33 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
         starts.numpy()[:] = (np.cumsum(totals, axis=1) - totals).reshape(-1)  # where each bin starts
         launch(place_keys, 1, [keys, n, starts, first, high, order], device="cpu", threads=1)
         return order
-    # several runs: each places its own keys at its own places in every bin (run r after runs < r)
+    # several runs: each sorts its own keys by the low digit within its own places, then thread q
+    # places the keys of its share of the low digits' bins, run after run, by the high digit
     low = per_run_counts[:, 0, :]
-    bin_start = np.cumsum(totals[0]) - totals[0]
+    local = np.cumsum(low, axis=1) - low + (np.arange(runs) * per_run)[:, None]  # (run, bin): its first place
+    seg = scratch_buffer(scratch, "sort_seg", runs * bins, wp.int32, "cpu")
+    seg.numpy()[:] = local.reshape(-1)
     starts = scratch_buffer(scratch, "sort_starts", runs * bins, wp.int32, "cpu")
-    starts.numpy()[:] = (bin_start[None, :] + np.cumsum(low, axis=0) - low).reshape(-1)
+    starts.numpy()[:] = local.reshape(-1)
+    # thread q's bins: about n / runs keys each
+    bin_lo = np.zeros(runs + 1, np.int64)
+    bin_lo[1:-1] = np.searchsorted(np.cumsum(totals[0]), np.arange(1, runs) * (n / runs))
+    bin_lo[-1] = bins
+    bin_lo = np.maximum.accumulate(bin_lo)
+    owner = scratch_buffer(scratch, "sort_owner", bins, wp.int32, "cpu")
+    owner.numpy()[:] = np.repeat(np.arange(runs), np.diff(bin_lo))
     hc = scratch_buffer(scratch, "sort_high_counts", runs * runs * bins, wp.int32, "cpu")
     hc.zero_()
-    launch(place_low_runs, runs, [keys, n, per_run, starts, first, high, hc], device="cpu", threads=runs, min_items=1)
-    per_place_run = hc.numpy().reshape(runs, runs, bins).sum(axis=0, dtype=np.int64)  # (run of places, digit)
+    launch(place_low_runs, runs, [keys, n, per_run, owner, starts, first, high, hc], device="cpu", threads=runs,
+           min_items=1)
+    per_thread = hc.numpy().reshape(runs, runs, bins).sum(axis=0, dtype=np.int64)  # (thread q, high digit)
     hbin_start = np.cumsum(totals[1]) - totals[1]
-    starts.numpy()[:] = (hbin_start[None, :] + np.cumsum(per_place_run, axis=0) - per_place_run).reshape(-1)
-    launch(place_high_runs, runs, [first, high, n, per_run, starts, order], device="cpu", threads=runs, min_items=1)
+    starts2 = scratch_buffer(scratch, "sort_starts2", runs * bins, wp.int32, "cpu")
+    starts2.numpy()[:] = (hbin_start[None, :] + np.cumsum(per_thread, axis=0) - per_thread).reshape(-1)
+    lo = scratch_buffer(scratch, "sort_bin_lo", runs + 1, wp.int32, "cpu")
+    lo.numpy()[:] = bin_lo
+    launch(place_high_runs, runs, [first, high, runs, lo, seg, starts, starts2, order], device="cpu",
+           threads=runs, min_items=1)
     return order
 
 
@@ -1862,12 +1890,13 @@ def hit_outputs(n: int, device: str) -> tuple[list, wp.array | None]:
     scratch timings, each phase timed in the query)."""
     if not device.startswith("cpu"):
         return [wp.empty(n, dtype=dt, device=device) for dt in (float, wp.int32, float, float)], None
-    block = np.empty((n, 4), np.float32)
+    records = wp.empty(n, dtype=wp.vec4, device=device)  # Warp's allocator: numpy's fresh pages cost faults
+    block = records.numpy()  # (n, 4) float32, the same memory
     columns = [wp.array(block[:, 0], dtype=float, device=device, copy=False),
                wp.array(block[:, 1].view(np.int32), dtype=wp.int32, device=device, copy=False),
                wp.array(block[:, 2], dtype=float, device=device, copy=False),
                wp.array(block[:, 3], dtype=float, device=device, copy=False)]
-    return columns, wp.array(block, dtype=wp.vec4, device=device, copy=False)
+    return columns, records
 
 
 def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float) -> list:
