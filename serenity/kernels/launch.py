@@ -37,6 +37,7 @@ threads)`` (callers that key per-worker buffers on the chunk offsets rely on tha
 from __future__ import annotations
 
 import itertools
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -140,23 +141,50 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
     # compile/load the module on this thread first so worker threads never race to build it
     kernel.module.load(wp.get_device(device))
     workers = min(workers, len(chunks))
-    pool = _executor(workers)
-    if workers == len(chunks):
-        futures = [
-            pool.submit(wp.launch, kernel, dim=count, inputs=args(k, int(start) + first), device=device)
-            for k, (first, count) in enumerate(chunks)
-        ]
-    else:
-        ticket = itertools.count()  # next() is atomic under the GIL: each chunk goes to one worker
+    _run_chunks(lambda worker, first, count: wp.launch(kernel, dim=count, inputs=args(worker, int(start) + first),
+                                                       device=device), chunks, workers)
 
-        def work(worker: int) -> None:
-            while (k := next(ticket)) < len(chunks):
-                first, count = chunks[k]
-                wp.launch(kernel, dim=count, inputs=args(worker, int(start) + first), device=device)
 
-        futures = [pool.submit(work, w) for w in range(workers)]
-    for f in futures:
-        f.result()
+class _Chunks:
+    """One launch's chunks, taken in order by whichever thread is free (``next`` on an
+    ``itertools.count`` is atomic under the GIL), and the count of those not finished yet."""
+
+    def __init__(self, run, chunks: list[tuple[int, int]]):
+        self.run, self.chunks = run, chunks
+        self.ticket = itertools.count()
+        self.left = len(chunks)
+        self.lock = threading.Lock()
+        self.done = threading.Event()
+        self.error: BaseException | None = None
+
+    def work(self, worker: int) -> None:
+        while (k := next(self.ticket)) < len(self.chunks):
+            try:
+                if self.error is None:
+                    self.run(worker, *self.chunks[k])
+            except BaseException as exc:  # handed to the calling thread
+                self.error = exc
+            with self.lock:
+                self.left -= 1
+                if self.left == 0:
+                    self.done.set()
+
+
+def _run_chunks(run, chunks: list[tuple[int, int]], workers: int) -> None:
+    """``run(worker, first, count)`` for each chunk on ``workers`` threads: this one (worker 0) and
+    ``workers`` − 1 of the pool. The calling thread works too, and returns when every chunk is done,
+    not when every pool thread has looked for one: a pool thread whose CPU was idle can take a
+    millisecond or more to wake on this 2-vCPU VM, and by then the calling thread may have run the
+    chunks it would have taken (round 30: a 2-chunk launch run on one thread after the other, the
+    counting sort's passes taking 10-13 ms where they take 6-8 split; scratch timings)."""
+    state = _Chunks(run, chunks)
+    pool = _executor(workers - 1)
+    for w in range(1, workers):
+        pool.submit(state.work, w)
+    state.work(0)
+    state.done.wait()
+    if state.error is not None:
+        raise state.error
 
 
 # ---------------------------------------------------------------------------------------------
