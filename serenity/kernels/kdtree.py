@@ -1096,6 +1096,86 @@ def place_high_runs(
                 starts[c] = p + 1
 
 
+@wp.kernel(enable_backward=False)
+def sort_starts_one(
+    # inputs
+    counts: wp.array(dtype=wp.int32),
+    # outputs
+    starts: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """:func:`counting_order` on one thread: where each bin of each digit starts (exclusive prefix
+    sums of one run's counts, :func:`count_keys`)."""
+    for digit in range(2):
+        acc = int(0)
+        for b in range(_SORT_BINS):
+            starts[digit * _SORT_BINS + b] = acc
+            acc += counts[digit * _SORT_BINS + b]
+
+
+@wp.kernel(enable_backward=False)
+def sort_starts_low(
+    # inputs
+    counts: wp.array(dtype=wp.int32),
+    n: int,
+    runs: int,
+    per_run: int,
+    # outputs
+    seg: wp.array(dtype=wp.int32),
+    starts: wp.array(dtype=wp.int32),
+    owner: wp.array(dtype=wp.int32),
+    bin_lo: wp.array(dtype=wp.int32),
+    high_counts: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """:func:`counting_order` on several threads, before the first pass (one kernel thread): each
+    run's first place of each low bin within its own places (``seg`` and ``starts``, which the pass
+    advances); the low bins' shares of the second pass's threads — thread q takes bins
+    ``[bin_lo[q], bin_lo[q+1])`` (``owner[b] = q``), whose keys before them number about q·n / runs;
+    and ``high_counts`` zeroed."""
+    for r in range(runs):
+        acc = r * per_run
+        for b in range(_SORT_BINS):
+            seg[r * _SORT_BINS + b] = acc
+            starts[r * _SORT_BINS + b] = acc
+            acc += counts[2 * r * _SORT_BINS + b]
+    bin_lo[0] = 0
+    last = int(0)
+    before = wp.int64(0)  # keys in the bins before b
+    for b in range(_SORT_BINS):
+        q = int(wp.min(wp.int64(runs - 1), before * wp.int64(runs) // wp.int64(n)))
+        for k in range(last + 1, q + 1):
+            bin_lo[k] = b
+        last = wp.max(last, q)
+        owner[b] = last
+        for r in range(runs):
+            before += wp.int64(counts[2 * r * _SORT_BINS + b])
+    for k in range(last + 1, runs + 1):
+        bin_lo[k] = _SORT_BINS
+    for i in range(runs * runs * _SORT_BINS):
+        high_counts[i] = 0
+
+
+@wp.kernel(enable_backward=False)
+def sort_starts_high(
+    # inputs
+    high_counts: wp.array(dtype=wp.int32),
+    runs: int,
+    # outputs
+    starts: wp.array(dtype=wp.int32),
+    offset: int,
+):
+    """:func:`counting_order` on several threads, before the second pass (one kernel thread): where
+    thread q's keys of each high digit go, ``starts[q·B + digit]``: after every key of a lower digit,
+    and after those of that digit of the threads before q (counted by :func:`place_low_runs`)."""
+    acc = int(0)
+    for h in range(_SORT_BINS):
+        for q in range(runs):
+            starts[q * _SORT_BINS + h] = acc
+            for r in range(runs):
+                acc += high_counts[(r * runs + q) * _SORT_BINS + h]
+
+
 def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: Staging | None = None) -> wp.array:
     """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU:
     a radix sort of two digits by counting. The threads count contiguous runs of the keys per digit
@@ -1118,42 +1198,28 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
     bins = 1 << SORT_DIGIT_BITS
     counts = scratch_buffer(scratch, "sort_counts", runs * 2 * bins, wp.int32, "cpu")
     launch(count_keys, runs, [keys, n, per_run, counts], device="cpu", threads=runs, min_items=1)
-    per_run_counts = counts.numpy().reshape(runs, 2, bins).astype(np.int64)  # (run, digit, bin)
-    totals = per_run_counts.sum(axis=0)
     first = scratch_buffer(scratch, "sort_first", n, wp.int32, "cpu")
     high = scratch_buffer(scratch, "sort_high", n, wp.uint16, "cpu")
     order = scratch_buffer(scratch, "order", n, wp.int32, "cpu")
+    starts = scratch_buffer(scratch, "sort_starts", max(runs, 2) * bins, wp.int32, "cpu")  # one run: both digits
     if runs == 1:
-        starts = scratch_buffer(scratch, "sort_starts", 2 * bins, wp.int32, "cpu")
-        starts.numpy()[:] = (np.cumsum(totals, axis=1) - totals).reshape(-1)  # where each bin starts
-        launch(place_keys, 1, [keys, n, starts, first, high, order], device="cpu", threads=1)
+        wp.launch(sort_starts_one, 1, [counts, starts, 0], device="cpu")
+        wp.launch(place_keys, 1, [keys, n, starts, first, high, order, 0], device="cpu")
         return order
     # several runs: each sorts its own keys by the low digit within its own places, then thread q
-    # places the keys of its share of the low digits' bins, run after run, by the high digit
-    low = per_run_counts[:, 0, :]
-    local = np.cumsum(low, axis=1) - low + (np.arange(runs) * per_run)[:, None]  # (run, bin): its first place
+    # places the keys of its share of the low digits' bins, run after run, by the high digit; the
+    # prefix sums between the passes are one-thread kernels (numpy's took ~0.6 ms per step with
+    # its array views, all of it time the other thread waits)
     seg = scratch_buffer(scratch, "sort_seg", runs * bins, wp.int32, "cpu")
-    seg.numpy()[:] = local.reshape(-1)
-    starts = scratch_buffer(scratch, "sort_starts", runs * bins, wp.int32, "cpu")
-    starts.numpy()[:] = local.reshape(-1)
-    # thread q's bins: about n / runs keys each
-    bin_lo = np.zeros(runs + 1, np.int64)
-    bin_lo[1:-1] = np.searchsorted(np.cumsum(totals[0]), np.arange(1, runs) * (n / runs))
-    bin_lo[-1] = bins
-    bin_lo = np.maximum.accumulate(bin_lo)
     owner = scratch_buffer(scratch, "sort_owner", bins, wp.int32, "cpu")
-    owner.numpy()[:] = np.repeat(np.arange(runs), np.diff(bin_lo))
+    bin_lo = scratch_buffer(scratch, "sort_bin_lo", runs + 1, wp.int32, "cpu")
     hc = scratch_buffer(scratch, "sort_high_counts", runs * runs * bins, wp.int32, "cpu")
-    hc.zero_()
+    wp.launch(sort_starts_low, 1, [counts, n, runs, per_run, seg, starts, owner, bin_lo, hc, 0], device="cpu")
     launch(place_low_runs, runs, [keys, n, per_run, owner, starts, first, high, hc], device="cpu", threads=runs,
            min_items=1)
-    per_thread = hc.numpy().reshape(runs, runs, bins).sum(axis=0, dtype=np.int64)  # (thread q, high digit)
-    hbin_start = np.cumsum(totals[1]) - totals[1]
     starts2 = scratch_buffer(scratch, "sort_starts2", runs * bins, wp.int32, "cpu")
-    starts2.numpy()[:] = (hbin_start[None, :] + np.cumsum(per_thread, axis=0) - per_thread).reshape(-1)
-    lo = scratch_buffer(scratch, "sort_bin_lo", runs + 1, wp.int32, "cpu")
-    lo.numpy()[:] = bin_lo
-    launch(place_high_runs, runs, [first, high, runs, lo, seg, starts, starts2, order], device="cpu",
+    wp.launch(sort_starts_high, 1, [hc, runs, starts2, 0], device="cpu")
+    launch(place_high_runs, runs, [first, high, runs, bin_lo, seg, starts, starts2, order], device="cpu",
            threads=runs, min_items=1)
     return order
 
@@ -1867,8 +1933,9 @@ def trace_packets_kernel(any_hit: bool):
 class Hits:
     """Closest hits of N rays: ``t`` (N,) float32 (inf = miss), ``prim`` (N,) int32 (−1 = miss),
     barycentrics ``u``, ``v`` (N,) float32 (p = (1−u−v)·v0 + u·v1 + v·v2; 0 on a miss). From
-    :meth:`KdTree.intersect` on the CPU the four are the columns of one (N, 4) block of records
-    (views with a 16-byte stride: :func:`hit_outputs`; ``np.ascontiguousarray`` packs one)."""
+    :meth:`KdTree.intersect` of a reordered batch on the CPU the four are the columns of one (N, 4)
+    block of records (views with a 16-byte stride: :func:`hit_outputs`; ``np.ascontiguousarray``
+    packs one)."""
 
     t: np.ndarray
     prim: np.ndarray
@@ -1880,15 +1947,17 @@ class Hits:
         return self.prim >= 0
 
 
-def hit_outputs(n: int, device: str) -> tuple[list, wp.array | None]:
-    """The closest-hit query's outputs for ``n`` rays: [t, prim, u, v], and on the CPU the (n,) vec4
-    array of 16-byte records (t, prim's bits, u, v) whose columns they are (prim's viewed as int32),
-    None on CUDA (four arrays there, coalesced per array). A reordered batch's results are
-    scattered back as records (:func:`scatter_hits`): one random store of 16 bytes per ray, where
-    four arrays took four of 4 bytes to four cache lines, the store buffer filling with misses (the
-    scatter of 0.92 M incoherent rays, 10.3 ms → 6.7 on one thread, 8.2 → 4.7 on two, round 30:
-    scratch timings, each phase timed in the query)."""
-    if not device.startswith("cpu"):
+def hit_outputs(n: int, device: str, reordered: bool) -> tuple[list, wp.array | None]:
+    """The closest-hit query's outputs for ``n`` rays: [t, prim, u, v], and for a ``reordered`` batch
+    on the CPU the (n,) vec4 array of 16-byte records (t, prim's bits, u, v) whose columns they are
+    (prim's viewed as int32); else four arrays and None (CUDA: coalesced per array). A reordered
+    batch's results are scattered back as records (:func:`scatter_hits`): one random store of 16
+    bytes per ray, where four arrays took four of 4 bytes to four cache lines, the store buffer
+    filling with misses (the scatter of 0.92 M incoherent rays, 10.3 ms → 6.7 on one thread, 8.2 →
+    4.7 on two, round 30: scratch timings, each phase timed in the query). A batch traced in its own
+    order writes its results in order: there the columns of records made camera rays' traversal
+    1.5-2.5 % slower beside incoherent queries (scratch timings), so it keeps four arrays."""
+    if not (reordered and device.startswith("cpu")):
         return [wp.empty(n, dtype=dt, device=device) for dt in (float, wp.int32, float, float)], None
     records = wp.empty(n, dtype=wp.vec4, device=device)  # Warp's allocator: numpy's fresh pages cost faults
     block = records.numpy()  # (n, 4) float32, the same memory
@@ -2198,11 +2267,13 @@ class KdTree:
         dev = resolve_device(device)
         o, d, tm = self._rays(origins, directions, tmax)
         n = len(o)
-        columns, records = hit_outputs(n, dev)
         if n:
             args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
+            columns, records = hit_outputs(n, dev, order.shape[0] > 0)
             _launch_query(False, n, args, order, columns, dev, threads, rays_per_thread, self.scratch(dev), coherent,
                           records)
+        else:
+            columns, _ = hit_outputs(0, dev, False)
         out_t, out_p, out_u, out_v = (a.numpy() for a in columns)
         return Hits(t=out_t, prim=out_p, u=out_u, v=out_v)
 

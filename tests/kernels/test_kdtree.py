@@ -353,8 +353,8 @@ def test_sort_keys_are_the_documented_key_with_and_without_bmi2():
 def test_counting_order_is_numpys_stable_argsort():
     """The CPU's radix sort of the keys by counting (``counting_order``, two digits) gives the order
     numpy's stable argsort gives, on one thread and on several (runs of uneven length, keys at both
-    ends of the range and of each digit, many ties, a batch too small to split), into fresh arrays
-    and into reused scratch."""
+    ends of the range and of each digit, many ties, a batch too small to split; nearly every key in
+    one bin), into fresh arrays and into reused scratch."""
     from serenity.kernels.kdtree import SORT_DIGIT_BITS, SORT_KEY_BITS, SORT_MIN_KEYS_PER_THREAD, counting_order
     from serenity.kernels.launch import Staging
 
@@ -370,6 +370,13 @@ def test_counting_order_is_numpys_stable_argsort():
         for threads in (1, 2, 3, 8):
             assert np.array_equal(counting_order(wk, n, threads).numpy(), expected), (n, threads)
             assert np.array_equal(counting_order(wk, n, threads, scratch).numpy(), expected), (n, threads)
+    # one bin of the low digit holds every key (or nearly): the second pass's other threads get none
+    n = 3 * SORT_MIN_KEYS_PER_THREAD + 5
+    for keys in (np.full(n, 5 << SORT_DIGIT_BITS, np.uint32), np.full(n, 77, np.uint32)):
+        keys[::1000] = rng.integers(0, top + 1, len(keys[::1000]))
+        for threads in (2, 3):
+            got = counting_order(wp.array(keys, dtype=wp.uint32, device="cpu"), n, threads, scratch).numpy()
+            assert np.array_equal(got, np.argsort(keys, kind="stable")), threads
 
 
 def test_query_scratch_is_reused_without_aliasing_results():
