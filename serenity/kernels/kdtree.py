@@ -1968,12 +1968,17 @@ def hit_outputs(n: int, device: str, reordered: bool) -> tuple[list, wp.array | 
     return columns, records
 
 
-def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float) -> list:
+def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float, scratch: Staging) -> list:
     """The kernels' ray inputs (origins, directions, tmin, tmax): views of the numpy arrays on the CPU
-    (no copy: serial work before the threads start), copies on a GPU."""
+    (no copy: serial work before the threads start), copies on a GPU; a scalar tmax (0-d ``tm``) is
+    ``scratch``'s buffer filled with it (:meth:`Staging.filled`: refilled only when it changes)."""
     copy = not dev.startswith("cpu")
+    if np.ndim(tm) == 0:
+        tmax = scratch.filled("tmax_uniform", len(o), float, float(tm))
+    else:
+        tmax = wp.array(tm, dtype=float, device=dev, copy=copy)
     return [wp.array(o, dtype=wp.vec3, device=dev, copy=copy), wp.array(d, dtype=wp.vec3, device=dev, copy=copy),
-            float(tmin), wp.array(tm, dtype=float, device=dev, copy=copy)]
+            float(tmin), tmax]
 
 
 def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: wp.array, n: int, sort: bool | None,
@@ -2230,6 +2235,8 @@ class KdTree:
         d = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
         if len(o) != len(d):
             raise SerenityError(f"{len(o)} ray origins but {len(d)} directions")
+        if np.ndim(tmax) == 0:
+            return o, d, np.float32(tmax)  # one value: a filled scratch buffer (_ray_arrays)
         tm = np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, np.float32), (len(o),)))
         return o, d, tm
 
@@ -2240,9 +2247,9 @@ class KdTree:
         ray has the same tmax (a scalar was given), which then needs no reordering. Third: whether a batch
         left in its order is coherent (:func:`batch_is_coherent`; on the CPU it is traced in packets)."""
         data = self.device_data(dev)
-        origins, directions, tmin, tmax = _ray_arrays(o, d, tm, dev, tmin)
-        n = len(o)
         scratch = self.scratch(dev)
+        origins, directions, tmin, tmax = _ray_arrays(o, d, tm, dev, tmin, scratch)
+        n = len(o)
         order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads, scratch)
         coherent = False
         if order.shape[0]:

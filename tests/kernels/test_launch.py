@@ -169,3 +169,29 @@ def test_balanced_launch_chunks_shrink_to_min_chunk():
     out = wp.full(n, wp.vec2i(-1, -1), dtype=wp.vec2i, device="cpu")
     launch(_worker_and_chunk, n, [out], device="cpu", threads=2, balanced=True, worker_arg=True, min_chunk=256)
     assert sorted(int(x) for x in np.unique(out.numpy()[:, 1])) == [a for a, _ in chunks]
+
+
+def test_staging_filled_refills_only_when_the_value_or_length_changes():
+    """``Staging.filled``: a buffer of one value, filled again only for another value or more
+    elements (a query's scalar tmax); a scalar tmax that changes between queries is honoured."""
+    st = Staging("cpu")
+    a = st.filled("t", 100, float, 2.0)
+    assert np.all(a.numpy() == 2.0)
+    a.numpy()[:] = -1.0  # not refilled for the same value and length: the marker stays
+    assert np.all(st.filled("t", 50, float, 2.0).numpy() == -1.0)
+    assert np.all(st.filled("t", 100, float, 3.0).numpy() == 3.0)
+    assert np.all(st.filled("t", 1000, float, 3.0).numpy() == 3.0)  # more elements: a new buffer, filled
+    assert np.all(st.filled("t", 1000, float, np.inf).numpy() == np.inf)
+
+    from serenity.kernels.kdtree import KdTree
+    from serenity.scene.procedural import lumpy_mesh
+
+    v, f = lumpy_mesh(2)
+    tree = KdTree.build(v, f, cache=False, progress=False)
+    o = np.zeros((64, 3), np.float32)
+    d = np.tile(np.array([[0.0, 0.0, 1.0]], np.float32), (64, 1))
+    far = tree.intersect(o, d, np.inf, device="cpu")
+    assert far.hit.all()
+    near = tree.intersect(o, d, 0.5 * float(far.t.min()), device="cpu")
+    assert not near.hit.any()
+    assert np.array_equal(tree.intersect(o, d, np.inf, device="cpu").t, far.t)
