@@ -2,7 +2,10 @@
 
 Warp runs a CPU launch on a single thread. Warp releases the GIL while a CPU kernel runs, so
 splitting the index range into contiguous chunks and launching each chunk from its own Python
-thread scales with the cores (1.9x with 2 threads on the 2-core CI machine).
+thread scales with the cores (1.9x with 2 threads on the 2-core CI machine). The calling thread is
+one of the workers (worker 0) and the pool supplies the others; whichever is free takes the next
+chunk, and the call returns when every chunk is done (:func:`_run_chunks`: a pool thread on an idle
+vCPU can take a millisecond or more to wake, and meanwhile the calling thread works).
 
 Convention for a splittable kernel: its **last parameter is** ``offset: int`` and it computes its
 index as ``i = wp.tid() + offset``. ``launch`` appends that offset; on CUDA it is 0 and the whole
