@@ -195,3 +195,31 @@ def test_staging_filled_refills_only_when_the_value_or_length_changes():
     near = tree.intersect(o, d, 0.5 * float(far.t.min()), device="cpu")
     assert not near.hit.any()
     assert np.array_equal(tree.intersect(o, d, np.inf, device="cpu").t, far.t)
+
+
+def test_run_chunks_runs_each_chunk_once_and_raises_a_chunks_error():
+    """The calling thread works beside the pool (worker 0): every chunk runs once, by some worker
+    below the count, and an error in a chunk reaches the caller after the chunks taken are done."""
+    import threading
+    import time
+
+    from serenity.kernels.launch import _run_chunks
+
+    seen, lock = [], threading.Lock()
+
+    def run(worker, first, count):
+        time.sleep(0.001 * (first % 3))
+        with lock:
+            seen.append((worker, first, count))
+
+    chunks = [(k * 10, 10) for k in range(25)]
+    _run_chunks(run, chunks, 3)
+    assert sorted((f, c) for _, f, c in seen) == chunks
+    assert {w for w, _, _ in seen} <= {0, 1, 2} and 0 in {w for w, _, _ in seen}
+
+    def fail(worker, first, count):
+        if first == 50:
+            raise ValueError("chunk 5")
+
+    with pytest.raises(ValueError, match="chunk 5"):
+        _run_chunks(fail, chunks, 2)
