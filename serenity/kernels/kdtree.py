@@ -1224,7 +1224,8 @@ def sort_starts_high(
 def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: Staging | None = None) -> wp.array:
     """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU:
     a radix sort of two digits by counting. The threads count contiguous runs of the keys per digit
-    and bin (:func:`count_keys`), numpy sums the runs' counts into each bin's first place, and one
+    and bin (:func:`count_keys`), a one-thread kernel sums the runs' counts into each bin's first
+    place (:func:`sort_starts_one`, :func:`sort_starts_low`, :func:`sort_starts_high`), and one
     thread places the keys by the low digit, then by the high one (:func:`place_keys`). On several
     threads each run of keys is sorted by its low digit within its own places
     (:func:`place_low_runs`), then each thread takes a share of the low digits' bins and places their
