@@ -18,8 +18,9 @@ call's median. Phases:
   lanes, the one-ray kernel for the last few); ``counting_order``: the keys' stable order (its
   launches, ``count_keys`` and ``place_keys`` or, on several threads, ``place_low_runs`` and
   ``place_high_runs``, are inside it);
-- ``gather_rays``: the rays' origins and directions in that order (one launch, 4096 rays per
-  kernel thread, since round 30; ``gather_array``, one launch per array, before);
+- ``move_in_order``: the rays' origins and directions in that order (one launch per array, 4096
+  rays per kernel thread; ``gather_rays``, both arrays in one launch, in round 30's first runs;
+  ``gather_array``, one ray per kernel thread, before round 30);
 - ``trace``: the traversal (``trace_packets``, 16-ray packets, for a reordered batch and for a
   coherent one in the caller's order; ``trace_rays``, interleaved, when asked for; ``intersect_rays``,
   one ray per kernel thread, for any other batch);
@@ -81,7 +82,7 @@ def instrument(kd, times: dict) -> None:
 #: the README table's rows: (label, the phases summed into it)
 TABLE_ROWS = [
     ("traversal (`trace_rays` / `trace_packets`)", ("trace",)),
-    ("gather of origins and directions", ("gather_rays", "gather_array")),
+    ("gather of origins and directions", ("move_in_order", "gather_rays", "gather_array")),
     ("scatter of the four results", ("scatter_hits", "scatter_array")),
     ("sort keys", ("sort_keys_simd", "sort_keys")),
     ("counting sort", ("counting_order",)),

@@ -1306,7 +1306,7 @@ def scatter_array(
     dst[order[i]] = src[i]
 
 
-#: rays per kernel thread of the CPU's reordering passes (:func:`gather_rays`, :func:`scatter_hits`),
+#: rays per kernel thread of the CPU's reordering passes (:func:`move_in_order`, :func:`scatter_hits`),
 #: and how many rays ahead each prefetches the lines it will read or write at random: the
 #: out-of-order core alone keeps too few of those misses in flight (0.92 M incoherent rays, cold
 #: caches, one thread: the gather 9.5 → 8.0 ms, the scatter 6.4 → 4.8; two threads: 6.7 → 5.1-5.7
@@ -1315,53 +1315,63 @@ REORDER_BLOCK = 4096
 GATHER_PREFETCH = 64
 SCATTER_PREFETCH = 128
 
-_GATHER_RAYS_C = f"""
+_MOVE_C = f"""
 #if !defined(__CUDA_ARCH__)
 const int* ord = order.data;
-const char* O = (const char*)o.data;
-const char* D = (const char*)d.data;
-char* GO = (char*)go.data;
-char* GD = (char*)gd.data;
+const char* S = (const char*)src;
+char* D = (char*)dst;
 const int n = order.shape[0];
 const int end = first + count;
-for (int i = first; i < end; ++i) {{
-    if (i + {GATHER_PREFETCH} < n) {{
-        const size_t a = 12 * (size_t)ord[i + {GATHER_PREFETCH}];
-        __builtin_prefetch(O + a, 0, 3);
-        __builtin_prefetch(D + a, 0, 3);
+/* gather: D[i] = S[ord[i]], the source prefetched; scatter: D[ord[i]] = S[i], the target prefetched
+   for writing; the element's size a constant in the common cases */
+#define SERENITY_MOVE(SIZE)                                                                      \\
+    for (int i = first; i < end; ++i) {{                                                          \\
+        if (scatter) {{                                                                           \\
+            if (i + {SCATTER_PREFETCH} < n)                                                        \\
+                __builtin_prefetch(D + (SIZE) * (size_t)ord[i + {SCATTER_PREFETCH}], 1, 3);        \\
+            __builtin_memcpy(D + (SIZE) * (size_t)ord[i], S + (SIZE) * (size_t)i, (SIZE));         \\
+        }} else {{                                                                                \\
+            if (i + {GATHER_PREFETCH} < n)                                                         \\
+                __builtin_prefetch(S + (SIZE) * (size_t)ord[i + {GATHER_PREFETCH}], 0, 3);         \\
+            __builtin_memcpy(D + (SIZE) * (size_t)i, S + (SIZE) * (size_t)ord[i], (SIZE));         \\
+        }}                                                                                       \\
     }}
-    const size_t j = 12 * (size_t)ord[i];
-    __builtin_memcpy(GO + 12 * (size_t)i, O + j, 12);
-    __builtin_memcpy(GD + 12 * (size_t)i, D + j, 12);
+switch (size) {{
+    case 4: SERENITY_MOVE(4) break;
+    case 12: SERENITY_MOVE(12) break;
+    case 16: SERENITY_MOVE(16) break;
+    default: SERENITY_MOVE(size) break;
 }}
+#undef SERENITY_MOVE
 #endif
 """
 
 
-@wp.func_native(_GATHER_RAYS_C)
-def gather_rays_range(order: wp.array(dtype=wp.int32), o: wp.array(dtype=wp.vec3), d: wp.array(dtype=wp.vec3),
-                      go: wp.array(dtype=wp.vec3), gd: wp.array(dtype=wp.vec3), first: int, count: int):
-    """``go[i] = o[order[i]]``, ``gd[i] = d[order[i]]`` for i in ``[first, first + count)`` (CPU,
-    contiguous arrays; nothing on CUDA)."""
+@wp.func_native(_MOVE_C)
+def move_range(order: wp.array(dtype=wp.int32), src: wp.uint64, dst: wp.uint64, size: int, scatter: int,
+               first: int, count: int):
+    """For i in ``[first, first + count)``: element ``order[i]`` of ``src`` to element i of ``dst``
+    (a gather), or element i to element ``order[i]`` (``scatter``); elements of ``size`` bytes,
+    contiguous arrays at the addresses ``src``, ``dst`` (CPU; nothing on CUDA)."""
     ...
 
 
 @wp.kernel(enable_backward=False)
-def gather_rays(
+def move_in_order(
     # inputs
     order: wp.array(dtype=wp.int32),
-    o: wp.array(dtype=wp.vec3),
-    d: wp.array(dtype=wp.vec3),
+    src: wp.uint64,
+    size: int,
+    scatter: int,
     # outputs
-    go: wp.array(dtype=wp.vec3),
-    gd: wp.array(dtype=wp.vec3),
+    dst: wp.uint64,
     offset: int,
 ):
-    """The rays' origins and directions in the order of :func:`ray_order`, ``REORDER_BLOCK`` rays
-    per kernel thread, each ray's lines prefetched ``GATHER_PREFETCH`` rays ahead (CPU only:
-    :func:`gather_in_order` elsewhere)."""
+    """:func:`gather_in_order`'s and :func:`scatter_in_order`'s pass on the CPU, ``REORDER_BLOCK`` rays
+    per kernel thread, each ray's line prefetched ``GATHER_PREFETCH`` (``SCATTER_PREFETCH``, for
+    writing) rays ahead (:func:`move_range`)."""
     first = (wp.tid() + offset) * REORDER_BLOCK
-    gather_rays_range(order, o, d, go, gd, first, wp.min(REORDER_BLOCK, order.shape[0] - first))
+    move_range(order, src, dst, size, scatter, first, wp.min(REORDER_BLOCK, order.shape[0] - first))
 
 
 _SCATTER_HITS_C = f"""
@@ -2152,8 +2162,21 @@ def gather_in_order(order: wp.array, arrays: list, device: str, threads: int | N
     outputs are its grow-only buffers (:func:`buffers_like`), else new arrays."""
     out = buffers_like(arrays, "gather", device, scratch)
     for a, b in zip(arrays, out, strict=True):
-        launch(gather_array, a.shape[0], [order, a, b], device=device, threads=threads)
+        _move(order, a, b, False, device, threads)
     return out
+
+
+def _move(order: wp.array, src: wp.array, dst: wp.array, scatter: bool, device: str, threads: int | None) -> None:
+    """One array's pass of :func:`gather_in_order` (``scatter`` False) or :func:`scatter_in_order`:
+    on the CPU the prefetching loops of :func:`move_in_order` (contiguous arrays), else one element
+    per kernel thread (:func:`gather_array`, :func:`scatter_array`)."""
+    n = order.shape[0]
+    if device.startswith("cpu") and src.is_contiguous and dst.is_contiguous:
+        size = wp.types.type_size_in_bytes(src.dtype)
+        launch(move_in_order, -(-n // REORDER_BLOCK), [order, src.ptr, size, int(scatter), dst.ptr], device=device,
+               threads=threads, min_items=1)
+    else:
+        launch(scatter_array if scatter else gather_array, n, [order, src, dst], device=device, threads=threads)
 
 
 def scatter_in_order(order: wp.array, arrays: list, outs: list, device: str, threads: int | None = None) -> None:
@@ -2163,7 +2186,7 @@ def scatter_in_order(order: wp.array, arrays: list, outs: list, device: str, thr
     arrays are skipped."""
     for a, b in zip(arrays, outs, strict=True):
         if a.shape[0]:
-            launch(scatter_array, a.shape[0], [order, a, b], device=device, threads=threads)
+            _move(order, a, b, True, device, threads)
 
 
 def scratch_buffer(scratch: Staging | None, name: str, n: int, dtype, device: str) -> wp.array:
@@ -2229,7 +2252,7 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         per = k * _slot_rays(n, k, threads)
         launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device,
                threads=threads, balanced=True)
-    if reordered and records is not None and not any_hit and all(a.is_contiguous for a in traced):
+    if reordered and records is not None:  # traced into new or scratch arrays: contiguous
         launch(scatter_hits, -(-n // REORDER_BLOCK), [order, *traced, records], device=device, threads=threads,
                min_items=1)
     elif reordered:
@@ -2362,11 +2385,11 @@ class KdTree:
         tm = np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, np.float32), (len(o),)))
         return o, d, tm
 
-    def _query_inputs(self, o, d, tm, dev: str, tmin: float, sort: bool | None, threads: int | None,
-                      uniform_tmax: bool = False) -> tuple[list, wp.array, bool]:
+    def _query_inputs(self, o, d, tm, dev: str, tmin: float, sort: bool | None,
+                      threads: int | None) -> tuple[list, wp.array, bool]:
         """The query kernels' inputs (the tree, the rays in their traced order) and that order (empty:
-        as given; else ray i of the kernel is the caller's ray ``order[i]``). ``uniform_tmax``: every
-        ray has the same tmax (a scalar was given), which then needs no reordering. Third: whether a batch
+        as given; else ray i of the kernel is the caller's ray ``order[i]``). ``tm``: :meth:`_rays`'
+        tmax, 0-d when every ray has the same (then it needs no reordering). Third: whether a batch
         left in its order is coherent (:func:`batch_is_coherent`; on the CPU it is traced in packets)."""
         data = self.device_data(dev)
         scratch = self.scratch(dev)
@@ -2375,14 +2398,8 @@ class KdTree:
         order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads, scratch)
         coherent = False
         if order.shape[0]:
-            if dev.startswith("cpu") and origins.is_contiguous and directions.is_contiguous:
-                go, gd = buffers_like([origins, directions], "gather", dev, scratch)
-                launch(gather_rays, -(-n // REORDER_BLOCK), [order, origins, directions, go, gd], device=dev,
-                       threads=threads, min_items=1)
-                origins, directions = go, gd
-            else:
-                origins, directions = gather_in_order(order, [origins, directions], dev, threads, scratch)
-            if not uniform_tmax:
+            origins, directions = gather_in_order(order, [origins, directions], dev, threads, scratch)
+            if np.ndim(tm) > 0:  # a scalar tmax (0-d ``tm``, :meth:`_rays`) needs no reordering
                 (tmax,) = gather_in_order(order, [tmax], dev, threads, scratch)
         elif dev.startswith("cpu") and n >= PACKET_MIN_RAYS:
             # with sort=None, ray_order leaves a big batch in its order only when it found it coherent
@@ -2403,7 +2420,7 @@ class KdTree:
         o, d, tm = self._rays(origins, directions, tmax)
         n = len(o)
         if n:
-            args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
+            args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
             columns, records = hit_outputs(n, dev, order.shape[0] > 0)
             _launch_query(False, n, args, order, columns, dev, threads, rays_per_thread, self.scratch(dev), coherent,
                           records)
@@ -2422,7 +2439,7 @@ class KdTree:
         n = len(o)
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
-            args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads, np.ndim(tmax) == 0)
+            args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
             _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, self.scratch(dev), coherent)
         return out.numpy().astype(bool)
 
@@ -2431,9 +2448,10 @@ __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "I
            "PACKET_LANES", "PACKET_MIN_RAYS", "PACKET_SCRATCH", "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS",
            "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
            "KdTreeData", "batch_is_coherent", "buffers_like", "cache_dir", "finite", "gather_array",
-           "gather_in_order", "gather_rays", "hit_outputs", "inner_step_flat", "intersect_rays",
+           "gather_in_order", "hit_outputs", "inner_step_flat", "intersect_rays",
            "intersect_triangle", "intersect_triangle_fixed",
-           "leaf_hits", "lowest_lane", "node_head", "node_split", "occlude_rays", "origin_cell", "packet_pop",
+           "leaf_hits", "lowest_lane", "move_in_order", "node_head", "node_split", "occlude_rays", "origin_cell",
+           "packet_pop",
            "packet_step", "ray_order", "ray_sort_key", "ref_prim", "ref_vertex",
            "sample_key_changes", "scatter_array", "scatter_hits", "scatter_in_order", "setup_ray", "sort_keys",
            "sort_keys_simd",

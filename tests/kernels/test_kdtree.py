@@ -571,7 +571,7 @@ def test_default_cpu_kernels_trace_reordered_and_coherent_batches_in_packets(mon
     assert launched[-2:] == [K.trace_packets_kernel(False), K.scatter_hits]
     assert _hits_equal(hits, tree.intersect(o2, d2, device="cpu", sort=False))
     tree.occluded(o2, d2, device="cpu")
-    assert launched[-2:] == [K.trace_packets_kernel(True), K.scatter_array]
+    assert launched[-2:] == [K.trace_packets_kernel(True), K.move_in_order]  # the flags: scatter_in_order
     tree.intersect(o2, d2, device="cpu", rays_per_thread=CPU_RAYS_PER_THREAD)
     assert launched[-2:] == [K.trace_rays_kernel(CPU_RAYS_PER_THREAD, False), K.scatter_hits]
 
@@ -879,3 +879,30 @@ def test_cpu_and_cuda_give_identical_hits(cuda_devices):
         got = tree.intersect(o, d, device=dev)
         assert np.array_equal(got.prim, ref.prim) and np.array_equal(got.t, ref.t)
         assert np.array_equal(tree.occluded(o, d, 1.0, device=dev), tree.occluded(o, d, 1.0, device="cpu"))
+
+
+def test_gather_and_scatter_in_order_move_every_element_type():
+    """The CPU's prefetching reorder loops (``move_in_order``, several blocks of rays) and the
+    one-element kernels give numpy's ``a[order]`` and its inverse, for 4-, 12- and 16-byte elements
+    and any other size, and a strided array takes the one-element kernels."""
+    from serenity.kernels.kdtree import REORDER_BLOCK, gather_in_order, scatter_in_order
+
+    rng = np.random.default_rng(30)
+    n = 2 * REORDER_BLOCK + 77
+    order_np = rng.permutation(n).astype(np.int32)
+    order = wp.array(order_np, dtype=wp.int32, device="cpu")
+    for dtype, shape in ((wp.float32, (n,)), (wp.int32, (n,)), (wp.vec3, (n, 3)), (wp.vec4, (n, 4)),
+                         (wp.vec2h, (n, 2))):
+        np_dtype = {wp.int32: np.int32, wp.vec2h: np.float16}.get(dtype, np.float32)
+        a = (rng.random(shape) * 1000).astype(np_dtype)
+        src = wp.array(a, dtype=dtype, device="cpu")
+        for threads in (1, 2):
+            (got,) = gather_in_order(order, [src], "cpu", threads)
+            assert np.array_equal(got.numpy(), a[order_np]), (dtype, threads)
+            back = wp.zeros_like(src)
+            scatter_in_order(order, [got], [back], "cpu", threads)
+            assert np.array_equal(back.numpy(), a), (dtype, threads)
+    strided = wp.array(np.arange(2 * n, dtype=np.float32)[::2], dtype=float, device="cpu", copy=False)
+    assert not strided.is_contiguous
+    (got,) = gather_in_order(order, [strided], "cpu")
+    assert np.array_equal(got.numpy(), np.arange(2 * n, dtype=np.float32)[::2][order_np])
