@@ -13,7 +13,6 @@ Also tracked, for the "frame to frame" contract: the process's resident memory a
 from __future__ import annotations
 
 import copy
-import json
 import math
 import os
 import time
@@ -24,7 +23,7 @@ from tqdm import tqdm
 from serenity.config import BENCH_QUALITY, RenderConfig
 from serenity.device import resolve_device
 from serenity.frame import LPV_UPDATE_STAGES, MAIN_LANE, SKY_UPDATE_STAGES, STAGES, Renderer
-from serenity.io.results import machine_info
+from serenity.io.results import machine_info, write_results
 from serenity.optional import pyplot
 from serenity.scene import load
 from serenity.scene.model import Camera, direction_from_angles
@@ -212,10 +211,7 @@ def bench(scene_name: str, width: int, height: int, frames: int, device=None, js
     print(f"memory: RSS {result['rss_mb']['frame_20']:.0f} MiB at frame {min(20, len(rss))}, "
           f"{result['rss_mb']['last']:.0f} MiB at frame {len(rss)}; NaN frames: {result['nan_frames']}")
     if json_path:
-        os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
-        with open(json_path, "w") as f:
-            json.dump(result, f, indent=2)
-        print(f"wrote {json_path}")
+        write_results(json_path, result)
     if chart_path:
         os.makedirs(os.path.dirname(os.path.abspath(chart_path)), exist_ok=True)
         timeline_chart(sample, chart_path, f"{scene.name} {width}x{height}, {device}: one overlapped frame "
