@@ -22,6 +22,7 @@ import os
 import numpy as np
 from PIL import Image, ImageDraw
 
+from serenity.io.provenance import provenance
 from serenity.sweep.files import atomic_write, write_json
 from serenity.sweep.spec import SweepSpec, Task, scene_label
 
@@ -101,7 +102,9 @@ def write_summaries(spec: SweepSpec, tasks: list[Task], manifest: dict, out: str
     atomic_write(path, put_csv)
     written.append(path)
     path = os.path.join(out, "metrics.json")
-    write_json(path, {"sweep": spec.name, "spec_hash": spec.hash, "exposure": spec.exposure, "points": rows})
+    # where the summary came from (command, commit, machine, date), then the sweep's points
+    write_json(path, {**provenance(), "sweep": spec.name, "spec_hash": spec.hash, "exposure": spec.exposure,
+                      "points": rows})
     written.append(path)
     path = os.path.join(out, "contact_sheet.png")
     sheet = contact_sheet(spec, rows, out)
