@@ -1,7 +1,12 @@
 """Frozen render settings, one typed tree: ``RenderConfig`` holds a ``ShadowConfig``, an
 ``SSAOConfig``, a ``SkyConfig`` and an ``LPVConfig``. Units are stated on each attribute; defaults
-are the paper's where it gives them. Every invalid value raises a ``ConfigError`` (a
-``SerenityError``) whose message starts with ``Class.field``.
+are the paper's where it gives them, and where they differ the attribute says why. Every invalid
+value raises a ``ConfigError`` (a ``SerenityError``) whose message starts with ``Class.field``.
+
+Quality presets (``PRESETS``, ``RenderConfig.preset``) name a few tested combinations of these
+settings; ``DEFAULT_QUALITY`` ("traced-probes") is what ``Renderer`` renders without a config and
+what every ``serenity`` command uses unless ``--quality`` says otherwise. A bare ``RenderConfig()``
+holds the "lpv" preset's settings, the base every preset's overrides apply to.
 
 Plain Python only: importing this module imports neither Warp nor moderngl, so the kernels and
 the GL passes both read their settings from here.
@@ -10,6 +15,7 @@ the GL passes both read their settings from here.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 from serenity.errors import ConfigError, SerenityError
@@ -79,9 +85,10 @@ class ShadowConfig:
     """Constant depth bias, in shadow-map texels (converted to depth units in the shader), below the
     receiver's plane that each tap compares with (``serenity/raster/shadow.py``)."""
     normal_offset: float = 0.0
-    """Normal offset of the lookup point, in texels, scaled by the slope tan θ (clamped 1–4); 0 since
-    the receiver-plane comparison (1 before: under a grazing sun it cut the eaves' shadows on walls
-    short, ~0.3 m in the courtyard at 320×180)."""
+    """Normal offset of the lookup point, in texels, scaled by the slope tan θ (clamped 1–4). 0: the
+    receiver-plane comparison (``bias``) already keeps surfaces from shadowing themselves, and an
+    offset of 1 texel cuts the eaves' shadows on walls short under a grazing sun (~0.3 m in the
+    courtyard at 320×180)."""
     stagger: bool = False
     """Redraw the cascades after the first in turn, one per frame, while each still covers its slice
     (tiles fitted 10 % larger to leave room), instead of every cascade whose light matrix moved: with
@@ -90,9 +97,9 @@ class ShadowConfig:
     unchanged apart from the 10 % coarser tiles (``ShadowPass.render``)."""
     contact_steps: int = 6
     """Steps of the screen-space contact-shadow march towards the sun (main view; 0 = off): a
-    receiver touching a blocker closer than the map's texels (``glsl/deferred.glsl``). 6 since the
-    receiver-plane comparison, which finds the eaves' shadows itself (12 before; 6 gave the same
-    FLIP and relMSE within 0.001 in both scenes, ``pass_ab_contact6_*.json``)."""
+    receiver touching a blocker closer than the map's texels (``glsl/deferred.glsl``). 6: the
+    receiver-plane comparison finds the longer contact shadows itself, and 12 steps give the same
+    FLIP and relMSE within 0.001 in both test scenes."""
     contact_pixels: float = 12.0
     """Length of the contact-shadow march, in pixel footprints at the receiver ..."""
     contact_texels: float = 32.0
@@ -142,9 +149,9 @@ class SSAOConfig:
     radius: float = 0.35
     """Occlusion radius, metres (the ray-traced AO it approximates uses the same). SSAO multiplies the
     volumes' indirect light, which already holds their own, coarser occlusion, so it is kept to the
-    contact scale: 0.35 m instead of 1 m (until round 9) lowered FLIP and relMSE for every preset in
-    both scenes at both frontier sizes but one figure (the Cornell box's FLIP at 320×180 with
-    ``medium``, +0.001; ``benchmarks/results/pass_ab_ssao_radius_*.json``)."""
+    contact scale: against 1 m, 0.35 m has the lower FLIP and relMSE for every preset in both test
+    scenes at 320×180 and 640×360 but one figure (the Cornell box's FLIP at 320×180 with
+    ``lpv-fast``, +0.001)."""
     directions: int = 12
     """Cosine-distributed directions per pixel."""
     steps: int = 4
@@ -223,8 +230,8 @@ class SkyConfig:
     """"gather": rays per probe (traced once per scene)."""
     gather_bounces: int = 12
     """"gather": passes over the volume after a change of the sun (each adds one bounce). 12: the
-    courtyard's pale walls and the Cornell box pass light on for many bounces; at 4 the courtyard's
-    FLIP read 0.0925, at 8 0.0852, at 12, 16 and 24 0.0849 (320×180, round 11's low)."""
+    courtyard's pale walls and the Cornell box pass light on for many bounces: the courtyard's FLIP
+    at 320×180 reads 0.0925 with 4 passes, 0.0852 with 8, and 0.0849 with 12, 16 and 24."""
     gather_visibility: bool = True
     """"gather": weigh each of the 8 probes around a point by whether it sees the point (DDGI's test,
     Majercik et al. 2019: a smooth back-face weight and a Chebyshev bound from each probe's octahedral
@@ -358,20 +365,19 @@ class LPVConfig:
     """Self-illumination damping (``kernels/lpv`` docstring, "Self-illumination"; 0 = off): an irradiance
     lookup's SH is scaled by (DC self_damping cells further along the normal / DC where it looks up)^
     ``self_damping_power``, clamped to [0, 1] (Kaplanyan & Dachsbacher 2010: light whose intensity falls
-    off along the normal flows away from the surface, most of it the surface's own). On since round
-    13 (off before): a lit plane gets 0.02-0.05 of its exitance back instead of 0.33-0.41, the open
-    ground is within 5 % of the reference instead of 12 % too bright, and the Cornell box's indirect
-    light beats no LPV on relMSE and FLIP; the courtyard's FLIP rises by ~0.01
-    (``benchmarks/bench_lpv_room.py`` → ``lpv_room.json``)."""
+    off along the normal flows away from the surface, most of it the surface's own). With it a lit
+    plane gets 0.02-0.05 of its exitance back instead of 0.33-0.41, the open ground is within 5 % of
+    the reference instead of 12 % too bright, and the Cornell box's indirect light beats no LPV on
+    relMSE and FLIP; the courtyard's FLIP rises by ~0.01 (``benchmarks/bench_lpv_room.py``)."""
     self_damping_power: float = 2.0
     """The exponent of ``self_damping``'s ratio."""
     coverage_blocking: bool = False
     """With the geometry volume: propagation through a face is also attenuated by the projected coverage
     of its surfels (Σ A·n²/s² along the axis, either side): a two-sided wall thinner than a cell blocks
     all of the light, not the 2/3 its L1 blocking lobe can (``kernels/lpv``, "Coverage blocking"). Off:
-    it takes the thin-wall leak from 0.095 to 0.006 of the lit side, but the Cornell box's ceiling got
-    most of its light through the ceiling from the sunlit roof, and without that leak 0.17× the
-    reference (README, "The LPV in a closed room")."""
+    it takes the thin-wall leak from 0.095 to 0.006 of the lit side, but the Cornell box's ceiling
+    gets most of its LPV light through the ceiling from the sunlit roof, and without that leak only
+    0.17× the reference's."""
     stagger: bool = False
     """Re-inject and propagate one cascade per update, in turn, instead of all of them (each then
     lags the camera and the light by at most ``cascades`` updates; a cascade that did not change
@@ -438,7 +444,12 @@ class RenderConfig:
     sun's shadows (``shadow``), SSAO (``ssao``), the sky lighting volume (``sky``), the light
     propagation volumes (``lpv``), and the ray-tracing pass (``ray_tracing`` and the fields after
     it). Each GI technique is a sub-config with an ``enabled`` flag, e.g.
-    ``RenderConfig(lpv=LPVConfig(enabled=False))`` renders without the LPV."""
+    ``RenderConfig(lpv=LPVConfig(enabled=False))`` renders without the LPV.
+
+    A bare ``RenderConfig()`` is the "lpv" preset: the paper's techniques, every one on. It is not
+    the default: ``Renderer(scene, w, h)`` without a config renders ``DEFAULT_QUALITY``
+    ("traced-probes"), as every command does. Start from a preset with
+    ``RenderConfig.preset(name, **overrides)`` (no name: the default preset)."""
 
     exposure: float = DEFAULT_EXPOSURE
     """Multiplier applied to radiance (W·m⁻²·sr⁻¹) before Reinhard (see ``DEFAULT_EXPOSURE``)."""
@@ -461,8 +472,7 @@ class RenderConfig:
     it took to queue); "none" = never before the read-back. (True / False read as "each" / "none".)
     "each" by default, as every figure of a stage assumes; "cpu" is what an application that reads
     no per-stage times would use (the frontier does): still frames 3-12 % faster in four of five
-    interleaved A/Bs (1 % slower in the fifth), the same images
-    (``benchmarks/results/pass_ab_sync_cpu_*.json``)."""
+    interleaved A/Bs (1 % slower in the fifth), the same images."""
     ray_tracing: bool = True
     """Ray-traced reflections and refractions for mirror/metal/glass pixels (paper §9)."""
     reflections: bool = True
@@ -490,19 +500,17 @@ class RenderConfig:
     0 = the frame's priority, so that the volumes' kernels take a share of the cores from llvmpipe's
     threads while these render; higher, the GL passes beside them keep more of the cores and the
     volumes run more in what they leave idle, at the risk of the frame waiting for them where it
-    joins them ("wait for volumes"). 4: the G-buffer, CSM and SSAO got faster by more than the wait
-    grew (frame −1.4 to −3.3 % at 320×180 and 640×360; 10: about −1 %, the frame waiting 2.4 ms for
-    the volumes; README, "What each technique costs", round 24; ``benchmarks/bench_pass_ab.py
-    --a-config volume_nice=0``)."""
+    joins them ("wait for volumes"). 4: the G-buffer, CSM and SSAO get faster by more than the wait
+    grows (frame −1.4 to −3.3 % against 0 at 320×180 and 640×360; 10: about −1 %, the frame waiting
+    2.4 ms for the volumes; ``benchmarks/bench_pass_ab.py --a-config volume_nice=0``)."""
     tracer_nice: int = 19
     """The niceness (-20..19), relative to this process's, of the tracer process that the overlapped
     schedule on the CPU traces in (``kernels/tracer_process``): 19 = the lowest priority, so that it
     takes a core only where the frame's own threads leave one idle; 0 = the frame's; below 0 it
     preempts the frame's threads (allowed only with CAP_SYS_NICE, e.g. as root; elsewhere it runs at
     0). ``benchmarks/bench_tracer_nice.py`` measures the trade: the lower, the shorter the tracer's
-    stage and the slower the frame (``benchmarks/results/tracer_nice.json``). In a scheduling group of
-    its own (``tracer_session``, where it takes effect) the niceness orders nothing; 19 stays the
-    default for the machines where it does not."""
+    stage and the slower the frame. In a scheduling group of its own (``tracer_session``, where it
+    takes effect) the niceness orders nothing; 19 is the default for the machines where it does not."""
     tracer_session: bool | None = None
     """Start the tracer process in a session of its own (``setsid``). Where Linux groups processes by
     session for scheduling (autogroup: ``/proc/sys/kernel/sched_autogroup_enabled`` = 1, and neither
@@ -510,17 +518,16 @@ class RenderConfig:
     group against another, instead of as one more thread beside llvmpipe's, the Warp launches' and
     the main thread; ``tracer_nice`` then orders nothing (the tracer is alone in its group).
     Elsewhere nothing changes (``TracerProcess.own_group`` says which). No privilege needed.
-    None (default since round 26) = a session of its own where the frame has a volume worker (the
-    overlapped CPU schedule of ``medium``, ``high``, ``paper``), whose wait leaves a core idle: with
-    ``tracer_start = "auto"`` that is the one setting that met both of the overlap's bars (tracer
-    stage ≤ 1.5x the inline trace, frame ≤ the serial one) at both sizes in all four sweeps on
-    round 25/26's host, and it keeps the frame at or under the serial one beside a busy process,
-    where nice 19 alone starves the tracer (README, "What overlap can and cannot buy";
-    ``benchmarks/bench_tracer_nice.py``); its price on an idle machine is a frame 1-4 % slower than
-    nice 19 in the renderer's group. Without a volume worker (``low``: its gathered sky volume keeps
-    both cores busy from the main thread) the tracer stays in the renderer's session, where a group
-    of its own only took cores from that work (round 26: frame 1.040 against 1.001x the serial one
-    at 320x180, 1.019 against 1.009x at 640x360)."""
+    None (default) = a session of its own where the frame has a volume worker (the overlapped CPU
+    schedule of the LPV presets), whose wait leaves a core idle: with ``tracer_start = "auto"`` it
+    is the one setting that meets both of the overlap's bars (tracer stage ≤ 1.5x the inline trace,
+    frame ≤ the serial one) at 320×180 and 640×360 in every sweep of
+    ``benchmarks/bench_tracer_nice.py``, and it keeps the frame at or under the serial one beside a
+    busy process, where nice 19 alone starves the tracer; its price on an idle machine is a frame
+    1-4 % slower than nice 19 in the renderer's group. Without a volume worker ("traced-probes": its
+    gathered sky volume keeps every core busy from the main thread) the tracer stays in the
+    renderer's session, where a group of its own only takes cores from that work (frame 1.040x
+    the serial one against 1.001x at 320×180, 1.019x against 1.009x at 640×360)."""
     tracer_start: str = "auto"
     """With the volume worker on the CPU: where the frame reads the ray-casting buffer back and hands
     its rays to the tracer process (sync 1). "g-buffer": right after the G-buffer, as in the paper;
@@ -528,8 +535,8 @@ class RenderConfig:
     frame (otherwise right after the G-buffer), so that the tracer starts where a core may fall idle;
     "auto" (default): "idle" where the tracer process runs in a scheduling group of its own
     (``tracer_session`` took effect), else "g-buffer" — at nice 19 in the renderer's group a later
-    start only delays a tracer that still waits for a core (round 26's sweep: tracer 5.0x inline at
-    640x360 against 3.3x from the G-buffer). The same images in every case (tests)."""
+    start only delays a tracer that still waits for a core (tracer stage 5.0x the inline trace at
+    640×360 against 3.3x from the G-buffer). The same images in every case (tests)."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
     rt_sun_shadows: str = "traced"
@@ -603,12 +610,12 @@ class RenderConfig:
 
 
     @classmethod
-    def preset(cls, name: str, **overrides) -> RenderConfig:
-        """The settings of quality preset ``name`` (one of ``QUALITY_PRESETS``; see ``PRESETS`` for
-        what each sets — every field it does not name keeps its default), then ``overrides``
-        (fields of RenderConfig) on top."""
-        if name not in PRESETS:
-            raise ConfigError(f"quality preset must be one of {', '.join(QUALITY_PRESETS)}, got {name!r}")
+    def preset(cls, name: str | None = None, **overrides) -> RenderConfig:
+        """The settings of quality preset ``name`` (one of ``QUALITY_PRESETS``, a former name of one
+        with a ``PresetRenamedWarning``, or None for ``DEFAULT_QUALITY``; ``PRESETS`` lists what each sets,
+        every field it does not name keeps its default), then ``overrides`` (fields of RenderConfig)
+        on top: ``RenderConfig.preset(exposure=0.05)`` is the default preset a little brighter."""
+        name = preset_name(DEFAULT_QUALITY if name is None else name)
         kw: dict = {}
         for key, value in PRESETS[name].items():
             sub = SUB_CONFIGS.get(key)
@@ -626,11 +633,10 @@ class KdBuildConfig:
     part of the tree's disk-cache key. Costs are relative units (only their ratio matters)."""
 
     traversal_cost: float = 3.0
-    """C_trav: cost of one inner-node step, relative to ``intersection_cost``. 3 since round 29, when
-    the CPU's packets began testing a leaf's triangles 8 at a time (more triangles per leaf cost
-    little more): against 2, the benchmark's incoherent rays 1.06x (paired), camera rays 0.98x, on
-    a tree of 301k nodes instead of 500k; 3.5 and 4 read 1.09x / 0.93x
-    (``benchmarks/results/kdtree_ab_sah.json``)."""
+    """C_trav: cost of one inner-node step, relative to ``intersection_cost``. 3: the CPU's packets
+    test a leaf's triangles 8 at a time, so more triangles per leaf cost little more; against 2 the
+    benchmark's incoherent rays trace 1.06x as fast (paired), camera rays 0.98x, on a tree of 301k
+    nodes instead of 500k; 3.5 and 4 read 1.09x / 0.93x."""
     intersection_cost: float = 1.0
     """C_isect: cost of one ray–triangle test."""
     empty_bonus: float = 0.8
@@ -638,8 +644,8 @@ class KdBuildConfig:
     min_empty_fraction: float = 0.1
     """The bonus applies only when the empty side is at least this fraction (0..1) of the node's extent.
     0.1 rather than 0: thin empty slabs cost a traversal step each and save little; with 0.1 the
-    benchmark's rays take 12 % fewer steps and 17 % fewer triangle tests (``kdtree_counts.json``)
-    and coherent rays trace 16-22 % faster per CPU-second (``kdtree_steps*.json``)."""
+    benchmark's rays take 12 % fewer steps and 17 % fewer triangle tests and coherent rays trace
+    16-22 % faster per CPU-second."""
     bins: int = 32
     """SAH bins per axis per node, 4..64 (a node with fewer triangles gets fewer: the next power of 2)."""
     max_depth: int | None = None
@@ -669,65 +675,78 @@ class KdBuildConfig:
 SUB_CONFIGS = {"shadow": ShadowConfig, "ssao": SSAOConfig, "sky": SkyConfig, "lpv": LPVConfig}
 
 PRESETS: dict[str, dict] = {
-    # the paper's settings (§6–§9): full-resolution passes, one sky layer per frame by ray casting,
-    # 3 LPV cascades of 32³, 4 cascades of 2048² with PCSS and no contact shadow, SSAO at full
-    # resolution, the ray-traced views lit with the overlapped shadow maps
+    # The paper's pipeline as published (§6–§9): indirect light and SSAO at full resolution, the sky
+    # volume re-integrated one probe layer per frame by ray casting, 3 LPV cascades of 32³, 4 shadow
+    # cascades of 2048² with PCSS and no contact shadows, the ray-traced views lit with the
+    # overlapped shadow maps. The slowest preset, kept to compare with the paper.
     "paper": {"indirect_scale": 1, "sky": {"method": "layers"}, "sky_layers_per_frame": 1,
               "lpv": {"resolution": 32}, "shadow": {"contact_steps": 0}, "rt_sun_shadows": "osm"},
-    # the defaults: indirect light and SSAO at half resolution, the sky volume by visibility
-    # transfer (every probe current every frame), the 256² sky map
-    "high": {},
-    # what `serenity bench` uses unless told (`serenity render` until round 12): indirect light and SSAO at quarter
-    # resolution (the indirect light is smooth: the frontier's FLIP moved by under 0.002 from half
-    # resolution, the LPV lighting pass got ~4x cheaper), shadow cascades of 1.6 texels per pixel of
-    # the image (512² at 320×180; at most 1024²) redrawn in turn and no contact-shadow march (round
-    # 14, 2.4 texels and 6 steps before: the direct lighting 7.1 -> 5.8 ms and the CSM ~2 ms less at
-    # 320×180; courtyard FLIP 0.1191 -> 0.1169, relMSE 0.0277 -> 0.0307; Cornell FLIP 0.1100 ->
-    # 0.1118, relMSE* 0.530 -> 0.591: pass_ab_round14_medium_shadow_*.json), fewer PCSS, SSAO and
-    # glossy-LPV taps, a 64² sky map baked in 12 steps (96² before: FLIP 0.1166 -> 0.1169, relMSE
-    # unchanged, pass_ab_round14_skymap_courtyard.json), the sky volume re-lit one layer per
-    # frame after a rebake (the paper's sweep, by transfer), coarser RSM and sky VPLs. Round 23: 4
-    # PCSS blocker and 8 filter taps instead of 6 and 12 (direct lighting 6.10 -> 5.17 ms at 320×180,
-    # 18.4 -> 16.8 at 640×360; courtyard FLIP 0.1168 either way, relMSE* 0.0282 -> 0.0284; Cornell FLIP
-    # 0.1118 -> 0.1121, relMSE* 0.591 -> 0.593: pass_ab_round23_pcss_*.json)
-    "medium": {"indirect_scale": 4,
-               "shadow": {"size": 1024, "texels_per_pixel": 1.6, "blocker_samples": 4, "filter_samples": 8,
-                          "stagger": True, "contact_steps": 0},
-               "ssao": {"directions": 6, "steps": 2},
-               "sky": {"sky_map_size": 64, "sky_steps": 12, "transfer_layers": 1},
-               "lpv": {"glossy_steps": 4, "stagger": True},
-               "rsm_size": 128, "sky_vpl_stride": 8},
-    # the cheapest, and since round 11 beyond the paper: indirect light at quarter resolution, 3 shadow
-    # cascades, a coarse sky map, and no LPV: the sky volume's probes are lit by gathering ("gather",
-    # ``kernels/probegather``) — rays traced once per probe through the kd-tree carry the sky and every
-    # bounce of sun and sky light through the real geometry, instead of occlusion quads + a 6³ LPV
-    # (round 10's low). Since round 12 the grid covers what stands on the ground (``fit="content"``:
-    # the courtyard's 120 m ground plane left out, ~1.2 m cells from 24 000 probes instead of 100 000),
-    # each probe traces 512 rays (128 left the Cornell box's probes blotchy: its light comes from a
-    # small sunlit patch), 12 passes converge the bounces, and no SSAO: the probes, traced against the
-    # real geometry, already hold the occlusion the SSAO multiplied in a second time (FLIP better in
-    # both scenes without it; benchmarks/results/pass_ab_low_round12_*.json); each probe weighed by
-    # whether it sees the point (``gather_visibility``), so the lookup sits a quarter cell off the
-    # surface instead of half. The other presets keep the paper's LPV.
-    "low": {"indirect_scale": 4,
-            "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4, "filter_samples": 8,
-                       "stagger": True},
-            "ssao": {"enabled": False},
-            "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_layers": 1, "method": "gather",
-                    "fit": "content", "target_probes": 24_000, "gather_rays": 512, "normal_offset": 0.25},
-            "lpv": {"enabled": False},
-            "rsm_size": 128, "sky_vpl_stride": 8},
+    # Every technique of the paper, at the settings of a bare RenderConfig(): indirect light and SSAO
+    # at half resolution, the sky volume re-lit by visibility transfer (every probe current every
+    # frame), 3 LPV cascades of 12³, 4 shadow cascades of 2048² with PCSS and a contact-shadow march.
+    "lpv": {},
+    # "lpv" at about 60 % of its frame time for a little more error: indirect light and SSAO at
+    # quarter resolution (the indirect light is smooth: FLIP moves by under 0.002, the LPV lighting
+    # pass gets ~4x cheaper), shadow cascades of 1.6 texels per image pixel (at most 1024²) redrawn
+    # in turn without the contact march, 4 PCSS blocker and 8 filter taps, fewer SSAO and glossy-LPV
+    # taps, a 64² sky map re-lit one probe layer per frame, LPV cascades updated in turn, a coarser
+    # RSM and fewer sky VPLs.
+    "lpv-fast": {"indirect_scale": 4,
+                 "shadow": {"size": 1024, "texels_per_pixel": 1.6, "blocker_samples": 4, "filter_samples": 8,
+                            "stagger": True, "contact_steps": 0},
+                 "ssao": {"directions": 6, "steps": 2},
+                 "sky": {"sky_map_size": 64, "sky_steps": 12, "transfer_layers": 1},
+                 "lpv": {"glossy_steps": 4, "stagger": True},
+                 "rsm_size": 128, "sky_vpl_stride": 8},
+    # Beyond the paper, and the default: no LPV and no SSAO. The sky volume's probes, fitted to what
+    # stands on the ground (~24 000 probes), each trace 512 rays once through the kd-tree and are lit
+    # with the sky and every bounce of sun and sky light through the real geometry (``"gather"``),
+    # each probe weighed by whether it sees the point it lights. The probes already hold the
+    # occlusion SSAO would add (FLIP is better in both test scenes without SSAO), and 128 rays leave
+    # the Cornell box's probes blotchy (its light comes from a small sunlit patch). Indirect light at
+    # quarter resolution, 3 shadow cascades of 2.4 texels per image pixel, a coarse sky map.
+    "traced-probes": {"indirect_scale": 4,
+                      "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4,
+                                 "filter_samples": 8, "stagger": True},
+                      "ssao": {"enabled": False},
+                      "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_layers": 1, "method": "gather",
+                              "fit": "content", "target_probes": 24_000, "gather_rays": 512, "normal_offset": 0.25},
+                      "lpv": {"enabled": False},
+                      "rsm_size": 128, "sky_vpl_stride": 8},
 }
-"""Quality presets: field → value, or for a sub-config (shadow, ssao, sky, lpv) its field → value.
-Each is one point of the speed-vs-error charts (``benchmarks/bench_frontier.py``)."""
+"""Quality presets: field → value, or for a sub-config (shadow, ssao, sky, lpv) its field → value;
+every field a preset does not name keeps ``RenderConfig()``'s default. Each is one point of the
+speed-vs-error frontier (``benchmarks/bench_frontier.py``)."""
 
 QUALITY_PRESETS = tuple(PRESETS)
-DEFAULT_QUALITY = "low"
-"""The preset ``serenity render``, ``view`` and ``sweep`` use unless ``--quality`` says otherwise.
-"low" since round 13 (``medium`` before): on the speed-vs-error frontier it is both the cheapest
-preset and the closest to the path-traced reference in both test scenes (README, "Against path
-tracing + denoising"), so it is what a user should get first; its name says what it costs, not
-how good it looks. The presets that keep the paper's LPV are a ``--quality`` away."""
-BENCH_QUALITY = "medium"
-"""The preset ``serenity bench`` times unless told: the paper's Table 1 has every technique on
-(SSAO, the LPV), which ``low`` leaves out."""
+DEFAULT_QUALITY = "traced-probes"
+"""The preset ``Renderer`` renders without a config, and ``serenity render``, ``view``, ``sweep``
+and ``bench`` use unless ``--quality`` says otherwise. On the speed-vs-error frontier it is both the
+cheapest preset and the closest to the path-traced reference in both test scenes (FLIP 0.043–0.056
+against 0.108–0.117 for the LPV presets at 320×180 and 640×360, at the same or a lower frame time;
+``benchmarks/bench_frontier.py``). The presets that keep the paper's LPV are a ``--quality`` away."""
+
+PRESET_ALIASES = {"low": "traced-probes", "medium": "lpv-fast", "high": "lpv"}
+"""Former preset names, still accepted everywhere a preset name is, with a ``PresetRenamedWarning``."""
+
+
+class PresetRenamedWarning(FutureWarning):
+    """A former quality preset name was used (``PRESET_ALIASES``); the message names the new one.
+    A ``FutureWarning``, so that Python shows it by default; the ``serenity`` command prints it as
+    one line."""
+
+
+def preset_name(name: str, where: str | None = None) -> str:
+    """The preset ``name`` stands for: itself, or for a former name (``PRESET_ALIASES``) its current
+    one, with a one-line ``PresetRenamedWarning`` (prefixed with ``where``, e.g. a file, when given). An
+    unknown name is a ``ConfigError`` that lists the presets."""
+    if name in PRESET_ALIASES:
+        new = PRESET_ALIASES[name]
+        prefix = f"{where}: " if where else ""
+        warnings.warn(f"{prefix}quality preset {name!r} is now called {new!r}", PresetRenamedWarning,
+                      stacklevel=3)
+        return new
+    if name not in PRESETS:
+        prefix = f"{where}: " if where else ""
+        raise ConfigError(f"{prefix}quality preset must be one of {', '.join(QUALITY_PRESETS)}, got {name!r}")
+    return name

@@ -192,14 +192,18 @@ def lighting_inputs(scene, config: RenderConfig, view_proj: np.ndarray) -> Light
 
 class Renderer:
     """Renders a ``Scene`` at a fixed size. Static data (geometry, textures, the kd-tree) is
-    built and uploaded once; each ``render()`` redoes only what the frame's changes need."""
+    built and uploaded once; each ``render()`` redoes only what the frame's changes need.
+
+    ``config`` None renders the default quality preset (``RenderConfig.preset()``:
+    ``DEFAULT_QUALITY``), the one every ``serenity`` command uses. ``close()`` stops the worker
+    thread and the tracer process; a ``with Renderer(...) as r:`` block closes it on the way out."""
 
     def __init__(self, scene, width: int, height: int, device: str | None = None,
                  config: RenderConfig | None = None):
         check_image_size(width, height)
         self.scene = scene
         self.width, self.height = int(width), int(height)
-        self.config = config or RenderConfig()
+        self.config = config if config is not None else RenderConfig.preset()
         self.device = resolve_device(device)
         self.ctx = get_context()
         self._timings: dict[str, float] = {}
@@ -849,9 +853,15 @@ class Renderer:
         full = np.repeat(np.repeat(img, s, axis=0), s, axis=1)
         return np.ascontiguousarray(full[full.shape[0] - self.height:, :self.width])
 
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def close(self) -> None:
-        """Stop the ray-tracing worker thread or process (the GL objects go with the process's
-        context)."""
+        """Stop the ray-tracing worker thread or process and the volume worker (the GL objects go
+        with the process's context). Closing twice is harmless."""
         for name in ("_pool", "_volume_pool"):
             pool = getattr(self, name, None)
             if pool is not None:

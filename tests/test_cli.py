@@ -60,6 +60,54 @@ def test_render_warns_of_nonfinite_pixels(tmp_path, capsys, monkeypatch):
     assert "warning: 1 of 384 pixels are NaN or infinite" in err
 
 
+def test_every_command_renders_the_renderers_default_preset(tmp_path, capsys, monkeypatch):
+    """``serenity render`` with no --quality renders exactly the config ``Renderer(scene, w, h)``
+    gets without one, and closes its Renderer; bench, view and sweep default to the same preset."""
+    from serenity.cli import build_parser
+    from serenity.config import DEFAULT_QUALITY
+    from serenity.frame import Renderer
+    from serenity.scene import load
+    from serenity.sweep import spec_from_dict
+
+    seen, closed = [], []
+    real_init, real_close = Renderer.__init__, Renderer.close
+
+    def init(self, *a, **k):
+        real_init(self, *a, **k)
+        seen.append(self.config)
+
+    def close(self):
+        closed.append(self)
+        real_close(self)
+
+    monkeypatch.setattr(Renderer, "__init__", init)
+    monkeypatch.setattr(Renderer, "close", close)
+    code, out, err = _run(["render", "plane", "--size", "16x16", "--frames", "1", "-o", str(tmp_path / "p.png")],
+                          capsys)
+    assert code == 0, err
+    assert f"quality {DEFAULT_QUALITY};" in out
+    assert len(seen) == 1 and len(closed) == 1
+    with Renderer(load("plane"), 16, 16) as r:
+        assert r.config == seen[0]
+    parser = build_parser()
+    for command in ("render", "bench", "view"):
+        assert parser.parse_args([command]).quality == DEFAULT_QUALITY, command
+    assert spec_from_dict({"sweep": {"scenes": ["plane"], "sizes": ["8x8"]}}).qualities == (DEFAULT_QUALITY,)
+
+
+def test_a_former_quality_name_works_and_says_its_new_name_in_one_line(capsys):
+    from serenity.cli import build_parser, main
+
+    with pytest.warns(FutureWarning, match="quality preset 'high' is now called 'lpv'"):
+        assert build_parser().parse_args(["bench", "--quality", "high"]).quality == "lpv"
+    # through main: one line on stderr, then the command goes on (here to a one-line error of its own)
+    code = main(["render", "no_such_scene", "--quality", "medium", "--size", "8x8"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 2, err
+    assert err[0] == "serenity: warning: quality preset 'medium' is now called 'lpv-fast'"
+    assert err[1].startswith("serenity: error:") and "no_such_scene" in err[1]
+
+
 def _one_line_error(code, err, *words):
     assert code == 2
     lines = [ln for ln in err.strip().splitlines() if ln.strip()]

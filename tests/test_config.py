@@ -68,8 +68,8 @@ def test_shadow_maps_sized_to_the_image():
     assert cfg.size_for(640, 360) == 1024         # 1536, capped at size
     assert cfg.size_for(160, 90) == 512           # at least 512 (384 left the 160×90 courtyard 11 % worse)
     assert ShadowConfig(size=1024).size_for(320, 180) == 1024
-    assert RenderConfig.preset("medium").shadow.size_for(320, 180) == 512   # 1.6 x 320
-    assert RenderConfig.preset("medium").shadow.size_for(640, 360) == 1024
+    assert RenderConfig.preset("lpv-fast").shadow.size_for(320, 180) == 512   # 1.6 x 320
+    assert RenderConfig.preset("lpv-fast").shadow.size_for(640, 360) == 1024
     assert RenderConfig.preset("paper").shadow.size_for(1280, 720) == 2048
 
 
@@ -81,7 +81,7 @@ def test_presets_change_what_they_name_and_nothing_else():
     from serenity.config import PRESETS, QUALITY_PRESETS, SUB_CONFIGS, RenderConfig
 
     base = RenderConfig()
-    assert set(QUALITY_PRESETS) == {"low", "medium", "high", "paper"}
+    assert set(QUALITY_PRESETS) == {"traced-probes", "lpv-fast", "lpv", "paper"}
     for name in QUALITY_PRESETS:
         cfg, named = RenderConfig.preset(name), PRESETS[name]
         for f in dataclasses.fields(RenderConfig):
@@ -94,12 +94,46 @@ def test_presets_change_what_they_name_and_nothing_else():
                 assert ours == named.get(f.name, default), (name, f.name)
     assert RenderConfig.preset("paper").lpv.resolution == 32 and RenderConfig.preset("paper").indirect_scale == 1
     assert RenderConfig.preset("paper").sky.method == "layers"
-    assert RenderConfig.preset("low", exposure=0.5).exposure == 0.5
+    assert RenderConfig.preset("traced-probes", exposure=0.5).exposure == 0.5
 
 
 def test_unknown_preset_names_the_choices():
     from serenity.config import RenderConfig
     from serenity.errors import SerenityError
 
-    with pytest.raises(SerenityError, match="quality preset must be one of low, medium, high, paper|paper, high"):
+    with pytest.raises(SerenityError, match="quality preset must be one of paper, lpv, lpv-fast, traced-probes, "
+                                            "got 'ultra'"):
         RenderConfig.preset("ultra")
+
+
+def test_the_default_preset_and_what_a_bare_config_holds():
+    """``RenderConfig.preset()`` is DEFAULT_QUALITY, traced-probes; a bare RenderConfig() is the
+    "lpv" preset (its docstring says so), the base every preset's overrides apply to."""
+    from serenity.config import DEFAULT_QUALITY, PRESETS
+
+    assert DEFAULT_QUALITY == "traced-probes"
+    assert RenderConfig.preset() == RenderConfig.preset(DEFAULT_QUALITY)
+    assert RenderConfig.preset(exposure=0.5) == RenderConfig.preset(DEFAULT_QUALITY, exposure=0.5)
+    assert RenderConfig() == RenderConfig.preset("lpv") and PRESETS["lpv"] == {}
+    assert "lpv" in RenderConfig.__doc__ and DEFAULT_QUALITY in RenderConfig.__doc__
+    default = RenderConfig.preset()
+    assert not default.lpv.enabled and not default.ssao.enabled and default.sky.method == "gather"
+
+
+@pytest.mark.parametrize("old, new", [("low", "traced-probes"), ("medium", "lpv-fast"), ("high", "lpv")])
+def test_former_preset_names_still_work_with_a_one_line_warning(old, new):
+    import warnings
+
+    from serenity.config import PRESET_ALIASES, PresetRenamedWarning, preset_name
+
+    assert PRESET_ALIASES[old] == new
+    assert issubclass(PresetRenamedWarning, FutureWarning)  # shown by default, not only under -W
+    with pytest.warns(PresetRenamedWarning) as caught:
+        cfg = RenderConfig.preset(old, exposure=0.5)
+    assert [str(w.message) for w in caught] == [f"quality preset {old!r} is now called {new!r}"]
+    assert cfg == RenderConfig.preset(new, exposure=0.5)
+    with pytest.warns(PresetRenamedWarning, match=f"^sweep.toml: quality preset '{old}'"):
+        assert preset_name(old, "sweep.toml") == new
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the current names warn of nothing
+        assert preset_name(new) == new and RenderConfig.preset(new, exposure=0.5) == cfg

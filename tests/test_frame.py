@@ -64,7 +64,7 @@ def test_unchanged_scene_renders_identically_and_skips_work(courtyard):
 
 
 def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
-    """``medium``'s sky layer cycle and LPV stagger: after frames with the camera and sun moving, a
+    """``lpv-fast``'s sky layer cycle and LPV stagger: after frames with the camera and sun moving, a
     still scene keeps updating (one sky layer, one LPV cascade per frame; the LPV again after the sky
     volume's last layer, since its sky-light VPLs read that volume) only until every layer and
     cascade holds the newest inputs, then skips the volume work; its image is then the one a renderer
@@ -72,11 +72,11 @@ def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
     summation order)."""
     import dataclasses
 
-    medium = RenderConfig.preset("medium", overlap=False)
-    every = dataclasses.replace(medium, sky=dataclasses.replace(medium.sky, transfer_layers=0),
-                                lpv=dataclasses.replace(medium.lpv, stagger=False))
+    fast = RenderConfig.preset("lpv-fast", overlap=False)
+    every = dataclasses.replace(fast, sky=dataclasses.replace(fast.sky, transfer_layers=0),
+                                lpv=dataclasses.replace(fast.lpv, stagger=False))
     scenes = [copy.deepcopy(courtyard), copy.deepcopy(courtyard)]
-    rs = [Renderer(s, *SIZE, config=c) for s, c in zip(scenes, (medium, every), strict=True)]
+    rs = [Renderer(s, *SIZE, config=c) for s, c in zip(scenes, (fast, every), strict=True)]
     try:
         for i in range(4):  # moving
             for s in scenes:
@@ -85,8 +85,8 @@ def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
             for r in rs:
                 r.render(read_back=False)
         amortised = rs[0]
-        # medium's cascades are sized to the image (ShadowConfig.texels_per_pixel)
-        assert amortised.shadow_pass.size == medium.shadow.size_for(*SIZE) < medium.shadow.size
+        # lpv-fast's cascades are sized to the image (ShadowConfig.texels_per_pixel)
+        assert amortised.shadow_pass.size == fast.shadow.size_for(*SIZE) < fast.shadow.size
         assert amortised.lpv.pending_levels > 0 and amortised.sky_volume.pending_layers > 0
         layers, cascades = amortised.sky_volume.resolution[1], len(amortised.lpv.fitted)
         catch_up = 0
@@ -193,19 +193,35 @@ def test_tracer_process_in_a_session_of_its_own():
 
 
 @pytest.mark.skipif(not hasattr(os, "getsid"), reason="POSIX sessions")
-@pytest.mark.parametrize("quality", ["medium", "low"])
+@pytest.mark.parametrize("quality", ["lpv-fast", "traced-probes"])
 def test_tracer_session_by_default_where_a_volume_worker_waits(quality):
     """``tracer_session=None`` (the default) starts the tracer process in a session of its own where
-    the frame has a volume worker (``medium``), and in the renderer's where it has none (``low``:
+    the frame has a volume worker (``lpv-fast``), and in the renderer's where it has none (``traced-probes``:
     the gathered sky volume's work on the main thread would lose cores to it)."""
     r = Renderer(load("glass"), *SIZE, config=RenderConfig.preset(quality))
     try:
         r.render()
         pid = r._tracer_proc._proc.pid
-        assert (r._volume_pool is not None) == (quality == "medium")
-        assert (os.getsid(pid) == pid) == (quality == "medium")
+        assert (r._volume_pool is not None) == (quality == "lpv-fast")
+        assert (os.getsid(pid) == pid) == (quality == "lpv-fast")
     finally:
         r.close()
+
+
+def test_a_with_block_closes_the_renderer_even_when_it_raises():
+    """``with Renderer(...) as r:`` stops the tracer process and the worker threads on the way out,
+    also when the block raises (and lets the exception through)."""
+    with pytest.raises(RuntimeError, match="in the block"):
+        with Renderer(load("glass"), *SIZE, config=RenderConfig.preset("lpv-fast")) as r:
+            r.render(read_back=False)
+            proc, pool = r._tracer_proc, r._volume_pool
+            assert proc is not None and proc._proc.poll() is None and pool is not None
+            raise RuntimeError("in the block")
+    assert r._tracer_proc is None
+    assert proc._proc.poll() is not None  # the tracer process has exited
+    with pytest.raises(RuntimeError, match="shutdown"):  # the volume worker is stopped
+        pool.submit(int)
+    r.close()  # closing again is harmless
 
 
 def test_scheduling_group_is_none_where_the_kernel_names_none(monkeypatch, tmp_path):
@@ -233,7 +249,7 @@ def test_volume_worker_runs_at_the_configured_niceness(courtyard):
     own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
     images = []
     for nice in (0, 6):
-        r = Renderer(courtyard, *SIZE, config=RenderConfig.preset("medium", volume_nice=nice))
+        r = Renderer(courtyard, *SIZE, config=RenderConfig.preset("lpv-fast", volume_nice=nice))
         try:
             assert r._volume_pool is not None
             worker = r._volume_pool.submit(lambda: os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
@@ -252,7 +268,7 @@ def test_sync_modes_give_the_same_frames(courtyard):
     for mode in ("each", "cpu", "none"):
         scene = copy.deepcopy(courtyard)
         base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-        r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium", sync_stages=mode))
+        r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast", sync_stages=mode))
         try:
             frames = []
             for i in range(3):
@@ -284,7 +300,7 @@ def test_volume_worker_gives_the_serial_frames(courtyard):
     for worker in (True, False):
         scene = copy.deepcopy(courtyard)
         base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-        r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium", overlap_volumes=worker))
+        r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast", overlap_volumes=worker))
         try:
             assert (r._volume_pool is not None) == worker
             frames, lanes, stages = [], set(), []
@@ -325,7 +341,7 @@ def test_tracer_start_moves_sync_1_only(courtyard):
     for where in ("g-buffer", "idle"):
         scene = copy.deepcopy(courtyard)
         base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-        r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium", tracer_start=where))
+        r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast", tracer_start=where))
         try:
             assert r._volume_pool is not None
             frames = []
@@ -365,7 +381,7 @@ def test_tracer_start_auto_follows_the_tracers_scheduling_group(courtyard, monke
     assert RenderConfig().tracer_start == "auto" and RenderConfig().tracer_session is None
     scene = copy.deepcopy(courtyard)
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-    r = Renderer(scene, *SIZE, config=RenderConfig.preset("medium"))
+    r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast"))
     try:
         frames = []
         for i in range(3):

@@ -24,7 +24,7 @@ W, H = 96, 54
 def courtyard(gl_ctx):
     """The courtyard (glass, a mirror, water) at full-resolution indirect light, so that a term's
     pixels are exactly the pixels that show it (no upsampling spreads it to neighbours)."""
-    r = Renderer(load("courtyard"), W, H, config=RenderConfig.preset("medium", indirect_scale=1))
+    r = Renderer(load("courtyard"), W, H, config=RenderConfig.preset("lpv-fast", indirect_scale=1))
     base = r.config
     r.render()  # builds the volumes; from here on nothing changes between frames
 
@@ -96,7 +96,7 @@ def test_lpv_self_damping_is_compiled_in_when_on(courtyard):
     LPV_DAMPING; fixed when the renderer is built, like the LPV's other lookup settings; on by
     default since round 13): the damped default renderer's LPV light is at most the undamped
     one's (never brighter), and the two differ."""
-    base = RenderConfig.preset("medium", indirect_scale=1)
+    base = RenderConfig.preset("lpv-fast", indirect_scale=1)
     assert base.lpv.self_damping > 0
     r = Renderer(load("courtyard"), W, H, config=dataclasses.replace(
         base, lpv=dataclasses.replace(base.lpv, self_damping=0.0)))

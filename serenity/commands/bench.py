@@ -13,7 +13,6 @@ from serenity.commands.common import (
     add_quality_argument,
     parse_size,
 )
-from serenity.config import BENCH_QUALITY
 from serenity.errors import SerenityError
 
 
@@ -24,7 +23,7 @@ def register(subparsers) -> None:
     b.add_argument("--frames", type=int, default=30, help="frames per schedule (default %(default)s)")
     b.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}", help="WxH (default %(default)s)")
     b.add_argument("--device", help=DEVICE_HELP)
-    add_quality_argument(b, BENCH_QUALITY)
+    add_quality_argument(b)
     b.add_argument("--json", default=os.path.join(DEFAULT_OUT_DIR, "bench.json"), help="JSON output path")
     b.add_argument("--chart", default=os.path.join(DEFAULT_OUT_DIR, "timeline.png"), help="timeline PNG path")
     b.set_defaults(func=run)

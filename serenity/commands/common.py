@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import sys
 
-from serenity.config import DEFAULT_QUALITY, QUALITY_PRESETS, check_image_size
+from serenity.config import DEFAULT_QUALITY, PRESET_ALIASES, QUALITY_PRESETS, check_image_size, preset_name
 from serenity.errors import SerenityError
 
 DEFAULT_SCENE = "courtyard"
@@ -69,7 +69,14 @@ def report_error(error: BaseException) -> int:
     return 2
 
 
+def quality_argument(text: str) -> str:
+    """``--quality``'s type: a former preset name becomes its current one (``preset_name``, with its
+    one-line warning); any other text is left for ``choices`` to accept or refuse."""
+    return preset_name(text) if text in PRESET_ALIASES else text
+
+
 def add_quality_argument(parser, default: str = DEFAULT_QUALITY) -> None:
-    """``--quality`` (a ``RenderConfig.preset`` name)."""
-    parser.add_argument("--quality", choices=QUALITY_PRESETS, default=default,
-                        help="quality preset (default %(default)s; 'paper' = the paper's settings)")
+    """``--quality`` (a ``RenderConfig.preset`` name; the former names low, medium and high still work)."""
+    parser.add_argument("--quality", type=quality_argument, choices=QUALITY_PRESETS, default=default,
+                        help="quality preset (default %(default)s: probes lit by traced rays; 'lpv' and "
+                             "'lpv-fast': the paper's light propagation volumes; 'paper': the paper's settings)")

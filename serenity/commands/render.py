@@ -72,10 +72,10 @@ def run(args) -> int:
     png = args.output or os.path.join(DEFAULT_OUT_DIR, f"{scene_stem(args.scene)}.png")
     exr = args.exr or os.path.splitext(png)[0] + ".exr"
     config = RenderConfig.preset(args.quality, exposure=args.exposure, ambient=args.ambient, overlap=not args.serial)
-    renderer = Renderer(scene, width, height, device=args.device, config=config)
     frame = None
-    for _ in range(max(1, args.frames)):
-        frame = renderer.render()
+    with Renderer(scene, width, height, device=args.device, config=config) as renderer:
+        for _ in range(max(1, args.frames)):
+            frame = renderer.render()
     for path in (png, exr):
         make_parent_dir(path)
     write_png(png, frame.ldr)

@@ -6,7 +6,7 @@ A sweep file is TOML::
     name = "courtyard-day"                 # optional (default: the file's stem)
     scenes = ["courtyard", "my/scene.toml"]  # built-in names or files (relative to this file)
     sizes = ["160x90", "320x180"]          # WxH, pixels
-    quality = ["medium", "baseline"]       # presets low | medium | high | paper, or "baseline"
+    quality = ["lpv-fast", "baseline"]     # presets traced-probes | lpv-fast | lpv | paper, or "baseline"
     produce = ["frame", "reference", "compare"]   # any of these; "compare" implies the other two
 
     [time]                                 # optional: without it every scene keeps its own sun
@@ -44,7 +44,16 @@ import os
 from dataclasses import asdict, dataclass, field
 from datetime import datetime, timedelta
 
-from serenity.config import DEFAULT_QUALITY, QUALITY_PRESETS, LPVConfig, RenderConfig, SkyConfig, check_image_size
+from serenity.config import (
+    DEFAULT_QUALITY,
+    PRESET_ALIASES,
+    QUALITY_PRESETS,
+    LPVConfig,
+    RenderConfig,
+    SkyConfig,
+    check_image_size,
+    preset_name,
+)
 from serenity.errors import SerenityError
 from serenity.eval.reference import COMPONENTS
 from serenity.scene.procedural import scene_names
@@ -232,7 +241,8 @@ def spec_from_dict(data: dict, path: str = "<sweep>") -> SweepSpec:
             raise _err(f"{path} [sweep]", f"needs {k} = [...]")
     scenes = tuple(_resolve_scene(s, base) for s in _str_list(sw["scenes"], f"{path} [sweep].scenes"))
     sizes = tuple(_parse_size(s, f"{path} [sweep].sizes") for s in _str_list(sw["sizes"], f"{path} [sweep].sizes"))
-    qualities = tuple(_str_list(sw.get("quality", [DEFAULT_QUALITY]), f"{path} [sweep].quality"))
+    qualities = tuple(_quality_name(q, f"{path} [sweep].quality")
+                      for q in _str_list(sw.get("quality", [DEFAULT_QUALITY]), f"{path} [sweep].quality"))
     for q in qualities:
         _parse(quality_config, q, f"{path} [sweep].quality")
     produce = _str_list(sw.get("produce", ["frame"]), f"{path} [sweep].produce")
@@ -299,14 +309,20 @@ BASELINE = "baseline"
 QUALITIES = (*QUALITY_PRESETS, BASELINE)
 
 
+def _quality_name(name: str, where: str) -> str:
+    """A sweep file's quality as its current name: a former preset name becomes the preset's name
+    now (with a one-line warning naming the file), so that task keys and output names use it."""
+    return preset_name(name, where) if name in PRESET_ALIASES else name
+
+
 def quality_config(name: str) -> RenderConfig:
-    """The ``RenderConfig`` of a sweep's quality: a preset (``RenderConfig.preset``: low | medium |
-    high | paper), or "baseline": the default preset with a constant ambient term instead of the sky
-    volume and the LPV."""
+    """The ``RenderConfig`` of a sweep's quality: a preset (``RenderConfig.preset``: traced-probes |
+    lpv-fast | lpv | paper), or "baseline": the default preset with a constant ambient term instead
+    of the sky volume and the LPV."""
     if name == BASELINE:
         return RenderConfig.preset(DEFAULT_QUALITY, ambient="constant", sky=SkyConfig(enabled=False),
                                    lpv=LPVConfig(enabled=False))
-    if name not in QUALITY_PRESETS:
+    if name not in QUALITY_PRESETS and name not in PRESET_ALIASES:
         raise SerenityError(f"unknown quality {name!r} (known: {', '.join(QUALITIES)})")
     return RenderConfig.preset(name)
 

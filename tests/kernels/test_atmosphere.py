@@ -51,7 +51,7 @@ def test_sky_radiance_matches_map_texels(device):
     assert np.allclose(A.sky_radiance(d, sun, device=device), sky.reshape(-1, 3), rtol=1e-5, atol=1e-9)
 
 
-# the sky-view table against marching every texel (96², the medium preset's map): relative error of
+# the sky-view table against marching every texel (96²): relative error of
 # the luminance over the disc — mean, 99th percentile, worst — and of the horizontal irradiance
 TABLE_BOUNDS = {1.0: (0.003, 0.03, 0.05), 5.0: (0.002, 0.01, 0.02), 30.0: (0.002, 0.01, 0.02),
                 90.0: (0.002, 0.01, 0.02)}

@@ -99,7 +99,7 @@ def test_layout_centres_the_image_on_the_tiles(width, height, scale):
     assert crop[-1, 0] == img[img.shape[0] - 1 - lay.origin[1], lay.origin[0]]
 
 
-@pytest.mark.parametrize("preset", ["medium", "high"])
+@pytest.mark.parametrize("preset", ["lpv-fast", "lpv"])
 def test_padded_layout_changes_no_pixel(gl_ctx, preset):
     """The SSAO, the guide and the indirect light drawn into padded targets (the default) give the
     frame of unpadded ones, bit for bit: each pass reads and writes the image's texels only."""

@@ -23,7 +23,7 @@ BASE = """
 [sweep]
 scenes = ["plane", "my.toml"]
 sizes = ["32x18", "64x36"]
-quality = ["medium", "baseline"]
+quality = ["lpv-fast", "baseline"]
 produce = ["compare"]
 [time]
 start = "2024-06-21 06:00 +01:00"
@@ -88,7 +88,7 @@ def test_no_time_table_keeps_the_scene_sun(tmp_path):
     ('[sweep]\nscenes = ["plane"]\nsizes = ["9000x8"]\n', "[sweep].sizes: size must be within 1..8192 pixels"),
     ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\nproduce = ["movie"]\n', "[sweep].produce: unknown product 'movie'"),
     ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\nquality = ["ultra"]\n',
-     "[sweep].quality: unknown quality 'ultra' (known: paper, high, medium, low, baseline)"),
+     "[sweep].quality: unknown quality 'ultra' (known: paper, lpv, lpv-fast, traced-probes, baseline)"),
     ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\ncolour = 1\n', "[sweep]: unknown key 'colour'"),
     ('[sweep]\nscenes = []\nsizes = ["8x8"]\n', "[sweep].scenes: must not be empty"),
     ('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\n[time]\nstart = "2024-06-21 06:00"\n', "[time]: needs start, end"),
@@ -163,9 +163,9 @@ def test_a_changed_preset_means_new_frame_keys_but_the_same_references(tmp_path,
     before = {t.key: t.kind for t in expand(spec)}
     real = spec_module.quality_config
     monkeypatch.setattr(spec_module, "quality_config",
-                        lambda q: replace(real(q), exposure=0.5) if q == "medium" else real(q))
+                        lambda q: replace(real(q), exposure=0.5) if q == "lpv-fast" else real(q))
     after = {t.key: t.kind for t in expand(spec)}
     gone = set(before) - set(after)
     assert {before[k] for k in gone} == {"frame", "compare"}
-    assert all("-medium-" in k for k in gone)
+    assert all("-lpv-fast-" in k for k in gone)
     assert {k for k, kind in before.items() if kind == "reference"} <= set(after)

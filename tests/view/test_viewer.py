@@ -77,14 +77,14 @@ def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
     from serenity.config import DEFAULT_QUALITY
     from serenity.view.controls import Settings, quality_config
 
-    q = "medium"  # a preset with every technique (the default, low, has no SSAO and no LPV)
+    q = "lpv-fast"  # a preset with every technique (the default, traced-probes, has no SSAO and no LPV)
     s = Settings(quality=q)
     base = s.config()
     for name, value in (("exposure", 0.05), ("ssao", False), ("shadow_filter", "pcf"), ("lpv_diffuse", False),
                         ("lpv_glossy", False), ("reflections", False), ("refractions", False), ("taa", False)):
         t = Settings(quality=q, **{name: value})
         assert not Settings.needs_rebuild(base, t.config()), name
-    for name, value in (("sky_lighting", False), ("quality", "low")):
+    for name, value in (("sky_lighting", False), ("quality", "traced-probes")):
         assert Settings.needs_rebuild(base, Settings(**{"quality": q, name: value}).config()), name
     # one term of a pair switches live; both off turns the technique off, which needs a rebuild
     lpv = Settings(quality=q, lpv_glossy=False).config().lpv
@@ -222,10 +222,10 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
               f'[[step]]\nframe = {done + 1}\nkey = "W"\n[[step]]\nframe = {done + 2}\nexit = true\n')
     (tmp_path / "s.toml").write_text(SCRIPT.replace("{still}", str(still)).replace("{views}", views))
     env = {**os.environ, "PYTHONPATH": ROOT}
-    # medium: the live switches under test (SSAO, the LPV) are not in the default preset, low
+    # lpv-fast: the live switches under test (SSAO, the LPV) are not in the default preset, traced-probes
     cmd = _xvfb_prefix() + [sys.executable, "-m", "serenity", "view", "courtyard", "--size", f"{SIZE[0]}x{SIZE[1]}",
-                            "--quality", "medium", "--script", "s.toml", "--trace", "trace.json", "--out-dir", "saved",
-                            "--taa", str(TAA)]
+                            "--quality", "lpv-fast", "--script", "s.toml", "--trace", "trace.json",
+                            "--out-dir", "saved", "--taa", str(TAA)]
     p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900, cwd=tmp_path)
     if p.returncode != 0 and "cannot open a window" in p.stderr:
         pytest.skip(f"no X server could be had: {p.stderr.strip().splitlines()[-1]}")
@@ -260,7 +260,7 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     saved = tmp_path / "saved" / "courtyard_000"
     f12 = np.asarray(Image.open(str(saved) + ".png").convert("RGB")).astype(np.int16)
     out = tmp_path / "render.png"
-    assert main(["render", str(saved) + ".toml", "--size", f"{SIZE[0]}x{SIZE[1]}", "--quality", "medium",
+    assert main(["render", str(saved) + ".toml", "--size", f"{SIZE[0]}x{SIZE[1]}", "--quality", "lpv-fast",
                  "-o", str(out)]) == 0
     ref = np.asarray(Image.open(out).convert("RGB")).astype(np.int16)
     assert shot.shape == ref.shape == (SIZE[1], SIZE[0], 3)
@@ -305,7 +305,7 @@ def test_scripted_viewer_moves_camera_and_sun_and_matches_render(tmp_path):
     # F12 saves the mean (tone-mapped on the host; the window tone-maps in GL: one 8-bit step apart at most)
     saved_png = np.asarray(Image.open(saved + ".png").convert("RGB")).astype(np.int16)
     assert np.abs(saved_png - taa_shot).max() <= 1 and np.mean(saved_png != taa_shot) < 1e-3, "F12 saves the mean"
-    r = Renderer(load(saved + ".toml"), *SIZE, config=RenderConfig.preset("medium"))
+    r = Renderer(load(saved + ".toml"), *SIZE, config=RenderConfig.preset("lpv-fast"))
     try:
         acc, one = r.render_accumulated(TAA).ldr.astype(np.int16), r.render().ldr.astype(np.int16)
     finally:

@@ -149,7 +149,7 @@ ground and damp everything: the courtyard's undersides went 0.54 → 0.17 of the
 0.47 with it). Measured (``bench_lpv_room.py``): the lit plane 0.33–0.42 → 0.02–0.05 at d = 2.5, but it
 also takes light the LPV gets right in the courtyard (README, "The LPV in a closed room").
 
-Stagger (``LPVConfig.stagger``, on in the ``medium`` and ``low`` presets): an update re-injects and
+Stagger (``LPVConfig.stagger``, on in the ``lpv-fast`` preset): an update re-injects and
 propagates one cascade, the next in turn, instead of all; the others keep the grids (boxes) and the
 light of their last update, and lookups read each at its own box, so nothing is inconsistent, only
 up to ``cascades`` updates old. Each level keeps its own accumulated light; what lookups read is
