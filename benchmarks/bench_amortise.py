@@ -1,10 +1,10 @@
 """What spreading the volumes' updates over frames costs in accuracy and buys in time.
 
-Two amortisations of the ``medium`` and ``low`` presets, each measured alone and together:
+Two amortisations of the ``lpv-fast`` and ``traced-probes`` presets, each measured alone and together:
 
 - the sky volume's transfer re-lights ``SkyConfig.transfer_layers`` y-layers per frame after a
   rebake of the sky map, in a continuous cycle, and only those layers are uploaded (0: every probe
-  each time, the ``high`` preset);
+  each time, the ``lpv`` preset);
 - the LPV re-injects and propagates one cascade per update, in turn (``LPVConfig.stagger``).
 
 This runs the frame benchmark's path (camera orbiting, the sun moving ~0.9° per frame, so the sky
@@ -51,7 +51,7 @@ VARIANTS = {
     "every frame": (0, False),
     "sky: 1 layer per frame": (1, False),
     "LPV: 1 cascade per frame": (0, True),
-    "both (medium, low)": (1, True),
+    "both (lpv-fast, traced-probes)": (1, True),
 }
 
 
@@ -170,7 +170,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="courtyard")
     ap.add_argument("--sizes", default="320x180,640x360")
-    ap.add_argument("--quality", default="medium")
+    ap.add_argument("--quality", default="lpv-fast")
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--reference-frames", default="6,12,18",
                     help="frames compared with a path-traced reference at the first size ('' = none)")

@@ -15,7 +15,7 @@ sky, up-/down-facing, vertical surfaces, edges and each material; printed for th
 Metrics: relMSE (ε = 1e-2) on
 linear HDR (also with the worst 0.1% of pixels left out: "rel_mse_trimmed", charted) and FLIP on the
 tone-mapped images (our exposure, Reinhard, sRGB), over all pixels.
-The last row is the ``low`` quality preset whole (beyond the paper: its sky volume's probes are lit
+The last row is the ``traced-probes`` quality preset whole (beyond the paper: its sky volume's probes are lit
 by rays traced through the scene, sky and bounces, instead of quads + LPV). Our frames use the
 default ``RenderConfig`` otherwise (ray-traced reflections/refractions where the
 renderer has them); ms = the median total of frames 2..N. References are cached, so a re-run
@@ -56,9 +56,9 @@ CONFIGS = {
                                   "lpv": LPVConfig(enabled=False)},
     "direct + sky volume": {"lpv": LPVConfig(enabled=False)},
     "direct + sky volume + LPV (all)": {},
-    # beyond the paper: the low preset, whose sky volume is lit by rays traced per probe (sky and every
+    # beyond the paper: the traced-probes preset, whose sky volume is lit by rays traced per probe (sky and every
     # bounce, ``SkyConfig.method = "gather"``) instead of occlusion quads + the LPV
-    "gathered probes (low preset)": {"preset": "low"},
+    "gathered probes (traced-probes preset)": {"preset": "traced-probes"},
 }
 
 

@@ -1,7 +1,7 @@
 """Warp on CUDA against Warp on the CPU, on one machine with an NVIDIA GPU (OpenGL runs on that GPU
 in both cases; only the Warp kernels change device).
 
-1. Agreement: the courtyard and the Cornell box at 320×180 (``medium``), the same two frames
+1. Agreement: the courtyard and the Cornell box at 320×180 (``lpv-fast``), the same two frames
    rendered with Warp on the CPU and on ``cuda:0``; FLIP and relMSE of the CUDA image against the
    CPU one (the CPU path is the tested one), and the share of pixels more than 1 % apart.
 2. The frame benchmark of ``serenity bench`` (camera path, moving sun, overlapped and serial
@@ -45,7 +45,7 @@ def render_pair(scene_name: str, width: int, height: int, frames: int = 2, devic
     scene = load(scene_name)
     images, ms = {}, {}
     for device in devices:
-        r = Renderer(copy.deepcopy(scene), width, height, device=device, config=RenderConfig.preset("medium"))
+        r = Renderer(copy.deepcopy(scene), width, height, device=device, config=RenderConfig.preset("lpv-fast"))
         for _ in range(frames):
             f = r.render(read_back={"hdr"})
         images[device], ms[device] = f.hdr[..., :3].astype(np.float64), f.wall_ms

@@ -1,7 +1,7 @@
 """A/B of whole frames between git revisions: ``serenity bench`` of each revision, alternating.
 
     python benchmarks/bench_frame_ab.py REV_A REV_B [...] [--patch COMMIT ...] [--sizes 320x180,640x360]
-                                        [--pairs 3] [--quality medium] [--json FILE]
+                                        [--pairs 3] [--quality lpv-fast] [--json FILE]
 
 Each revision is checked out in a temporary git worktree (``--patch`` commits are applied on top of
 every revision that does not already contain them, e.g. a change of the bench itself, so that all
@@ -72,7 +72,7 @@ def main(argv=None) -> int:
     ap.add_argument("--patch", action="append", default=[], help="commit applied on top of every revision lacking it")
     ap.add_argument("--sizes", default="320x180,640x360")
     ap.add_argument("--pairs", type=int, default=3)
-    ap.add_argument("--quality", default="medium")
+    ap.add_argument("--quality", default="lpv-fast")
     ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "frame_ab.json"))
     args = ap.parse_args(argv)
     tmp = Path(tempfile.mkdtemp(prefix="serenity-ab-"))

@@ -1,6 +1,6 @@
 """The Table-1 frame benchmark run several times in a row, to show how far one run's figure moves.
 
-    python benchmarks/bench_frame_repeat.py [--runs 5] [--size 320x180] [--quality medium] [--json FILE]
+    python benchmarks/bench_frame_repeat.py [--runs 5] [--size 320x180] [--quality lpv-fast] [--json FILE]
 
 Each run is a fresh ``serenity bench courtyard --frames 24`` process (the overlapped and the serial
 schedule in turns, frame by frame); this collects each run's median overlapped and serial frame,
@@ -31,7 +31,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--size", default="320x180")
-    ap.add_argument("--quality", default="medium")
+    ap.add_argument("--quality", default="lpv-fast")
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--json", default=None, help="default: benchmarks/results/frame_repeat_<size>.json")
     args = ap.parse_args()

@@ -3,7 +3,7 @@ the volume worker, Warp's launch threads and the tracer process.
 
     python benchmarks/bench_frame_threads.py [--sizes 320x180,640x360] [--frames 60] [--json FILE]
 
-One ``medium`` renderer per schedule (overlapped, serial) along ``serenity bench``'s camera path
+One ``lpv-fast`` renderer per schedule (overlapped, serial) along ``serenity bench``'s camera path
 with the sun moving, 6 warm-up frames, then ``--frames`` frames. Before and after them, every
 thread's CPU time is read from ``/proc/self/task/*/stat`` (and the tracer process's from its own
 ``/proc/PID/task``), so each thread's CPU-ms per frame is its difference divided by the frames.
@@ -75,7 +75,7 @@ def measure(width: int, height: int, frames: int, overlap: bool) -> dict:
 
     scene = load("courtyard")
     cam0, sun0 = scene.camera, np.asarray(scene.sun.direction, np.float64).copy()
-    r = Renderer(scene, width, height, config=RenderConfig.preset("medium", overlap=overlap))
+    r = Renderer(scene, width, height, config=RenderConfig.preset("lpv-fast", overlap=overlap))
 
     def step(i: int) -> float:
         t = (i % 48) / 47
@@ -118,7 +118,7 @@ def main(argv=None) -> int:
     if not os.path.isdir("/proc/self/task"):
         raise SystemExit("bench_frame_threads.py reads /proc/self/task: Linux only")
     out = {"benchmark": "frame_threads", "command": " ".join(["python", *sys.argv]), "machine": machine_info(),
-           "quality": "medium", "sizes": {}}
+           "quality": "lpv-fast", "sizes": {}}
     for size in args.sizes.split(","):
         w, h = (int(v) for v in size.lower().split("x"))
         res = out["sizes"][size] = {s: measure(w, h, args.frames, s == "overlapped") for s in ("overlapped", "serial")}

@@ -80,7 +80,7 @@ def main(argv=None) -> int:
     ap.add_argument("--stage", required=True, help="a frame.STAGES name, e.g. 'direct lighting'")
     ap.add_argument("--scene", default="courtyard")
     ap.add_argument("--size", default="320x180")
-    ap.add_argument("--preset", default="medium")
+    ap.add_argument("--preset", default="lpv-fast")
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--moving", action="store_true")
     ap.add_argument("--reference", action="store_true")

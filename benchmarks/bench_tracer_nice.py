@@ -171,7 +171,7 @@ def main(argv=None) -> int:
                     help="default or NICE[/session][/idle], comma-separated")
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--passes", type=int, default=10)
-    ap.add_argument("--quality", default="medium")
+    ap.add_argument("--quality", default="lpv-fast")
     ap.add_argument("--load", type=int, default=0, help="busy-looping processes to run beside (other programs)")
     ap.add_argument("--json")
     ap.add_argument("--chart")

@@ -29,7 +29,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("size", nargs="?", default="640x360")
     ap.add_argument("frames", nargs="?", type=int, default=6)
-    ap.add_argument("--quality", choices=QUALITY_PRESETS, default="medium")
+    ap.add_argument("--quality", choices=QUALITY_PRESETS, default="lpv-fast")
     ap.add_argument("--scene", default="courtyard")
     ap.add_argument("--static", action="store_true", help="keep the camera and the sun still")
     args = ap.parse_args()

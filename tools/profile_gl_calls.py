@@ -52,7 +52,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("size", nargs="?", default="320x180")
     ap.add_argument("frames", nargs="?", type=int, default=23)
-    ap.add_argument("--quality", choices=QUALITY_PRESETS, default="medium")
+    ap.add_argument("--quality", choices=QUALITY_PRESETS, default="lpv-fast")
     ap.add_argument("--scene", default="courtyard")
     ap.add_argument("--serial", action="store_true", help="the serial schedule (default: overlapped)")
     ap.add_argument("--json")
