@@ -518,8 +518,8 @@ def test_self_illumination_of_a_lit_plane(device):
 
 
 def test_self_illumination_damping_of_a_lit_plane(device):
-    """``LPVConfig.self_damping`` (2.5 cells by default since round 13; docs/history.md, "The LPV in a closed
-    room"): the lit plane of the test above, with its surfels in the geometry volume and the default
+    """``LPVConfig.self_damping`` (2.5 cells by default; docs/techniques.md, "Light propagation
+    volumes"): the lit plane of the test above, with its surfels in the geometry volume and the default
     lookups as in a frame, receives at most 0.1 of its exitance back (measured 0.018–0.047; 0.33–0.42
     without the damping; exact 0)."""
     from serenity.eval.stability import lpv_self_illumination
