@@ -28,10 +28,9 @@ range into contiguous chunks that shrink as it is used up (guided scheduling,
 :func:`guided_ranges`), and the workers take the next chunk as they finish one, so they end
 together: the first chunks are big (few launches: each costs one ``wp.launch``, ~0.1 ms of Python
 under the GIL, while the other workers run native code), the last ones short (the worker that
-finishes first waits at most one short chunk). 16 equal chunks per thread, round 28's split, left
-a thread idle for up to a sixteenth of the launch at its end (round 29: the incoherent kd-tree
-query on 2 threads, 1.74× one thread with equal chunks, 1.79× guided, in one process: scratch
-timings). Chunks stay
+finishes first waits at most one short chunk). Equal chunks, 16 per thread, would leave a thread
+idle for up to a sixteenth of the launch at its end: on the incoherent kd-tree query on 2 threads
+they reach 1.74× one thread, guided chunks 1.79× (timed in one process). Chunks stay
 contiguous and at least ``min_chunk`` items long, so outputs share a cache line only at chunk
 borders (no false sharing to speak of). Unbalanced, the chunks are exactly ``chunk_ranges(dim,
 threads)`` (callers that key per-worker buffers on the chunk offsets rely on that).
@@ -118,11 +117,11 @@ def launch(kernel: Any, dim: int, inputs: list, device: str, threads: int | None
 
     ``worker_arg``: the kernel's trailing parameters are ``worker: int, offset: int``; ``worker`` is
     the index (0 … threads − 1) of the worker thread running the chunk, so that a kernel can keep
-    per-worker scratch memory (no two chunks with the same index run at once; 0 on CUDA).
+    per-worker working memory (no two chunks with the same index run at once; 0 on CUDA).
     ``min_chunk``: a balanced launch's chunks are not made smaller than this many items
     (``MIN_ITEMS_PER_CHUNK`` for items of about one ray's work; fewer for items that each do more).
-    ``chunks_per_thread`` > 1 is the older spelling of ``balanced=True`` (kept for callers written
-    before round 29, such as earlier versions of the kd-tree that ``bench_kdtree_steps.py`` loads).
+    ``chunks_per_thread`` > 1 is another spelling of ``balanced=True``, accepted for the earlier
+    versions of the kd-tree that ``bench_kdtree_steps.py`` loads beside this module.
     """
     wp = init_warp()
     dim = int(dim)
@@ -177,9 +176,9 @@ def _run_chunks(run, chunks: list[tuple[int, int]], workers: int) -> None:
     """``run(worker, first, count)`` for each chunk on ``workers`` threads: this one (worker 0) and
     ``workers`` − 1 of the pool. The calling thread works too, and returns when every chunk is done,
     not when every pool thread has looked for one: a pool thread whose CPU was idle can take a
-    millisecond or more to wake on this 2-vCPU VM, and by then the calling thread may have run the
-    chunks it would have taken (round 30: a 2-chunk launch run on one thread after the other, the
-    counting sort's passes taking 10-13 ms where they take 6-8 split; scratch timings)."""
+    millisecond or more to wake on a 2-vCPU VM, and by then the calling thread may have run the
+    chunks it would have taken (a pool that waited for every thread ran 2-chunk launches on one
+    thread after the other: the counting sort's passes took 10-13 ms where they take 6-8 split)."""
     state = _Chunks(run, chunks)
     pool = _executor(workers - 1)
     for w in range(1, workers):
