@@ -122,22 +122,23 @@ light from sources within N of its (small) cells. Two measures, both on by defau
         from sources outside a finer cascade's box within its reach of the border (the finer grid
         never had them and their coarse wavefronts are still "near"); the blend band hides the step.
     Measured (Cornell box, indirect only, 160×90, ``benchmarks/bench_lpv.py``; courtyard full
-    image vs the full reference): see the README's LPV section — together they took the
-    courtyard's FLIP from 0.235 to 0.124 and the Cornell box's trimmed relMSE from 18 to 1.0.
+    image vs the full reference): together they take the courtyard's FLIP from 0.235 to 0.124
+    and the Cornell box's trimmed relMSE from 18 to 1.0.
     Default resolution 12³ (not the paper's 32³): at 32³ cells are finer than the propagation
-    can cross in a frame's budget; over several views of both scenes (``bench_lpv_views.py``) 12³
-    has a lower error than 16³ in both, for about half the update.
+    can cross in a frame's budget; over several views of both scenes
+    (``benchmarks/experiments/bench_lpv_views.py``) 12³ has a lower error than 16³ in both, for
+    about half the update.
 Known error (measured, ``tests/kernels/test_lpv.py::test_self_illumination_of_a_lit_plane`` and
 ``benchmarks/bench_lpv_room.py``): L1 lobes are wide and propagation is diffusive, so light a lit
 plane's VPLs send sideways reaches the plane itself: a plane of exitance M receives 0.5–0.6·M from
 itself with the paper's transfer and no geometry volume, 0.33–0.41·M with its surfels in the geometry
-volume and the defaults (0.20–0.41·M without the lookup planes: the old home cell dropped the cells
-above a plane at 0.6 of a cell; exact: 0). With the faces next to a lit patch that share its cells, this
-is most of what is left of the Cornell box's error (README, "The LPV in a closed room"). No choice of
+volume and the defaults (0.20–0.41·M without the lookup planes, where the home cell drops the cells
+above a plane lying at 0.6 of a cell; exact: 0). With the faces next to a lit patch that share its
+cells, this is most of the Cornell box's error without the damping below (``lpv_room.json``). No choice of
 injection offset fixes it (0.33 at best over 0.5–1 cell): the cells above the plane hold mostly isotropic
 light after a step or two of propagation, whose downward half lights the plane.
 
-Self-illumination damping (``LPVConfig.self_damping`` = d cells, off by default; Kaplanyan & Dachsbacher
+Self-illumination damping (``LPVConfig.self_damping`` = d cells, 2.5 by default; Kaplanyan & Dachsbacher
 2010's remedy, gradient along the normal): an irradiance lookup's SH, per cascade and channel, is scaled
 by 1 − o·(1 − min(1, DC(u + d·n) / DC)^p), DC the looked-up (guarded) SH's, DC(u + d·n) plain trilinear
 d cells further along the normal, p = ``self_damping_power``: in front of a lit surface its own light falls
@@ -145,9 +146,10 @@ off along the normal (a lit plane's cells: DC 41, 36, 16, 6, 1.7 going up), ligh
 grows towards it and is kept. o (with the lookup occlusion; else 1) is the product of the openness of the
 ⌈d⌉ faces met going from the home cell along the normal's dominant axis: the far sample is trusted only as
 far as the space in front is open (under an overhang one cell above the ground it would read below the
-ground and damp everything: the courtyard's undersides went 0.54 → 0.17 of the reference without o,
-0.47 with it). Measured (``bench_lpv_room.py``): the lit plane 0.33–0.42 → 0.02–0.05 at d = 2.5, but it
-also takes light the LPV gets right in the courtyard (README, "The LPV in a closed room").
+ground and damp everything: the courtyard's undersides read 0.17 of the reference without o, 0.47
+with it, 0.54 undamped). Measured (``bench_lpv_room.py``): the lit plane 0.33–0.42 → 0.02–0.05 at
+d = 2.5, but it also takes light the LPV gets right in the courtyard (docs/techniques.md, "Light
+propagation volumes").
 
 Stagger (``LPVConfig.stagger``, on in the ``lpv-fast`` preset): an update re-injects and
 propagates one cascade, the next in turn, instead of all; the others keep the grids (boxes) and the
