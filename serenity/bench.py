@@ -30,7 +30,7 @@ from serenity.optional import pyplot
 from serenity.scene import load
 from serenity.scene.model import Camera, direction_from_angles
 
-#: the paper's Table 1 (ms), for the README comparison: stage → (paper's name, ms)
+#: the paper's Table 1 (ms), printed beside ours: stage → (paper's name, ms)
 PAPER_TABLE1 = {
     "lpv update": ("Light Propagation Volumes Update (3 cascades)", 5.0),
     "direct lighting": ("Direct Lighting (Phong + CSM + PCSS)", 6.5),

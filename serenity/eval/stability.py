@@ -5,7 +5,7 @@ the technique's mitigation off and on, and returns a :class:`Case`: the error of
 exact answer (the metric is named in ``metric``), the milliseconds each took, and small images for
 the gallery (exact, without, with, and the error map). ``tests/stability/`` calls them at tiny
 sizes and asserts bounds; ``benchmarks/bench_stability.py`` calls them at gallery sizes and writes
-the PNG grid + JSON of the README's "Where each method fails".
+the PNG grid + JSON that docs/stability.md shows.
 
 Units: irradiance W·m⁻², radiance W·m⁻²·sr⁻¹, lengths m, angles degrees; images (H, W) float.
 """
@@ -212,7 +212,7 @@ def lpv_self_illumination(y0: float, leak_guard: bool = True, device=None, surfe
 def lpv_self_illumination_case(heights=(3.01, 3.3, 3.6, 3.9), device=None) -> Case:
     """The LPV's known bias: a lit plane lights itself through its VPLs' wide L1 lobes. Worst E/M
     over plane heights within a cell, with its surfels in the geometry volume as in a frame, without
-    and with the self-illumination damping (``LPVConfig.self_damping``, on by default since round 13)."""
+    and with the self-illumination damping (``LPVConfig.self_damping``, on by default)."""
     lpv_self_illumination(heights[0], True, device, surfels=True, self_damping=0.0)  # compile outside the timing
     lpv_self_illumination(heights[0], True, device, surfels=True)
     off, t_off = zip(*[_timed(lpv_self_illumination, y, True, device, surfels=True, self_damping=0.0)
