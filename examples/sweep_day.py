@@ -1,5 +1,5 @@
-"""The README's sweep figures: runs ``examples/sweep_day.toml`` on Dask and copies its contact sheet,
-the medium quality's time-of-day GIF and the metrics into the repository.
+"""The sweep figures of docs/sweeps.md: runs ``examples/sweep_day.toml`` on Dask and copies its contact
+sheet, the lpv-fast preset's time-of-day GIF and the metrics into the repository.
 
     python examples/sweep_day.py [--workers N] [--out DIR]
 
@@ -28,7 +28,7 @@ def main(argv: list[str]) -> int:
     args = p.parse_args(argv[1:])
     result = run_sweep(load_spec(os.path.join(HERE, "sweep_day.toml")), args.out, workers=args.workers)
     copies = {"contact_sheet.png": os.path.join(ROOT, "docs", "sweep_contact_sheet.png"),
-              "time_of_day_courtyard_160x90_medium.gif": os.path.join(ROOT, "docs", "sweep_day.gif"),
+              "time_of_day_courtyard_160x90_lpv-fast.gif": os.path.join(ROOT, "docs", "sweep_day.gif"),
               "metrics.json": os.path.join(ROOT, "benchmarks", "results", "sweep_day.json")}
     for src, dst in copies.items():
         shutil.copyfile(os.path.join(result.out, src), dst)
