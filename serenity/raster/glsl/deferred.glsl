@@ -76,7 +76,7 @@ uniform float u_sun_cos_radius;     // cos of the disc's angular radius
 uniform vec3 u_camera_pos;
 uniform vec3 u_camera_forward;
 uniform mat4 u_inv_view_proj;
-uniform vec3 u_sky_radiance;        // constant sky (placeholder until the sky map)
+uniform vec3 u_sky_radiance;        // the sky where no sky map is bound: a constant sky
 uniform vec3 u_ambient_irradiance;  // constant ambient term (baseline hack; 0 = off)
 uniform bool u_use_ao;
 uniform sampler2D u_ao;             // SSAO, 1 = open (multiplies indirect light only)
