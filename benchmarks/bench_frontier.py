@@ -1,9 +1,8 @@
-"""The frontier (issue 12): our whole frame against Mitsuba 3 + Intel Open Image Denoise at equal error.
+"""The frontier: our whole frame against Mitsuba 3 + Intel Open Image Denoise at equal error.
 
     python benchmarks/bench_frontier.py                      # courtyard + cornell, 320x180 + 640x360
     python benchmarks/bench_frontier.py --quick              # smoke run: courtyard 160x90, few spp
     python benchmarks/bench_frontier.py --scenes cornell --sizes 320x180
-    python benchmarks/bench_frontier.py --table              # the README table from the JSON
     python benchmarks/bench_frontier.py --references-only    # render and cache the references first
 
 For each scene and size, all in one process on one machine:
@@ -30,14 +29,13 @@ For each scene and size, all in one process on one machine:
 Metrics as in ``serenity.eval.metrics``: FLIP on the tone-mapped images (our exposure, Reinhard,
 sRGB), relMSE (ε = 1e-2) on linear HDR, all pixels ("rel_mse") and without the worst 0.1% of the
 pixels ("rel_mse_trimmed", the one charted and compared: see ``TRIM``). Writes ``results/frontier.json`` and
-``results/frontier.png`` (``--quick``: ``frontier_quick.*``).
+``results/frontier.png`` (``--quick``: ``serenity_out/frontier_quick/``).
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
-import json
 import os
 import platform
 import sys
@@ -212,27 +210,6 @@ def summarise(cases: list[dict], goal: float) -> list[dict]:
     return out
 
 
-def table(data: dict) -> str:
-    """The README's markdown table from a frontier JSON: one row per case and config of ours, the
-    config with the best equal-FLIP standing (the one the summary reports) in bold."""
-    from serenity.eval.frontier import describe, goal_met
-
-    goal = data["goal_speedup"]
-    lines = ["| scene | size | ours | ms | FLIP | relMSE* | path tracer at our FLIP: ms (curve) | "
-             f"equal-FLIP speed-up | equal-relMSE* speed-up | ≥ {goal:g}× |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
-    for c, s in zip(data["cases"], data["summary"], strict=True):
-        for o in c["ours"]:
-            r = c["equal_error"]["flip"][o["name"]]
-            rm = c["equal_error"]["rel_mse_trimmed"][o["name"]]
-            name = f"**{o['name']}**" if o["name"] == s["flip"]["config"] else o["name"]
-            at = "—" if r["peer_ms"] is None else f"{r['peer_ms']:.0f} ({r['curve']})"
-            lines.append(f"| {c['scene']} | {s['size']} | {name} | {o['ms']:.0f} | {o['flip']:.3f} | "
-                         f"{o['rel_mse_trimmed']:.3f} | {at} | {describe(r)} | {describe(rm)} | "
-                         f"{'yes' if goal_met(r, goal) else 'no'} |")
-    return "\n".join(lines)
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true",
@@ -245,9 +222,8 @@ def main(argv=None) -> int:
                    help=f"OIDN qualities of the denoised curves (default {','.join(OIDN_QUALITIES)})")
     p.add_argument("--frames", type=int, help="our timed frames (default 5)")
     p.add_argument("--warmup", type=int, help="our untimed frames first (default 3)")
-    p.add_argument("--json", help="output JSON (default results/frontier.json; --quick: frontier_quick.json)")
-    p.add_argument("--png", help="output chart (default results/frontier.png; --quick: frontier_quick.png)")
-    p.add_argument("--table", action="store_true", help="print the README table of the JSON and exit")
+    p.add_argument("--json", help="output JSON (default results/frontier.json; --quick: under serenity_out/)")
+    p.add_argument("--png", help="output chart (default results/frontier.png; --quick: under serenity_out/)")
     p.add_argument("--references-only", action="store_true",
                    help="only render (and cache) the references of the selected scenes and sizes, then exit")
     p.add_argument("--no-progress", action="store_true")
@@ -258,15 +234,13 @@ def main(argv=None) -> int:
     from serenity.errors import SerenityError
     from serenity.eval.denoise import QUALITIES
     from serenity.eval.frontier import GOAL_SPEEDUP, save_frontier_chart
+    from serenity.io.results import write_results
 
-    stem = "frontier_quick" if args.quick else "frontier"
-    args.json = args.json or os.path.join(HERE, "results", f"{stem}.json")
-    args.png = args.png or os.path.join(HERE, "results", f"{stem}.png")
+    # the smoke run is not a result: it goes beside the renders, not into benchmarks/results
+    out_dir = os.path.join("serenity_out", "frontier_quick") if args.quick else os.path.join(HERE, "results")
+    args.json = args.json or os.path.join(out_dir, "frontier.json")
+    args.png = args.png or os.path.join(out_dir, "frontier.png")
     try:
-        if args.table:
-            with open(args.json) as f:
-                print(table(json.load(f)))
-            return 0
         defaults = QUICK if args.quick else dict(scenes=SCENES, sizes=SIZES, spp=SPP, ref_spp=REF_SPP, frames=5,
                                                  warmup=3)
         for key, value in defaults.items():
@@ -350,9 +324,7 @@ def main(argv=None) -> int:
         "summary": summary,
         "cases": cases,
     }
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as f:
-        json.dump(out, f, indent=2)
+    write_results(args.json, out)
     panels = []
     for c, s in zip(cases, summary, strict=True):
         panels.append({"title": f"{c['scene']} {c['size'][0]}×{c['size'][1]}",

@@ -2,7 +2,6 @@
 
     python benchmarks/bench_kdtree.py --json FILE [--size 1280x720] [--subdivisions 6] [--repeats 11]
                                       [--build-sizes 10000,40000,160000,640000,1000000] [--charts PREFIX]
-    python benchmarks/bench_kdtree.py --table RUN.json [EARLIER.json ...]   # the README's table
 
 Scene: a displaced icosphere on a wavy terrain grid (``--subdivisions 6``: 164k triangles, 7: 655k).
 Rays (the same arrays for every tracer):
@@ -56,7 +55,6 @@ triangles); PREFIX defaults to the JSON path without ``.json``. Prints progress,
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -70,7 +68,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from serenity.device import cpu_threads, init_warp
-from serenity.io.results import machine_info
+from serenity.io.results import machine_info, write_results
 from serenity.kernels.kdtree import PACKET_LANES, KdTree, intersect_rays, ray_order
 from serenity.kernels.launch import launch
 from serenity.scene.procedural import lumpy_mesh
@@ -281,76 +279,10 @@ def save_charts(prefix: str, figures: dict, sweep: list[dict], thread_counts: li
     return paths
 
 
-#: goals of the README's table (issue 17): row → (threshold, the ray sets it is set for)
-GOALS = {"embree": (0.5, ("coherent", "incoherent")), "warp": (1.5, ("incoherent",)),
-         "scaling": (1.8, ("coherent", "incoherent"))}
-
-
-def _goal(key: str, per_set: dict[str, list[float]]) -> str:
-    """``≥ x``, then per ray set the goal is set for whether the runs meet it."""
-    threshold, names = GOALS[key]
-    parts = []
-    for name in names:
-        vals = per_set[name]
-        met = sum(v >= threshold for v in vals)
-        status = "met" if met == len(vals) else "not met" if met == 0 else f"met in {met} of {len(vals)} runs"
-        parts.append(f"{'camera rays' if name == 'coherent' else 'incoherent rays'} {status}")
-    return f"≥ {threshold} — " + ", ".join(parts)
-
-
-def markdown_table(runs: list[dict]) -> str:
-    """The README's table of ``runs`` (this script's JSONs, the first the main run): per figure each
-    run's value, separated by '; ', and the goal's status."""
-    sets = ("coherent", "incoherent")
-    fig = [r["figures"] for r in runs]
-
-    def per_set(fn) -> dict[str, list[float]]:
-        return {name: [fn(f, name) for f in fig] for name in sets}
-
-    def suffix(name: str) -> str:
-        return "" if name == "incoherent" else "_coherent"
-
-    rows = [
-        ("ours, Mrays/s, 1 thread", per_set(lambda f, n: f[n]["mrays_per_s"]["ours_1t"]), "{:.2f}", None),
-        ("ours / Embree, 1 thread each (paired wall time)",
-         per_set(lambda f, n: f["ratio_vs_embree_1t" + suffix(n)]), "{:.2f}", "embree"),
-        ("ours / Warp `wp.Mesh` BVH, 1 thread each (paired)",
-         per_set(lambda f, n: f["speedup_vs_warp_bvh_1t" + suffix(n)]), "{:.2f}", "warp"),
-        ("ours / Embree, all threads each", per_set(lambda f, n: f["ratio_vs_embree_all_threads" + suffix(n)]),
-         "{:.2f}", None),
-        ("ours, 2 threads / 1 thread (paired wall time)",
-         per_set(lambda f, n: statistics.median(f[n]["paired_ratios_per_round"]["ours_1t_over_ours_2t"])),
-         "{:.2f}", "scaling"),
-        ("Mrays per CPU-s, 2 threads ÷ 1 thread (1.0: the threads do not slow each other)",
-         per_set(lambda f, n: f[n]["thread_cpu_efficiency"]), "{:.2f}", None),
-        ("Σ thread CPU-s / busiest thread in the launches (balanced: shrinking chunks, handed out dynamically)",
-         per_set(lambda f, n: f[n]["thread_scaling_cpu_bound"]), "{:.2f}", None),
-        ("agreement with Embree (same triangle, or same t at a shared edge)",
-         per_set(lambda f, n: f[n]["agreement_with_embree"]), "{:.6f}", None),
-    ]
-    lines = ["| figure (one value per run, in the order given) | coherent (camera) "
-             "| incoherent (random, from the hits) | goal |",
-             "| --- | --- | --- | --- |"]
-    for label, vals, fmt, goal in rows:
-        cells = ["; ".join(fmt.format(v) for v in vals[name]) for name in sets]
-        lines.append(f"| {label} | {cells[0]} | {cells[1]} | {_goal(goal, vals) if goal else ''} |")
-    if "build_1m_s" in fig[0]:
-        lines.append(f"| build of 1 M triangles, measured (s, wall) | {fig[0]['build_1m_s']:.2f} | | ≤ 5 — "
-                     f"{'met' if fig[0]['build_1m_s'] <= 5.0 else 'not met'} |")
-    return "\n".join(lines)
-
-
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     if argv is None:
         argv = sys.argv[1:]
-    if argv[:1] == ["--table"]:
-        runs = []
-        for path in argv[1:]:
-            with open(path) as fh:
-                runs.append(json.load(fh))
-        print(markdown_table(runs))
-        return {}
     ap.add_argument("--json", required=True, help="write the figures here")
     ap.add_argument("--size", default="1280x720", help="camera rays WxH (default 1280x720)")
     ap.add_argument("--subdivisions", type=int, default=6, help="icosphere subdivisions (6: 164k tris, 7: 655k)")
@@ -477,8 +409,7 @@ def main(argv=None) -> dict:
                   "references": st.references, "depth": st.depth, "sweep": sweep},
         "figures": figures,
     }
-    with open(args.json, "w") as fh:
-        json.dump(out, fh, indent=2)
+    write_results(args.json, out)
     prefix = args.charts or (args.json[:-5] if args.json.endswith(".json") else args.json)
     charts = save_charts(prefix, figures, sweep, thread_counts)
 

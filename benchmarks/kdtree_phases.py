@@ -2,7 +2,6 @@
 benchmark's rays, on 1 thread and on all threads.
 
     python benchmarks/kdtree_phases.py --json FILE [--size 1280x720] [--subdivisions 6] [--rounds 9]
-    python benchmarks/kdtree_phases.py --table FILE    # the README's table, printed from a run's JSON
 
 Rays and scene as in ``bench_kdtree.py`` (coherent camera rays; incoherent random rays from their
 hits). The default call is timed as it runs: every Warp launch the query makes through
@@ -19,19 +18,18 @@ call's median. Phases:
   launches, ``count_keys`` and ``place_keys`` or, on several threads, ``place_low_runs`` and
   ``place_high_runs``, are inside it);
 - ``move_in_order``: the rays' origins and directions in that order (one launch per array, 4096
-  rays per kernel thread; ``gather_rays``, both arrays in one launch, in round 30's first runs;
-  ``gather_array``, one ray per kernel thread, before round 30);
+  rays per kernel thread; ``gather_rays`` and ``gather_array`` are read too, for JSON of earlier
+  versions of the query);
 - ``trace``: the traversal (``trace_packets``, 16-ray packets, for a reordered batch and for a
   coherent one in the caller's order; ``trace_rays``, interleaved, when asked for; ``intersect_rays``,
   one ray per kernel thread, for any other batch);
 - ``scatter_hits``: the four results back at their rays' own indices, as one 16-byte record per ray
-  (``scatter_array``, one launch per result array, before round 30).
+  (``scatter_array``, one launch per result array, for JSON of earlier versions).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -79,54 +77,13 @@ def instrument(kd, times: dict) -> None:
     kd.launch, kd.counting_order = timed_launch, timed_order
 
 
-#: the README table's rows: (label, the phases summed into it)
-TABLE_ROWS = [
-    ("traversal (`trace_rays` / `trace_packets`)", ("trace",)),
-    ("gather of origins and directions", ("move_in_order", "gather_rays", "gather_array")),
-    ("scatter of the four results", ("scatter_hits", "scatter_array")),
-    ("sort keys", ("sort_keys_simd", "sort_keys")),
-    ("counting sort", ("counting_order",)),
-    ("coherence sample, Python, allocation", ("sample_key_changes", "other")),
-]
-#: the README table's columns: (label, the run's result key)
-TABLE_COLUMNS = [("incoherent, 1 thread", "incoherent_1t"), ("incoherent, 2 threads", "incoherent_2t"),
-                 ("camera rays, 1 thread", "coherent_1t")]
-
-
-def markdown_table(run: dict) -> str:
-    """The README's table of a run's phases: ms per call (share of the call) per column; rows the
-    coherent call does not have read "—"; the last row is the remainder, without a share."""
-    cols = [(label, run["results"][key]) for label, key in TABLE_COLUMNS if key in run["results"]]
-    lines = ["| phase | " + " | ".join(label for label, _ in cols) + " |", "| --- |" + " --- |" * len(cols),
-             "| whole call | " + " | ".join(f"{r['call_ms']:.1f}" for _, r in cols) + " |"]
-    for k, (label, keys) in enumerate(TABLE_ROWS):
-        cells = []
-        for _, r in cols:
-            parts = [r["phases"][key] for key in keys if key in r["phases"]]
-            if not parts:
-                cells.append("—")
-                continue
-            ms = sum(p["ms"] for p in parts)
-            last = k == len(TABLE_ROWS) - 1
-            cells.append(f"{ms:.1f}" if last else f"{ms:.1f} ({100 * ms / r['call_ms']:.1f} %)")
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--json")
-    ap.add_argument("--table", metavar="FILE", help="print the README's table from a run's JSON and stop")
+    ap.add_argument("--json", required=True)
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--subdivisions", type=int, default=6)
     ap.add_argument("--rounds", type=int, default=9)
     args = ap.parse_args(argv)
-    if args.table:
-        with open(args.table) as fh:
-            print(markdown_table(json.load(fh)))
-        return {}
-    if not args.json:
-        ap.error("--json FILE is required (or --table FILE)")
     init_warp()
     import serenity.kernels.kdtree as kd
 
