@@ -1,4 +1,4 @@
-"""Edges and textures (issue #14 item 5): FXAA post pass vs jittered temporal accumulation on a static
+"""Edges and textures: FXAA post pass vs jittered temporal accumulation on a static
 camera, and the G-buffer's in-shader anisotropic texture filtering (``RenderConfig.texture_taps``),
 against the cached Mitsuba references of ``bench_baseline.py``.
 

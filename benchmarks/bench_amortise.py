@@ -51,7 +51,7 @@ VARIANTS = {
     "every frame": (0, False),
     "sky: 1 layer per frame": (1, False),
     "LPV: 1 cascade per frame": (0, True),
-    "both (lpv-fast, traced-probes)": (1, True),
+    "both (lpv-fast)": (1, True),
 }
 
 

@@ -1,4 +1,4 @@
-"""The accuracy baseline every GI technique must beat (issue #3): error against the full Mitsuba 3
+"""The accuracy baseline every GI technique must beat: error against the full Mitsuba 3
 reference of (a) direct light only and (b) direct + the constant ambient term (irradiance π·L_sky on
 every surface, SSAO applied — the classic hack the paper replaces), for ``courtyard`` and ``cornell``.
 

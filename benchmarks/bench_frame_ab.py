@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", default="320x180,640x360")
     ap.add_argument("--pairs", type=int, default=3)
     ap.add_argument("--quality", default="lpv-fast")
-    ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "frame_ab.json"))
+    ap.add_argument("--json", default=str(ROOT / "serenity_out" / "frame_ab.json"))
     args = ap.parse_args(argv)
     tmp = Path(tempfile.mkdtemp(prefix="serenity-ab-"))
     trees, held = [], []

@@ -33,9 +33,9 @@ def main() -> None:
     ap.add_argument("--size", default="320x180")
     ap.add_argument("--quality", default="lpv-fast")
     ap.add_argument("--frames", type=int, default=24)
-    ap.add_argument("--json", default=None, help="default: benchmarks/results/frame_repeat_<size>.json")
+    ap.add_argument("--json", default=None, help="default: benchmarks/results/frame_repeat_<quality>_<size>.json")
     args = ap.parse_args()
-    out = args.json or str(ROOT / f"benchmarks/results/frame_repeat_{args.size.split('x')[0]}.json")
+    out = args.json or str(ROOT / f"benchmarks/results/frame_repeat_{args.quality}_{args.size}.json")
     runs = []
     with tempfile.TemporaryDirectory() as tmp:
         for i in tqdm(range(args.runs), desc=f"serenity bench x{args.runs}", unit="run"):

@@ -12,7 +12,7 @@ Python's threads are told apart by their native ids (the main thread, the ``sere
 worker, the ``serenity-launch`` pool that splits Warp's CPU launches). Reported per group: CPU-ms
 per frame and its share of the frame's CPU time, beside the median wall time of a frame.
 
-The point is the bound the README states for the overlap: a frame's CPU time divided by the cores
+The point is the bound on what the overlap can buy: a frame's CPU time divided by the cores
 is the wall time no schedule can beat, and what the GL passes cost on llvmpipe's threads is what
 no overlap can hide. Linux only (``/proc``).
 """

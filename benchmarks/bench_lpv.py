@@ -1,4 +1,4 @@
-"""Light propagation volumes: cost on all CPU threads, and error against Mitsuba (paper §8; issue #6).
+"""Light propagation volumes: cost on all CPU threads, and error against Mitsuba (paper §8).
 
     python benchmarks/bench_lpv.py [--json FILE] [--device cpu] [--reps N] [--no-reference] [--quick]
 
@@ -38,6 +38,7 @@ import numpy as np
 from serenity.config import LPVConfig
 from serenity.device import cpu_threads, resolve_device
 from serenity.frame import LPV_UPDATE_STAGES
+from serenity.io.results import write_results
 from serenity.kernels.lpv import LightPropagationVolume
 
 BOUNDS = np.array([[-30.0, 0.0, -30.0], [30.0, 20.0, 30.0]])
@@ -368,12 +369,9 @@ def main(argv=None):
         result["thin_wall"] = {k: v for k, v in thin.items() if k != "images"}
     else:
         result["cornell_indirect_relmse"] = None  # not measured in this run (--no-reference)
-    text = json.dumps(result, indent=2)
-    print(text)
+    print(json.dumps(result, indent=2))
     if args.json:
-        os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-        with open(args.json, "w") as f:
-            f.write(text + "\n")
+        write_results(args.json, result)
         stem = os.path.splitext(args.json)[0]
         chart(sweep, stem + ".png")
         if cornell is not None:

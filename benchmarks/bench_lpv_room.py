@@ -1,11 +1,11 @@
-"""LPV in a closed room and outdoors: each propagation/placement change measured against Mitsuba (issue 14).
+"""LPV in a closed room and outdoors: each propagation/placement change measured against Mitsuba.
 
     python benchmarks/bench_lpv_room.py [--json FILE] [--quick]
 
-For each LPV setting (``VARIANTS``: the settings before the closed-room work, each of its three changes
-alone — ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — all three, round 12's default (all three +
-``lookup_planes``), near-field and coverage-blocking alternatives that were measured and not adopted,
-and the self-illumination damping, the default since round 13):
+For each LPV setting (``VARIANTS``: the paper's transfer with view-fitted cells, each closed-room
+change alone — ``clamp_faces``, ``lookup_occlusion``, ``scene_cells`` — all three, all three with
+``lookup_planes`` but without the self-illumination damping ("undamped"), near-field and
+coverage-blocking alternatives, and the default, which adds the damping):
 
 - ``cornell_indirect``: the Cornell box's indirect light alone at 160×90 (ours = frame with the LPV −
   frame without it; the reference = Mitsuba full − direct, 4096 spp, cached — the same as
@@ -16,7 +16,7 @@ and the self-illumination damping, the default since round 13):
 - ``courtyard``: the full frame at 320×180 against the full reference (256 spp, cached, as
   ``bench_baseline.py``): FLIP, relMSE and the region luminance ratios;
 - ``open_ground``: the ``plane`` scene (flat lit ground, black sky: exact indirect 0) at 320×180, the
-  plane's luminance ours/reference (the issue's open-ground bar: within 5 %);
+  plane's luminance ours/reference (the bar: within 5 %);
 - ``plane_self_illumination``: E_self/M of a lit plane (the kernel test's set-up: one 16³ cascade
   of 1 m cells, 8 iterations, plane heights 3.01/3.3/3.6/3.9 m, with its surfels in the geometry
   volume as in a frame); exact 0;
@@ -59,7 +59,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 WALL = time.perf_counter
 BEFORE = {"clamp_faces": False, "lookup_occlusion": False, "scene_cells": 0.0, "lookup_planes": False,
           "self_damping": 0.0}
-#: round 12's default: everything of the closed-room work but the self-illumination damping
+#: undamped: every closed-room change but the self-illumination damping
 UNDAMPED = {"self_damping": 0.0}
 VARIANTS = {
     "before (paper transfer, view-fitted cells)": BEFORE,
@@ -67,12 +67,12 @@ VARIANTS = {
     "lookup occlusion": {**BEFORE, "lookup_occlusion": True},
     "scene-fitted coarsest cascade (6 cells)": {**BEFORE, "scene_cells": 6.0},
     "all three": {**UNDAMPED, "lookup_planes": False},
-    "all three + lookup planes (round 12's default)": UNDAMPED,
-    "round 12's default, scene-fitted 8 cells": {**UNDAMPED, "scene_cells": 8.0},
-    "round 12's default + lookups without the injected lobes": {**UNDAMPED, "accumulate_injected": False},
-    "round 12's default + injection offset 1 cell": {**UNDAMPED, "injection_offset": 1.0},
-    "round 12's default + injection offset 0.75 cell": {**UNDAMPED, "injection_offset": 0.75},
-    "round 12's default + coverage blocking": {**UNDAMPED, "coverage_blocking": True},
+    "all three + lookup planes (undamped)": UNDAMPED,
+    "undamped, scene-fitted 8 cells": {**UNDAMPED, "scene_cells": 8.0},
+    "undamped + lookups without the injected lobes": {**UNDAMPED, "accumulate_injected": False},
+    "undamped + injection offset 1 cell": {**UNDAMPED, "injection_offset": 1.0},
+    "undamped + injection offset 0.75 cell": {**UNDAMPED, "injection_offset": 0.75},
+    "undamped + coverage blocking": {**UNDAMPED, "coverage_blocking": True},
     "+ self-illumination damping (1.5 cells, power 2)": {"self_damping": 1.5, "self_damping_power": 2.0},
     "+ self-illumination damping (2 cells, power 2)": {"self_damping": 2.0, "self_damping_power": 2.0},
     "**default (+ self-illumination damping, 2.5 cells, power 2)**": {},
@@ -82,7 +82,7 @@ VARIANTS = {
 }
 
 COST_VARIANTS = {k: VARIANTS[k] for k in ("before (paper transfer, view-fitted cells)", "face clamp",
-                                          "all three + lookup planes (round 12's default)",
+                                          "all three + lookup planes (undamped)",
                                           "**default (+ self-illumination damping, 2.5 cells, power 2)**")}
 
 

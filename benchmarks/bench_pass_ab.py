@@ -1,6 +1,6 @@
 """A/B of one stage of the frame between two variants of the renderer, in one process, frames interleaved.
 
-    python benchmarks/bench_pass_ab.py --stage "lpv lighting" --a-glsl lpv.glsl@56cadd6 [--json FILE]
+    python benchmarks/bench_pass_ab.py --stage "lpv lighting" --a-glsl lpv.glsl@HEAD~1 [--json FILE]
     python benchmarks/bench_pass_ab.py --stage "shadow maps (CSM)" --moving \\
         --a-config shadow.texels_per_pixel=0 --reference [--json FILE]
 

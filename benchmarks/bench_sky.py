@@ -1,5 +1,4 @@
-"""Sky: sky map bake, atmosphere accuracy vs steps, SH and sky-volume accuracy, volume cost (paper §5, §7;
-issue #4).
+"""Sky: sky map bake, atmosphere accuracy vs steps, SH and sky-volume accuracy, volume cost (paper §5, §7).
 
     python benchmarks/bench_sky.py [--json FILE] [--chart FILE.png] [--device cpu] [--reps N] [--quick]
 
@@ -19,7 +18,7 @@ Keys:
   rays per probe; ``rays_sweep`` rays per probe vs that error vs full-volume ms (right panel).
 - ``volume_full_ms``: the 32×16×23 volume (paper's), default rays, courtyard quads, all threads;
   ``volume_layer_ms``: one layer of it (the per-frame cost); ``goal_ratio``: volume_full_ms / 1000
-  (the issue's goal: ≤ 1 s); ``time_of_day_lag_frames``: layers until the volume reflects a sun step.
+  (the goal: ≤ 1 s); ``time_of_day_lag_frames``: layers until the volume reflects a sun step.
 """
 
 from __future__ import annotations
@@ -36,6 +35,7 @@ import numpy as np
 
 from serenity.config import SkyConfig
 from serenity.device import cpu_threads, resolve_device
+from serenity.io.results import write_results
 from serenity.kernels import atmosphere as A
 from serenity.kernels import sh as S
 from serenity.kernels.occlusion import occluded_np
@@ -198,12 +198,9 @@ def main(argv=None):
                      "relight_all_probes_ms": transfer_apply_ms, "quad_irradiance_mean_rel_error": transfer_mean,
                      "quad_irradiance_worst_rel_error": transfer_worst},
     }
-    text = json.dumps(result, indent=2)
     if args.json:
-        os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-        with open(args.json, "w") as f:
-            f.write(text + "\n")
-    print(text)
+        write_results(args.json, result)
+    print(json.dumps(result, indent=2))
     chart = args.chart or (os.path.splitext(args.json)[0] + ".png" if args.json else None)
     if chart:
         write_chart(result, chart)

@@ -1,4 +1,4 @@
-"""An independent sky anchor (issue #14 item 7): our atmosphere's sky and sun against Mitsuba 3's
+"""An independent sky anchor: our atmosphere's sky and sun against Mitsuba 3's
 ``sunsky`` emitter (the Hosek–Wilkie 2012 sky and its sun), over sun elevations 2°–90°.
 
     python benchmarks/bench_sky_anchor.py [--json FILE] [--chart FILE.png] [--turbidity 3]

@@ -1,4 +1,4 @@
-"""Why the sky volume's L2 SH irradiance misses R&H's ~1 % (issue #14 item 6), and what windowing costs.
+"""Why the sky volume's L2 SH irradiance misses R&H's ~1 %, and what windowing costs.
 
     python benchmarks/bench_sky_sh.py [--json FILE] [--device cpu]
 

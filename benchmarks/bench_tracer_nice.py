@@ -15,7 +15,7 @@ Every renderer draws the ``serenity bench`` camera path and moving sun (``--pass
 each frame of the path every renderer draws once, in an order rotated from frame to frame, so a
 drift of the machine's speed weighs on all alike. Per variant, over the frames after each pass's
 first two: the median frame (wall ms), the median "cpu ray tracing" stage and "wait for ray
-tracing", the tracer's CPU-ms; and the two ratios issue 12 asks about: the overlapped frame ÷ the
+tracing", the tracer's CPU-ms; and the two ratios the overlap is judged by: the overlapped frame ÷ the
 serial frame, and the overlapped tracer stage ÷ the serial (inline) one. A negative niceness needs
 CAP_SYS_NICE (root); ``actual_nice`` records what the OS granted, ``scheduling_group`` the tracer's
 autogroup. The chart puts each variant at (tracer ÷ inline, frame ÷ serial), one panel per size,

@@ -1,4 +1,4 @@
-"""Viewer: what a displayed frame costs beyond ``Renderer.render`` (issue #16), and what the
+"""Viewer: what a displayed frame costs beyond ``Renderer.render``, and what the
 per-frame read-back the viewer avoids would cost.
 
     python benchmarks/bench_view.py [--json FILE] [--size WxH] [--frames N] [--scene NAME]
@@ -77,6 +77,7 @@ def main() -> None:
     ap.add_argument("--scene", default="courtyard")
     args = ap.parse_args()
     from serenity.commands.common import parse_size
+    from serenity.io.results import write_results
 
     w, h = parse_size(args.size)
     runs = {}
@@ -96,10 +97,8 @@ def main() -> None:
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                     "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None},
     }
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as f:
-        json.dump(out, f, indent=1)
     print(json.dumps(out, indent=1))
+    write_results(args.json, out)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ import numpy as np
 
 from serenity.io.exr import read_exr
 from serenity.io.png import read_png
+from serenity.io.results import write_results
 
 
 def diff(a: np.ndarray, b: np.ndarray) -> dict:
@@ -43,12 +44,9 @@ def main(argv=None) -> int:
     ea, eb = (read_exr(os.path.splitext(x)[0] + ".exr") for x in (args.before, args.after))
     out["exr"] = {k: diff(ea[k], eb[k]) if k in eb else {"identical": False, "missing": True} for k in ea}
     out["identical"] = out["png"]["identical"] and all(v["identical"] for v in out["exr"].values())
-    text = json.dumps(out, indent=2)
-    print(text)
+    print(json.dumps(out, indent=2))
     if args.json:
-        os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-        with open(args.json, "w") as f:
-            f.write(text + "\n")
+        write_results(args.json, out)
     return 0 if out["identical"] else 1
 
 

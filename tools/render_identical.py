@@ -3,7 +3,7 @@ revision and with the working tree, and compare the PNG files byte for byte and 
 value for value.
 
     python tools/render_identical.py --base $(git merge-base main HEAD) \
-        --json benchmarks/results/render_identical.json courtyard:320x180 glass:320x180 courtyard:640x360
+        --json serenity_out/render_identical.json courtyard:320x180 glass:320x180 courtyard:640x360
 
 Compare against the branch's merge base, not a moving ``main``: commits that landed on main since
 the branch forked would show up as differences.
@@ -16,7 +16,6 @@ identical, 1 otherwise.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -26,6 +25,7 @@ import tempfile
 from diff_renders import diff  # tools/ is this script's folder, first on sys.path
 
 from serenity.io.exr import read_exr
+from serenity.io.results import write_results
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -81,11 +81,7 @@ def main(argv=None) -> int:
             print(f"{case}: {'identical' if out['cases'][case]['identical'] else 'DIFFERENT'}", flush=True)
     out["identical"] = all(c["identical"] for c in out["cases"].values())
     if args.json:
-        os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-        with open(args.json, "w") as f:
-            json.dump(out, f, indent=2)
-            f.write("\n")
-        print(f"wrote {args.json}")
+        write_results(args.json, out)
     return 0 if out["identical"] else 1
 
 

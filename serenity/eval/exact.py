@@ -1,6 +1,6 @@
 """Ray-traced ground truth for the raster approximations: sun-disc visibility (what CSM + PCSS
 estimate) and ambient occlusion (what SSAO estimates), by tracing the scene's kd-tree from
-G-buffer points. Used by ``benchmarks/bench_shadows.py``; the analytic-box twins in
+G-buffer points. Used by ``benchmarks/experiments/bench_shadows.py``; the analytic-box twins in
 ``tests/raster/exact.py`` share the sun-disc sampling."""
 
 from __future__ import annotations

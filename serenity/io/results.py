@@ -12,10 +12,15 @@ from serenity.io.provenance import machine, provenance
 
 def write_results(path: str, results: dict) -> None:
     """Write ``results`` as indented JSON to ``path`` (creating its folder) and say so. The
-    provenance keys come first; a key ``results`` already has (a script's own ``command``) wins."""
+    provenance keys come first; a key ``results`` already has (a script's own ``command``) wins, and
+    a script's own ``machine`` facts (a GPU's GL renderer, say) are added to the provenance's."""
+    prov = provenance()
+    out = {**prov, **results}
+    if isinstance(results.get("machine"), dict):  # a script's own machine facts add to the provenance's
+        out["machine"] = {**prov["machine"], **results["machine"]}
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w") as f:
-        json.dump({**provenance(), **results}, f, indent=2)
+        json.dump(out, f, indent=2)
     print(f"wrote {path}")
 
 

@@ -85,9 +85,9 @@ def finish(ctx) -> None:
     Python's GIL released during the wait when ``ctx`` is the headless context made here. moderngl
     holds the GIL through the call, and on llvmpipe the wait *is* the rendering: a thread running
     Warp launches and numpy beside the GL passes (``Renderer``'s volume worker) would stall behind
-    every pass. Measured on the 2-core machine (``benchmarks/bench_gil_finish.py``: a thread issuing
+    every pass. Measured on the 2-core machine (``benchmarks/experiments/bench_gil_finish.py``: a thread issuing
     small Warp launches beside a 15–20 ms fragment-bound pass): 73–76 launches/s through
-    ``ctx.finish()``, 405–408 through this, 474 alone (``gil_finish.json``).
+    ``ctx.finish()``, 405–408 through this, 474 alone (``benchmarks/experiments/results/gil_finish.json``).
     Call it also before a draw that reads what the draws before it rendered (the SSAO blur, the
     deferred pass): llvmpipe would wait for them inside the draw call, with the GIL held
     (``tools/profile_gl_calls.py`` shows where the main thread sits in GL).
@@ -109,7 +109,7 @@ def clear_depth_rect(ctx, fbo, texture, rect) -> None:
     On the headless context made here through ``glClearTexSubImage`` (GL 4.4), which writes the
     texels directly; elsewhere by ``fbo.clear`` with that viewport. llvmpipe clears a whole
     framebuffer fast but a part of one by drawing it: a 1024² tile of the shadow atlas took 1.36 ms
-    that way and 0.22 ms this way (``benchmarks/bench_shadow_clear.py``)."""
+    that way and 0.22 ms this way (``benchmarks/experiments/bench_shadow_clear.py``)."""
     native = _native_clear
     x, y, w, h = (int(v) for v in rect)
     if native is not None and native[0] is ctx:

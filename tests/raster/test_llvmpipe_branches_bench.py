@@ -1,5 +1,5 @@
-"""benchmarks/bench_llvmpipe_branches.py runs and writes every (body, placement) it documents (its
-figures are timings: the README quotes the committed JSON; nothing here asserts a time)."""
+"""benchmarks/experiments/bench_llvmpipe_branches.py runs and writes every (body, placement) it documents
+(its figures are timings: docs/architecture.md reads the committed JSON; nothing here asserts a time)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import json
 import math
 import os
 
-_PATH = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "bench_llvmpipe_branches.py")
+_PATH = os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks", "experiments",
+                     "bench_llvmpipe_branches.py")
 
 
 def test_branch_bench_writes_every_case(tmp_path):

@@ -77,7 +77,7 @@ def test_sparse_visibility_matches_per_pixel_away_from_edges(gl_ctx, mode, bound
     """Courtyard, direct sun light: with the visibility sampled sparsely, the mean |difference| from
     the per-pixel visibility is <= 4 % (checkerboard) / 8 % (half) of the mean direct light, and the
     median pixel is unchanged (within 0.5 %): the difference sits at shadow edges, and with "half" at
-    thin shadows, which can fall between its samples (benchmarks/results/pass_ab_visibility_*.json).
+    thin shadows, which can fall between its samples (benchmarks/experiments/results/sun_visibility/).
     Measured when written: checkerboard 2.0 %, half 3.9 %, medians 0.0 %."""
     full, covered = _direct("courtyard", "pixel")
     sparse, _ = _direct("courtyard", mode)

@@ -3,7 +3,7 @@ time: ``medium`` as it is (``indirect_scale`` = 4: sky light, LPV light and SSAO
 bilaterally upsampled) against the same preset at 1/2 resolution, for the courtyard and the Cornell
 box at 320×180 and 640×360, against the frontier's 1024-spp references.
 
-    python benchmarks/bench_indirect_scale.py [--json benchmarks/results/indirect_scale.json]
+    python benchmarks/experiments/bench_indirect_scale.py [--json benchmarks/experiments/results/indirect_scale.json]
 
 Per case: FLIP and relMSE (all pixels, and without the worst 0.1 %) of one still frame, and the
 median ms of the passes that run at the indirect resolution (sky lighting, LPV lighting, SSAO, the
@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
 
 from serenity.config import RenderConfig  # noqa: E402
@@ -75,7 +75,7 @@ def run(frames: int) -> list[dict]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--json", default=os.path.join(ROOT, "benchmarks", "results", "indirect_scale.json"))
+    ap.add_argument("--json", default=os.path.join(ROOT, "benchmarks", "experiments", "results", "indirect_scale.json"))
     ap.add_argument("--frames", type=int, default=6)
     args = ap.parse_args()
     t0 = time.perf_counter()

@@ -1,6 +1,6 @@
-"""Speed vs accuracy of the sun's shadows (hard / PCF / PCSS) and of SSAO (paper §6, §3; issue #7).
+"""Speed vs accuracy of the sun's shadows (hard / PCF / PCSS) and of SSAO (paper §6, §3).
 
-    python benchmarks/bench_shadows.py [--json FILE] [--chart-dir DIR] [--size WxH]
+    python benchmarks/experiments/bench_shadows.py [--json FILE] [--chart-dir DIR] [--size WxH]
 
 Shadows: the ``penumbra`` scene (a 6 m pole's shadow tip under the 0.53° sun). Ours: the direct
 light of each ground pixel divided by its unshadowed value (``frame.aovs["direct"]``) = visibility.
@@ -21,7 +21,6 @@ Writes JSON and two speed-vs-error charts.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -31,6 +30,7 @@ import numpy as np
 from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
 from serenity.eval.exact import exact_ao, exact_sun_visibility
 from serenity.frame import Renderer
+from serenity.io.results import write_results
 from serenity.kernels.kdtree import KdTree
 from serenity.scene import load
 
@@ -100,8 +100,8 @@ def bench_ssao(size, frames):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--json", default="benchmarks/results/shadows.json")
-    ap.add_argument("--chart-dir", default="benchmarks/results")
+    ap.add_argument("--json", default="serenity_out/shadows.json")
+    ap.add_argument("--chart-dir", default="serenity_out")
     ap.add_argument("--size", default="480x270")
     ap.add_argument("--frames", type=int, default=4)
     args = ap.parse_args(argv)
@@ -112,10 +112,7 @@ def main(argv=None) -> int:
     ao = bench_ssao(size, args.frames)
     out = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count()}, "size": size,
            "shadows": sh, "ssao": ao}
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as fh:
-        json.dump(out, fh, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, out)
     from serenity.eval.charts import save_speed_accuracy_chart
 
     os.makedirs(args.chart_dir, exist_ok=True)

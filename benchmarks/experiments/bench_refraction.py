@@ -1,6 +1,6 @@
-"""Refraction through glass solids against Mitsuba's dielectric (issue #5 follow-up).
+"""Refraction through glass solids against Mitsuba's dielectric.
 
-    python benchmarks/bench_refraction.py [--size 160x90] [--spp 512] [--json FILE]
+    python benchmarks/experiments/bench_refraction.py [--size 160x90] [--spp 512] [--json FILE]
 
 The ``glass`` scene (slab, ball, prism) rendered with ``RenderConfig.transmissions`` = 0 (the paper:
 a refraction ray shows the first surface it hits, the solid's own back face), 1, 2 and 4 (the ray is
@@ -12,7 +12,6 @@ frames 2..N, serial schedule). The reference is cached.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 
@@ -22,6 +21,7 @@ from serenity.config import RenderConfig
 from serenity.eval.metrics import compare
 from serenity.eval.reference import render_reference
 from serenity.frame import Renderer
+from serenity.io.results import write_results
 from serenity.scene import load
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -52,10 +52,7 @@ def main(argv=None) -> int:
         print(f"transmissions {t}: relMSE {every['rel_mse']:.3f} FLIP {every['flip']:.3f} | traced px "
               f"({traced.mean():.1%}) relMSE {inside['rel_mse']:.3f} FLIP {inside['flip']:.3f} | "
               f"ray tracing {ms:.1f} ms", flush=True)
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as fh:
-        json.dump({"scene": "glass", "size": [width, height], "reference_spp": args.spp, "rows": rows}, fh, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, {"scene": "glass", "size": [width, height], "reference_spp": args.spp, "rows": rows})
     return 0
 
 

@@ -3,8 +3,8 @@ preset with each of ``--resolutions`` cells per cascade axis (everything else as
 the courtyard from 4 camera positions and the Cornell box from 3, at 160×90 against 1024-spp
 references (rendered once and cached; the LPV lives in world space, so a small image judges it).
 
-    python benchmarks/bench_lpv_views.py [--json benchmarks/results/lpv_views.json] [--chart ...png]
-                                         [--resolutions 12] [--lpv FIELD=VALUE ...]
+    python benchmarks/experiments/bench_lpv_views.py [--json experiments/results/lpv_views.json]
+                                         [--chart ...png] [--resolutions 12] [--lpv FIELD=VALUE ...]
 
 Per scene, view and resolution: FLIP and relMSE (without the worst 0.1 % of pixels) of one frame; per
 scene and resolution: their means over the views, and the median milliseconds of the LPV update
@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
 
 from serenity.config import RenderConfig  # noqa: E402
@@ -144,8 +144,8 @@ def chart(results: dict, path: str) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--json", default=os.path.join(ROOT, "benchmarks", "results", "lpv_views.json"))
-    ap.add_argument("--chart", default=os.path.join(ROOT, "benchmarks", "results", "lpv_views.png"))
+    ap.add_argument("--json", default=os.path.join(ROOT, "benchmarks", "experiments", "results", "lpv_views.json"))
+    ap.add_argument("--chart", default=os.path.join(ROOT, "benchmarks", "experiments", "results", "lpv_views.png"))
     ap.add_argument("--resolutions", default=",".join(map(str, RESOLUTIONS)))
     ap.add_argument("--frames", type=int, default=9)
     ap.add_argument("--no-progress", action="store_true")

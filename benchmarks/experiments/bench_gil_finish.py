@@ -1,6 +1,6 @@
 """Does a Python thread issuing Warp launches keep going while the main thread waits for GL?
 
-    python benchmarks/bench_gil_finish.py [--json FILE]
+    python benchmarks/experiments/bench_gil_finish.py [--json FILE]
 
 A worker thread runs small Warp CPU launches (each followed by a little numpy) in a loop while the
 main thread draws a fragment-bound fullscreen pass and waits for it, either through moderngl's
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from serenity.io.results import write_results  # noqa: E402
@@ -48,7 +48,7 @@ void main() {
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--passes", type=int, default=40)
-    ap.add_argument("--json", default=str(ROOT / "benchmarks/results/gil_finish.json"))
+    ap.add_argument("--json", default=str(ROOT / "benchmarks/experiments/results/gil_finish.json"))
     args = ap.parse_args()
     wp = init_warp()
 

@@ -1,7 +1,7 @@
 """What a branch saves on llvmpipe: the cost of a full-screen fragment shader whose expensive part sits
 behind a condition that no pixel, half the pixels or every pixel takes.
 
-    python benchmarks/bench_llvmpipe_branches.py [--size 640x360] [--reps 15] [--json FILE]
+    python benchmarks/experiments/bench_llvmpipe_branches.py [--size 640x360] [--reps 15] [--json FILE]
 
 The deferred passes are written for this rasteriser (``docs/architecture.md``, GL passes): it shades a
 block of pixels as SIMD lanes under an execution mask, so which code a block skips decides what a pass
@@ -33,12 +33,13 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
 
 from serenity.io.results import write_results  # noqa: E402
 
-SHADER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "glsl", "llvmpipe_branches.glsl")
+HERE = os.path.dirname(os.path.abspath(__file__))
+SHADER = os.path.join(HERE, "glsl", "llvmpipe_branches.glsl")
 
 #: body name -> BODY in the shader (12 steps of one kind of work)
 BODIES = {"taps_unrolled": 0, "taps_dynamic": 1, "alu_unrolled": 2}
@@ -50,7 +51,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", default="640x360")
     ap.add_argument("--reps", type=int, default=15)
-    ap.add_argument("--json", default=os.path.join(ROOT, "benchmarks", "results", "llvmpipe_branches.json"))
+    ap.add_argument("--json", default=os.path.join(HERE, "results", "llvmpipe_branches.json"))
     args = ap.parse_args(argv)
     w, h = (int(x) for x in args.size.lower().split("x"))
 

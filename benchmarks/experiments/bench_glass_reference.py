@@ -1,6 +1,6 @@
-"""Is the courtyard's window error ours or the reference's? (issue #14, per-region report)
+"""Is the courtyard's window error ours or the reference's? (per-region report)
 
-    python benchmarks/bench_glass_reference.py [--size 320x180] [--spp 256] [--json FILE]
+    python benchmarks/experiments/bench_glass_reference.py [--size 320x180] [--spp 256] [--json FILE]
 
 The per-region report puts half of the courtyard's relMSE on its 820 window pixels (material
 ``glass``, transparency 0.9), which come out 2.4× brighter than the Mitsuba reference. A path tracer
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import platform
 import sys
@@ -28,6 +27,7 @@ import numpy as np
 
 from serenity.eval.reference import render_reference
 from serenity.frame import Renderer
+from serenity.io.results import write_results
 from serenity.scene import load
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -80,10 +80,7 @@ def main(argv=None) -> int:
         print(f"{k:<11} {v:8.2f} W/m^2/sr (luminance, mean over {int(windows.sum())} window pixels)")
     print(f"glass / open: reference {out['ref_glass_over_open']:.3f}, ours {out['ours_glass_over_open']:.3f} "
           f"(a pane of T = 0.9: about {out['expected_glass_over_open']:.2f} + reflection)")
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as fh:
-        json.dump(out, fh, indent=2)
-    print(f"wrote {args.json}")
+    write_results(args.json, out)
     return 0
 
 

@@ -1,6 +1,6 @@
 """What clearing the shadow atlas's tiles costs: ``glClearTexSubImage`` against a scissored clear.
 
-    python benchmarks/bench_shadow_clear.py [--sizes 320x180,640x360] [--frames 160] [--json FILE]
+    python benchmarks/experiments/bench_shadow_clear.py [--sizes 320x180,640x360] [--frames 160] [--json FILE]
 
 llvmpipe clears a whole framebuffer by tagging its tiles, but a part of one (``fbo.clear`` with a
 viewport: one tile of the 2×2 cascade atlas) by drawing it; ``glClearTexSubImage`` writes the texels
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from serenity.io.results import machine_info, write_results  # noqa: E402
@@ -95,7 +95,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="320x180,640x360")
     ap.add_argument("--frames", type=int, default=160)
-    ap.add_argument("--json", default=str(ROOT / "benchmarks/results/shadow_clear.json"))
+    ap.add_argument("--json", default=str(ROOT / "benchmarks/experiments/results/shadow_clear.json"))
     args = ap.parse_args(argv)
     from serenity.raster import context
 

@@ -1,6 +1,6 @@
-"""What the two sun-shadow fixes of the accuracy issue buy and cost, each switched on in turn.
+"""What the two sun-shadow fixes buy and cost, each switched on in turn.
 
-    python benchmarks/bench_shadow_fixes.py [--frames N] [--json FILE]
+    python benchmarks/experiments/bench_shadow_fixes.py [--frames N] [--json FILE]
 
 The courtyard and the Cornell box at 320×180, default ``RenderConfig`` but for the two switches,
 against the same full references as ``bench_baseline.py`` (two cached halves, 256 / 1024 spp):
@@ -15,8 +15,8 @@ overlapped maps with a hard, unbiased lookup (whether the maps' resolution and b
 acne elsewhere does not matter for this question).
 
 Per setting: relMSE (also 0.1 % trimmed), FLIP, the luminance ratio ours/reference of the glass,
-mirror and down-facing regions (``serenity.eval.regions``), the Cornell box's worst pixel of
-``bench_cornell_pixels.py`` (row 152, column 97: ours and the reference), and the median over frames
+mirror and down-facing regions (``serenity.eval.regions``), the Cornell box's worst pixel
+(row 152, column 97: ours and the reference), and the median over frames
 2..N of the stages the switches touch ("cpu ray tracing" runs in the tracer process, beside the GL
 work) and of the frame's total. The renderers of one scene take their frames in turn, so the load
 of the machine falls on all settings alike. "tracer": the CPU tracer's time for one frame's rays
@@ -57,7 +57,7 @@ SETTINGS = {
 }
 STAGES = ("direct lighting", "cpu ray tracing", "shadow maps (OSM)", "rt direct lighting", "composite")
 WORST = (152, 97)
-"""The Cornell box's worst pixel (row, column) at 320×180 (``benchmarks/results/cornell_worst_pixels.json``)."""
+"""The Cornell box's worst pixel (row, column) at 320×180."""
 
 
 def tracer_cost(scene, w, h, repeats) -> dict | None:
