@@ -12,7 +12,13 @@ What is exported, and how faithfully:
   vertex normals as shading normals, uvs). Opaque BSDFs are wrapped in ``twosided``, as our
   G-buffer shades both sides of every triangle.
 - **Textures**: ``albedo × albedo_texture.mips[0]`` as a raw (linear, no sRGB conversion) float
-  bitmap, bilinear, repeating, flipped vertically so that v = 0 is the image's bottom row as in GL.
+  bitmap, bilinear, repeating, flipped vertically so that v = 0 is the image's bottom row as in GL,
+  through the material's ``albedo_uv_transform`` (``to_uv``).
+- **Cut-outs** (``Material.alpha_tested``): the BSDF inside a ``mask`` whose opacity is 1 where the
+  coverage reaches the cutoff and 0 elsewhere, texel by texel. **Normal maps**: a ``normalmap``
+  inside the ``twosided`` wrapper, its scale and uv frame baked into the bitmap (Mitsuba builds the
+  tangent from dp/du as our tangents do, but takes the bitmap's y along n × t, without a
+  handedness sign).
   Mitsuba does not use our mips: its pixel-footprint average comes from supersampling.
 - **Phong** ``ρ/π + k_s (n+2)/(2π) cos^n(r, v)`` (our deferred shader) has no Mitsuba plugin. It maps
   to ``blendbsdf(weight=k_s, diffuse(ρ/(1-k_s)), roughconductor(beckmann, α=√(2/(n+2)), F=1))``:
@@ -24,9 +30,8 @@ What is exported, and how faithfully:
   few tens of percent of the *specular* term. With k_s ≤ 0.05 on the built-in scenes' diffuse
   materials this is well under 1% of their radiance; it matters for water (k_s 0.3) and for the
   highlights on mirrors and glass. ρ/(1-k_s) > 1 (ρ + k_s > 1: the built-in glass, ρ 0.95 and
-  k_s 0.5, reflects 1.45 of what it receives) is exported as it is, through a raw bitmap; it was
-  clamped to 1 until the courtyard's windows showed the difference (their Phong surface at 0.53 of
-  ours in the reference).
+  k_s 0.5, reflects 1.45 of what it receives) is exported as it is, through a raw bitmap: clamped
+  to 1, the courtyard windows' Phong surface would read 0.53 of ours in the reference.
 - **Mirrors** (``reflectivity`` R > 0): ``blendbsdf(weight=R, phong, conductor(F=1))`` — R·mirror +
   (1-R)·surface. Our composite uses Schlick's F(R, cos θ) instead of R, so the reference lacks the
   reflectance rise towards grazing angles (at most (1-R)(1-cos θ)⁵, < 1% below 50°).
@@ -76,6 +81,7 @@ from serenity.config import check_image_size
 from serenity.errors import SerenityError
 from serenity.kernels.atmosphere import equirect_sky, scene_sun_irradiance
 from serenity.optional import require
+from serenity.scene.model import IDENTITY_UV, normal_map_frame
 
 EXPORTER_VERSION = 3
 """Bump when the export changes what an image looks like (invalidates the cache)."""
@@ -165,7 +171,38 @@ def _albedo_spec(mi, material, scale: float) -> dict:
     img = np.asarray(material.albedo_texture.mips[0], np.float32)[..., :3] * material.albedo.astype(np.float32)
     img = np.maximum(img * np.float32(scale), 0.0)[::-1]  # GL: v = 0 is the bottom row
     return {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(img)), "raw": True,
-            "filter_type": "bilinear", "wrap_mode": "repeat"}
+            "filter_type": "bilinear", "wrap_mode": "repeat", "to_uv": _to_uv(mi, material.albedo_uv_transform)}
+
+
+def _to_uv(mi, m) -> object:
+    """A material's (2, 3) uv transform as Mitsuba's bitmap ``to_uv`` (its uvs are ours: the images
+    are flipped so that v = 0 is the bottom row)."""
+    return mi.ScalarTransform3f(np.vstack([np.asarray(m, np.float64), [0.0, 0.0, 1.0]]))
+
+
+def _opacity_spec(mi, material) -> dict:
+    """A cut-out's coverage as the ``mask`` BSDF's opacity: 1 where coverage × texture alpha reaches
+    the cutoff, 0 elsewhere, per texel of level 0 (bilinear between texels, so edges are soft
+    within one texel where ours are hard), through the albedo uv transform."""
+    t = material.albedo_texture
+    if t is None or t.channels < 4:
+        return {"type": "uniform", "value": float(material.alpha >= material.alpha_cutoff)}
+    keep = (material.alpha * np.asarray(t.mips[0], np.float32)[..., 3] >= material.alpha_cutoff)
+    img = keep.astype(np.float32)[::-1, :, None]
+    return {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(img)), "raw": True,
+            "filter_type": "bilinear", "wrap_mode": "repeat", "to_uv": _to_uv(mi, material.albedo_uv_transform)}
+
+
+def _normalmap_spec(mi, material) -> dict:
+    """The normal map as Mitsuba's ``normalmap`` texture: raw, ``normal_scale`` and the uv transform's
+    frame (``normal_map_frame``) baked into its x and y, encoded back to [0, 1]."""
+    n = np.asarray(material.normal_texture.mips[0], np.float64)[..., :3] * 2.0 - 1.0
+    xy = n[..., :2] * material.normal_scale
+    n[..., :2] = xy @ normal_map_frame(material.normal_uv_transform).T
+    n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
+    img = (n * 0.5 + 0.5).astype(np.float32)[::-1]
+    return {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(img)), "raw": True,
+            "filter_type": "bilinear", "wrap_mode": "repeat", "to_uv": _to_uv(mi, material.normal_uv_transform)}
 
 
 def phong_alpha(shininess: float) -> float:
@@ -195,11 +232,18 @@ def material_bsdf(mi, material) -> dict:
     surface = _phong_bsdf(mi, material)
     if material.transparency > 0.0:
         glass = {"type": "dielectric", "int_ior": float(material.ior), "ext_ior": 1.0}
-        return {"type": "blendbsdf", "weight": float(material.transparency), "bsdf_0": surface, "bsdf_1": glass}
-    if material.reflectivity > 0.0:
-        mirror = {"type": "conductor", "material": "none"}
-        surface = {"type": "blendbsdf", "weight": float(material.reflectivity), "bsdf_0": surface, "bsdf_1": mirror}
-    return {"type": "twosided", "bsdf": surface}
+        out = {"type": "blendbsdf", "weight": float(material.transparency), "bsdf_0": surface, "bsdf_1": glass}
+    else:
+        if material.reflectivity > 0.0:
+            mirror = {"type": "conductor", "material": "none"}
+            surface = {"type": "blendbsdf", "weight": float(material.reflectivity), "bsdf_0": surface,
+                       "bsdf_1": mirror}
+        if material.normal_texture is not None:
+            surface = {"type": "normalmap", "normalmap": _normalmap_spec(mi, material), "bsdf": surface}
+        out = {"type": "twosided", "bsdf": surface}
+    if material.alpha_tested:
+        out = {"type": "mask", "opacity": _opacity_spec(mi, material), "bsdf": out}
+    return out
 
 
 # ------------------------------------------------------------------------------------------- scene
@@ -351,6 +395,10 @@ def scene_hash(scene, settings: dict, sky: np.ndarray | None = None) -> str:
     for m in scene.materials:
         put(m.albedo, m.specular, m.shininess, m.reflectivity, m.transparency, m.ior)
         put(None if m.albedo_texture is None else m.albedo_texture.mips[0])
+        if m.alpha_tested or m.normal_texture is not None or not np.array_equal(m.albedo_uv_transform, IDENTITY_UV):
+            # only scenes that use these change their keys
+            put("cut-outs, normal maps, uv transforms", m.alpha_tested, m.alpha, m.alpha_cutoff, m.albedo_uv_transform,
+                m.normal_uv_transform, m.normal_scale, None if m.normal_texture is None else m.normal_texture.mips[0])
         if diffuse_exceeds_one(m):  # exported unclamped since then: only these scenes' keys change
             put("diffuse > 1 unclamped")
     c = scene.camera

@@ -190,6 +190,8 @@ wp.set_module_options(TRACE_MODULE_OPTIONS)
 STACK_SIZE = KD_MAX_DEPTH + 2
 #: words of padding after the last leaf block (``refs``): SIMD leaf tests load 8 or 16 words at a time
 REF_PAD = 16
+#: a ray goes on through at most this many cut-out hits the alpha test rejects (``KdTree.set_alpha_test``)
+MAX_CUTOUT_LAYERS = 64
 T_TOLERANCE = 1e-6  # relative (to the scene scale) overlap of near/far traversal intervals
 BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest extent
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
@@ -2276,6 +2278,20 @@ class KdTree:
         self.stats = stats
         self._device_data: dict[str, KdTreeData] = {}
         self._scratch = threading.local()  # per thread: scratch()
+        self._masked: np.ndarray | None = None  # (F,) bool: triangles the alpha test applies to
+        self._coverage = None
+
+    def set_alpha_test(self, masked: np.ndarray, coverage) -> None:
+        """Cut-outs for :meth:`intersect` and :meth:`occluded`: ``masked`` (F,) bool marks the
+        triangles of alpha-tested materials, ``coverage(prim, u, v)`` → (N,) bool says whether such a
+        triangle is there at a hit. A rejected hit is not a hit: the ray goes on beyond it. The
+        traversal kernels are unchanged — the test runs on the host over the hits on masked
+        triangles only (a tree without masked triangles queries exactly as before)."""
+        masked = np.asarray(masked, bool).reshape(-1)
+        if masked.shape != (len(self.faces),):
+            raise SerenityError(f"alpha test: {masked.shape[0]} flags for {len(self.faces)} triangles")
+        self._masked = masked if masked.any() else None
+        self._coverage = coverage if masked.any() else None
 
     # -- build and cache ------------------------------------------------------------------------
 
@@ -2418,6 +2434,14 @@ class KdTree:
         either way, in the caller's order."""
         dev = resolve_device(device)
         o, d, tm = self._rays(origins, directions, tmax)
+        hits = self._closest(o, d, tm, dev, tmin, threads, sort, rays_per_thread)
+        if self._masked is not None and len(o):
+            self._through_cutouts(hits, o, d, tm, dev, tmin, threads)
+        return hits
+
+    def _closest(self, o, d, tm, dev: str, tmin: float, threads: int | None, sort: bool | None,
+                 rays_per_thread: int | None) -> Hits:
+        """The closest-hit query of :meth:`intersect` without the alpha test."""
         n = len(o)
         if n:
             args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
@@ -2428,6 +2452,32 @@ class KdTree:
             columns, _ = hit_outputs(0, dev, False)
         out_t, out_p, out_u, out_v = (a.numpy() for a in columns)
         return Hits(t=out_t, prim=out_p, u=out_u, v=out_v)
+
+    def _through_cutouts(self, hits: Hits, o, d, tm, dev: str, tmin: float, threads: int | None) -> None:
+        """Replace, in place, the hits the alpha test rejects by what lies beyond them: those rays
+        are traced again from their hit point on (origin moved to it, t measured from the original
+        origin), up to ``MAX_CUTOUT_LAYERS`` times; a ray still on a rejected hit then misses."""
+        eps = T_TOLERANCE * float(self.device_data(dev).scale)
+        for layer in range(MAX_CUTOUT_LAYERS + 1):
+            idx = np.flatnonzero(hits.prim >= 0)
+            idx = idx[self._masked[hits.prim[idx]]]
+            if len(idx):
+                idx = idx[~self._coverage(hits.prim[idx], hits.u[idx], hits.v[idx])]
+            if not len(idx):
+                return
+            if layer == MAX_CUTOUT_LAYERS:
+                hits.t[idx], hits.prim[idx], hits.u[idx], hits.v[idx] = np.inf, -1, 0.0, 0.0
+                return
+            t0 = hits.t[idx].astype(np.float64)
+            di = d[idx].astype(np.float64)
+            step = eps / np.maximum(np.linalg.norm(di, axis=1), 1e-30)
+            oi = (o[idx] + t0[:, None] * di).astype(np.float32)
+            tmax_i = (np.broadcast_to(tm, (len(o),))[idx] - t0).astype(np.float32)
+            oi, di32, tmax_i = self._rays(oi, d[idx], tmax_i)
+            again = self._closest(oi, di32, tmax_i, dev, float(step.min()), threads, None, None)
+            hit = again.prim >= 0
+            hits.t[idx] = np.where(hit, (t0 + again.t).astype(np.float32), np.inf)
+            hits.prim[idx], hits.u[idx], hits.v[idx] = again.prim, again.u, again.v
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
                  threads: int | None = None, sort: bool | None = None,
@@ -2441,7 +2491,13 @@ class KdTree:
         if n:
             args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
             _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, self.scratch(dev), coherent)
-        return out.numpy().astype(bool)
+        occ = out.numpy().astype(bool)
+        if self._masked is not None and occ.any():
+            # an any hit may be a rejected cut-out: the occluded rays look for their nearest kept hit
+            idx = np.flatnonzero(occ)
+            tmi = tm if np.ndim(tm) == 0 else tm[idx]
+            occ[idx] = self.intersect(o[idx], d[idx], tmi, dev, tmin=tmin, threads=threads).prim >= 0
+        return occ
 
 
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS", "KEY_LANES",

@@ -55,6 +55,7 @@ from serenity.kernels.atmosphere_ref import sample_sky_map_np
 from serenity.kernels.kdtree_build import cache_dir
 from serenity.kernels.launch import launch
 from serenity.kernels.sh import eval_sh9, sh_basis, vec9
+from serenity.scene.model import IDENTITY_UV
 
 wp.set_module_options({"enable_backward": False})
 
@@ -380,6 +381,13 @@ def scene_key(scene) -> str:
         h.update(np.ascontiguousarray(m.albedo, np.float64).tobytes())
         if m.albedo_texture is not None:
             h.update(np.ascontiguousarray(m.albedo_texture.mips[0]).tobytes())
+        if m.alpha_tested or m.normal_texture is not None or not np.array_equal(m.albedo_uv_transform, IDENTITY_UV):
+            # cut-outs, normal maps and uv transforms change what the rays hit and see (only such
+            # scenes' keys change)
+            h.update(f"|cutout {m.alpha_tested} {m.alpha} {m.alpha_cutoff} {m.normal_scale}".encode())
+            h.update(np.ascontiguousarray(np.concatenate([m.albedo_uv_transform, m.normal_uv_transform])).tobytes())
+            if m.normal_texture is not None:
+                h.update(np.ascontiguousarray(m.normal_texture.mips[0]).tobytes())
     return h.hexdigest()
 
 

@@ -22,6 +22,15 @@ surface each one hits is written into a G-buffer with **the same layout as the r
              hit when a sun direction is given (1 = lit, 0 = blocked), else 0.
 Misses write zeros to albedo, normal, position and material.
 
+Materials (``scene.model.Material``): a cut-out's hits (``alpha_cutoff``) go through the alpha test
+(:func:`covered`: coverage × the albedo texture's alpha, bilinear at level 0) and a rejected hit is
+not there — the ray, the sun's shadow ray and the probes' rays go on beyond it
+(:func:`trace_scene`; the tree's own host queries do the same, ``KdTree.set_alpha_test``). A
+normal-mapped material's normal is read from its tangent-space map at level 0 (bilinear) in the
+frame of the interpolated normal and the per-vertex tangent (:func:`mapped_normal`), then turned
+with the triangle's side towards the ray. Textures are read at the uvs through the material's uv
+transforms (KHR_texture_transform).
+
 Transmission (beyond the paper, whose tracer stops at the first hit, §12): with ``transmissions``
 = K > 0 a ray that hits a transparent material (transparency > 0) is bent there instead of
 shaded — refracted by Snell's law with the material's index (entering where the interpolated
@@ -76,6 +85,7 @@ from serenity.kernels.kdtree import (
     trace_kd,
 )
 from serenity.kernels.launch import launch
+from serenity.scene.model import normal_map_frame
 
 wp.set_module_options(TRACE_MODULE_OPTIONS)  # no FMA contraction: watertight on CUDA too (kdtree.py)
 
@@ -85,6 +95,9 @@ wp.set_module_options(TRACE_MODULE_OPTIONS)  # no FMA contraction: watertight on
 
 RAY_EPSILON_REL = 1e-4  # default tmin: this fraction of the scene's bounding-box diagonal (m)
 MIN_COSINE = 1e-4  # |n·d| floor in the LOD formula (grazing hits get the coarsest mips, not inf)
+#: a ray goes on through at most this many rejected cut-out hits (``trace_scene``), then counts as a miss
+MAX_CUTOUT_LAYERS = 64
+_INF_RT = wp.constant(float("inf"))
 
 # ----------------------------------------------------------------------------------------------
 # structs
@@ -109,6 +122,12 @@ class SceneData:
     level_offset: wp.array(dtype=wp.int32)  # (L,) first texel of each level in ``texels``
     level_size: wp.array(dtype=wp.vec2i)  # (L,) (width, height)
     texels: wp.array(dtype=wp.vec4)  # all levels of all textures, row-major, top row first, RGBA linear
+    mat_alpha: wp.array(dtype=wp.vec2)  # (M,) coverage factor, alpha cutoff (< 0: not a cut-out)
+    mat_uv: wp.array(dtype=wp.vec3)  # (4M,) rows of the albedo's, then the normal map's (2, 3) uv transform
+    mat_normal_tex: wp.array(dtype=wp.int32)  # (M,) normal map's texture index or -1
+    mat_normal: wp.array(dtype=wp.vec4)  # (M,) normal_map_frame (row-major 2x2) x normal_scale
+    tangents: wp.array(dtype=wp.vec4)  # (V,) xyz, handedness w (one dummy entry without normal maps)
+    cutouts: int  # 1 when some material is a cut-out (the alpha test runs on hits of those materials)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -127,6 +146,13 @@ def wrap_index(i: int, n: int) -> int:
 @wp.func
 def sample_bilinear(scene: SceneData, level: int, uv: wp.vec2) -> wp.vec3:
     """Bilinear lookup of one mip level with repeat wrap (GL_LINEAR, GL_REPEAT)."""
+    c = sample_bilinear4(scene, level, uv)
+    return wp.vec3(c[0], c[1], c[2])
+
+
+@wp.func
+def sample_bilinear4(scene: SceneData, level: int, uv: wp.vec2) -> wp.vec4:
+    """:func:`sample_bilinear` with the alpha channel."""
     size = scene.level_size[level]
     w = size[0]
     h = size[1]
@@ -149,8 +175,7 @@ def sample_bilinear(scene: SceneData, level: int, uv: wp.vec2) -> wp.vec3:
     t11 = scene.texels[off + r1 * w + c1]
     top = t00 * (1.0 - tx) + t01 * tx
     bottom = t10 * (1.0 - tx) + t11 * tx
-    c = top * (1.0 - ty) + bottom * ty
-    return wp.vec3(c[0], c[1], c[2])
+    return top * (1.0 - ty) + bottom * ty
 
 
 @wp.func
@@ -180,6 +205,88 @@ def eval_texture_lod(scene: SceneData, tex: int, p0: wp.vec3, p1: wp.vec3, p2: w
     if t_a > 0.0 and p_a > 0.0 and cone > 0.0:
         lod = wp.log2(cone / wp.max(cos_theta, MIN_COSINE) * wp.sqrt(t_a / p_a))
     return lod
+
+
+@wp.func
+def uv_transform(scene: SceneData, row: int, uv: wp.vec2) -> wp.vec2:
+    """``uv`` through the (2, 3) transform whose rows are ``mat_uv[row]``, ``mat_uv[row + 1]``."""
+    r0 = scene.mat_uv[row]
+    r1 = scene.mat_uv[row + 1]
+    return wp.vec2(r0[0] * uv[0] + r0[1] * uv[1] + r0[2], r1[0] * uv[0] + r1[1] * uv[1] + r1[2])
+
+
+@wp.func
+def covered(scene: SceneData, prim: int, u: float, v: float) -> bool:
+    """The alpha test at a hit: False where a cut-out material's coverage (factor × its albedo
+    texture's alpha, bilinear at level 0, through the albedo uv transform) is below its cutoff."""
+    m = scene.face_material[prim]
+    ac = scene.mat_alpha[m]
+    if ac[1] < 0.0:
+        return True
+    a = ac[0]
+    tex = scene.mat_texture[m]
+    if tex >= 0:
+        f = scene.faces[prim]
+        uv = (1.0 - u - v) * scene.uvs[f[0]] + u * scene.uvs[f[1]] + v * scene.uvs[f[2]]
+        a = a * sample_bilinear4(scene, scene.tex_first_level[tex], uv_transform(scene, 4 * m, uv))[3]
+    return a >= ac[1]
+
+
+@wp.func
+def trace_scene(scene: SceneData, o: wp.vec3, d: wp.vec3, tmin: float, tmax: float, any_hit: bool):
+    """:func:`~serenity.kernels.kdtree.trace_kd` with the cut-outs' alpha test: a hit the test
+    rejects is not there, and the ray goes on beyond it (traced again from its t, up to
+    ``MAX_CUTOUT_LAYERS`` times). An any-hit query that first lands on a rejected hit goes on as a
+    closest-hit search (an any hit is not the nearest, so tracing on beyond it could skip a nearer
+    one). In a scene without cut-outs this is trace_kd."""
+    prim, t, u, v = trace_kd(scene.tree, o, d, tmin, tmax, any_hit)
+    if scene.cutouts == 0 or prim < 0:
+        return prim, t, u, v
+    if covered(scene, prim, u, v):
+        return prim, t, u, v
+    lo = tmin
+    if not any_hit:
+        lo = t
+    for _layer in range(MAX_CUTOUT_LAYERS):
+        prim, t, u, v = trace_kd(scene.tree, o, d, lo, tmax, False)
+        if prim < 0:
+            return prim, t, u, v
+        if covered(scene, prim, u, v):
+            return prim, t, u, v
+        lo = t
+    return int(-1), float(_INF_RT), float(0.0), float(0.0)
+
+
+@wp.func
+def mapped_normal(scene: SceneData, m: int, n: wp.vec3, f: wp.vec3i, u: float, v: float, uv: wp.vec2) -> wp.vec3:
+    """The shading normal from material ``m``'s tangent-space normal map at mesh uv ``uv`` (its
+    texture at level 0, bilinear), in the frame of the interpolated normal ``n`` and tangent; ``n``
+    where the material has none or the tangent is degenerate."""
+    ntex = scene.mat_normal_tex[m]
+    if ntex < 0:
+        return n
+    b0 = 1.0 - u - v
+    tg = b0 * scene.tangents[f[0]] + u * scene.tangents[f[1]] + v * scene.tangents[f[2]]
+    t3 = wp.vec3(tg[0], tg[1], tg[2])
+    t3 = t3 - n * wp.dot(n, t3)
+    lt = wp.length(t3)
+    if lt <= 1.0e-8:
+        return n
+    t3 = t3 / lt
+    w = float(1.0)
+    if tg[3] < 0.0:
+        w = -1.0
+    b = wp.cross(n, t3) * w
+    c = sample_bilinear(scene, scene.tex_first_level[ntex], uv_transform(scene, 4 * m + 2, uv)) * 2.0 \
+        - wp.vec3(1.0, 1.0, 1.0)
+    fr = scene.mat_normal[m]
+    x = fr[0] * c[0] + fr[1] * c[1]
+    y = fr[2] * c[0] + fr[3] * c[1]
+    nm = t3 * x + b * y + n * c[2]
+    ln = wp.length(nm)
+    if ln <= 1.0e-6:
+        return n
+    return nm / ln
 
 
 # ----------------------------------------------------------------------------------------------
@@ -246,7 +353,7 @@ def trace_gbuffer(
     travelled = float(0.0)
     # pass through up to ``transmissions`` transparent interfaces, then shade the hit
     for k in range(transmissions + 1):
-        prim, t, u, v = trace_kd(scene.tree, o, dn, tmin, tmax, False)
+        prim, t, u, v = trace_scene(scene, o, dn, tmin, tmax, False)
         out_eye[i] = wp.vec4(o[0], o[1], o[2], 0.0)
         if prim < 0:
             out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], 0.0)
@@ -275,17 +382,22 @@ def trace_gbuffer(
         out_ray[i] = wp.vec4(dn[0], dn[1], dn[2], t_all)
         if report_back and wp.dot(ng, dn) > 0.0:
             out_back[i] = 1
-        if wp.dot(n, dn) > 0.0:  # two-sided: face the viewer of this ray, as the G-buffer pass does
+        flip = wp.dot(n, dn) > 0.0  # two-sided: face the viewer of this ray, as the G-buffer pass does
+        uv0 = scene.uvs[f[0]]
+        uv1 = scene.uvs[f[1]]
+        uv2 = scene.uvs[f[2]]
+        if scene.mat_normal_tex[m] >= 0:
+            n = mapped_normal(scene, m, n, f, u, v, b0 * uv0 + u * uv1 + v * uv2)
+        if flip:
             n = -n
         albedo = scene.mat_albedo[m]
         tex = scene.mat_texture[m]
         if tex >= 0:
-            uv0 = scene.uvs[f[0]]
-            uv1 = scene.uvs[f[1]]
-            uv2 = scene.uvs[f[2]]
-            uv = b0 * uv0 + u * uv1 + v * uv2
+            r = 4 * m
+            uv = uv_transform(scene, r, b0 * uv0 + u * uv1 + v * uv2)
             cone = cone_width[i] + cone_spread[i] * t_all
-            lod = eval_texture_lod(scene, tex, p0, p1, p2, uv0, uv1, uv2, cone, wp.abs(wp.dot(ng, dn)))
+            lod = eval_texture_lod(scene, tex, p0, p1, p2, uv_transform(scene, r, uv0), uv_transform(scene, r, uv1),
+                                   uv_transform(scene, r, uv2), cone, wp.abs(wp.dot(ng, dn)))
             albedo = wp.cw_mul(albedo, sample_trilinear(scene, tex, uv, lod))
         out_albedo[i] = wp.vec4(albedo[0], albedo[1], albedo[2], float(m))
         out_normal[i] = wp.vec4(n[0], n[1], n[2], scene.mat_specular[m])
@@ -293,7 +405,7 @@ def trace_gbuffer(
         out_material[i] = prm
         if sun_shadows != 0:
             vis = float(1.0)
-            s_prim, s_t, s_u, s_v = trace_kd(scene.tree, p, sun, tmin, float(1.0e30), True)
+            s_prim, s_t, s_u, s_v = trace_scene(scene, p, sun, tmin, float(1.0e30), True)
             if s_prim >= 0:
                 vis = 0.0
             out_eye[i] = wp.vec4(o[0], o[1], o[2], vis)
@@ -334,6 +446,22 @@ def pack_mip_chains(textures: list) -> tuple[np.ndarray, np.ndarray, np.ndarray,
             np.array(sizes, np.int32).reshape(-1, 2), np.concatenate(chunks))
 
 
+def _coverage_test(materials, fmat: np.ndarray, faces: np.ndarray, uvs: np.ndarray):
+    """The alpha test on the host for :meth:`KdTree.set_alpha_test`: (prim, u, v) → (N,) bool covered
+    (``Material.coverage`` at the hit's interpolated uv), the host twin of :func:`covered`."""
+    def test(prim: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        f = faces[prim]
+        b0 = (1.0 - u - v)[:, None]
+        uv = b0 * uvs[f[:, 0]] + u[:, None] * uvs[f[:, 1]] + v[:, None] * uvs[f[:, 2]]
+        out = np.ones(len(prim), bool)
+        mats = fmat[prim]
+        for mi in np.unique(mats):
+            sel = mats == mi
+            out[sel] = materials[int(mi)].coverage(uv[sel])
+        return out
+    return test
+
+
 class RayTracer:
     """Traces rays into G-buffers (module docstring) for one static scene on one device.
 
@@ -353,16 +481,19 @@ class RayTracer:
         diag = float(np.linalg.norm(hi.astype(np.float64) - lo))
         self.ray_epsilon = float(ray_epsilon) if ray_epsilon is not None else RAY_EPSILON_REL * max(diag, 1e-6)
 
-        textures, tex_index, mat_tex = [], {}, []
-        for m in scene.materials:
-            t = m.albedo_texture
+        textures, tex_index, mat_tex, mat_ntex = [], {}, [], []
+
+        def texture_index(t) -> int:
             if t is None:
-                mat_tex.append(-1)
-                continue
+                return -1
             if id(t) not in tex_index:
                 tex_index[id(t)] = len(textures)
                 textures.append(t)
-            mat_tex.append(tex_index[id(t)])
+            return tex_index[id(t)]
+
+        for m in scene.materials:
+            mat_tex.append(texture_index(m.albedo_texture))
+            mat_ntex.append(texture_index(m.normal_texture))
         first, nlev, offs, sizes, texels = pack_mip_chains(textures)
         mats = scene.materials
         dev = self.device
@@ -382,6 +513,19 @@ class RayTracer:
         s.level_offset = wp_.array(offs, dtype=wp.int32, device=dev)
         s.level_size = wp_.array(sizes, dtype=wp.vec2i, device=dev)
         s.texels = wp_.array(texels, dtype=wp.vec4, device=dev)
+        s.mat_alpha = wp_.array(np.array([[m.alpha, m.alpha_cutoff if m.alpha_tested else -1.0] for m in mats],
+                                         np.float32), dtype=wp.vec2, device=dev)
+        s.mat_uv = wp_.array(np.concatenate([np.concatenate([m.albedo_uv_transform, m.normal_uv_transform])
+                                             for m in mats]).astype(np.float32), dtype=wp.vec3, device=dev)
+        s.mat_normal_tex = wp_.array(np.array(mat_ntex, np.int32), dtype=wp.int32, device=dev)
+        s.mat_normal = wp_.array(np.array([(normal_map_frame(m.normal_uv_transform) * m.normal_scale).reshape(4)
+                                           for m in mats], np.float32), dtype=wp.vec4, device=dev)
+        tangents = scene.merged_tangents() if scene.has_normal_maps else np.zeros((1, 4), np.float32)
+        s.tangents = wp_.array(tangents, dtype=wp.vec4, device=dev)
+        cut = np.array([m.alpha_tested for m in mats], bool)
+        s.cutouts = int(cut.any())
+        if cut.any():  # the tree's own queries (probe visibility, sun rays) run the same alpha test
+            self.tree.set_alpha_test(cut[fmat], _coverage_test(scene.materials, fmat, faces, uv))
         self.data = s
         self.textures = textures
 
@@ -424,7 +568,7 @@ class RayTracer:
             reordered = order.shape[0] > 0
             if reordered:
                 rays = gather_in_order(order, rays, dev, threads, scratch)
-            # a reordered batch is traced into scratch arrays in its order, then scattered back
+            # a reordered batch is traced into working arrays in its order, then scattered back
             traced = buffers_like([*outs, back], "traced", dev, scratch) if reordered else [*outs, back]
             args = [self.data, *rays, float(self.ray_epsilon if tmin is None else tmin), float(tmax),
                     int(max(0, transmissions)), wp.vec3(*(float(x) for x in sun)),

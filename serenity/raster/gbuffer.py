@@ -13,6 +13,14 @@ import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program, uniform
+from serenity.scene.model import normal_map_frame
+
+
+def _uv_uniforms(program, prefix: str, m: np.ndarray) -> None:
+    """A (2, 3) uv transform as the two row uniforms ``prefix``0 and ``prefix``1 (where the variant reads them)."""
+    for k in range(2):
+        if (u := uniform(program, f"{prefix}{k}")) is not None:
+            u.value = tuple(float(x) for x in m[k])
 
 
 @dataclass
@@ -32,17 +40,25 @@ class GBufferPass:
         self.scene_gl = scene_gl
         self.texture_taps = int(texture_taps)
         """Trilinear taps per textured fragment along the footprint's major axis (1 = plain GL)."""
-        # one program for untextured materials and one for textured ones (``glsl/gbuffer.glsl``,
-        # TEXTURE_TAPS): llvmpipe would otherwise sample for every fragment, textured or not
-        self.program = load_program(ctx, "gbuffer.glsl", defines={"TEXTURE_TAPS": 0})
-        self.vao = scene_gl.vao(self.program)
+        # one program per variant drawn (``glsl/gbuffer.glsl``): untextured (TEXTURE_TAPS 0), textured,
+        # and the cut-outs' and normal-mapped materials' variants — llvmpipe would otherwise sample for
+        # every fragment, textured or not
+        self._programs: dict[tuple[bool, bool, bool], tuple] = {}
+        self.program, self.vao = self._variant(False, False, False)
         self.program_textured = self.vao_textured = None  # only for a scene with textures
         if scene_gl.textures:
-            self.program_textured = load_program(ctx, "gbuffer.glsl",
-                                                 defines={"TEXTURE_TAPS": max(1, self.texture_taps)})
-            self.vao_textured = scene_gl.vao(self.program_textured)
+            self.program_textured, self.vao_textured = self._variant(True, False, False)
         self.size = None
         self.gbuffer = None
+
+    def _variant(self, textured: bool, masked: bool, normal_map: bool) -> tuple:
+        key = (textured or masked, masked, normal_map)
+        if key not in self._programs:
+            p = load_program(self.ctx, "gbuffer.glsl", defines={
+                "TEXTURE_TAPS": max(1, self.texture_taps) if key[0] else 0, "ALPHA_MASK": int(masked),
+                "NORMAL_MAP": int(normal_map)})
+            self._programs[key] = (p, self.scene_gl.vao(p))
+        return self._programs[key]
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
@@ -79,18 +95,32 @@ class GBufferPass:
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
             vp = view_proj.T.astype(np.float32).tobytes()
-            for p in (self.program, self.program_textured):
-                if p is not None:
+            cam = tuple(float(x) for x in camera_pos)
+            sgl = self.scene_gl
+            ready = set()  # programs whose per-frame uniforms are set
+            for r in sgl.ranges:
+                m = sgl.materials[r.material]
+                tex = sgl.textures.get(r.material)
+                ntex = sgl.normal_textures.get(r.material)
+                p, vao = self._variant(tex is not None, m.alpha_tested, ntex is not None)
+                if id(p) not in ready:
+                    ready.add(id(p))
                     p["u_view_proj"].write(vp)
                     if (u := uniform(p, "u_camera_pos")) is not None:
-                        u.value = tuple(float(x) for x in camera_pos)
-            for r in self.scene_gl.ranges:
-                m = self.scene_gl.materials[r.material]
-                tex = self.scene_gl.textures.get(r.material)
-                p, vao = (self.program, self.vao) if tex is None else (self.program_textured, self.vao_textured)
+                        u.value = cam
                 if tex is not None:
                     tex.use(location=0)
                     p["u_albedo_tex"].value = 0
+                    _uv_uniforms(p, "u_albedo_uv", m.albedo_uv_transform)
+                if m.alpha_tested:
+                    p["u_alpha"].value = float(m.alpha)
+                    p["u_alpha_cutoff"].value = float(m.alpha_cutoff)
+                if ntex is not None:
+                    ntex.use(location=1)
+                    p["u_normal_tex"].value = 1
+                    _uv_uniforms(p, "u_normal_uv", m.normal_uv_transform)
+                    p["u_normal_frame"].write(normal_map_frame(m.normal_uv_transform).T.astype(np.float32).tobytes())
+                    p["u_normal_scale"].value = float(m.normal_scale)
                 p["u_albedo"].value = tuple(float(x) for x in m.albedo)
                 p["u_material_index"].value = float(r.material)
                 p["u_specular"].value = float(m.specular)

@@ -7,7 +7,9 @@ the sun power the scene's directly lit surfaces reflect diffusely.
 
 ρ of a textured material is the material albedo times the texture's mean: an RSM texel (and the
 LPV cell it lands in) is far coarser than texture detail, and binding a texture per draw made this
-256² pass cost ~115 ms instead of ~1.5 ms on llvmpipe (measured on the courtyard).
+256² pass cost ~115 ms instead of ~1.5 ms on llvmpipe (measured on the courtyard). Cut-outs
+(``Material.alpha_tested``) are the exception: they are drawn with their texture's alpha test
+(``rsm.glsl``'s ALPHA_MASK variant), so light passes their holes as it does in the shadow maps.
 """
 
 from __future__ import annotations
@@ -52,6 +54,10 @@ class RSMPass:
         self.size = size
         self.program = load_program(ctx, "rsm.glsl")
         self.vao = scene_gl.vao(self.program)
+        self.program_masked = self.vao_masked = None  # cut-outs: the alpha test (ALPHA_MASK)
+        if any(scene_gl.materials[r.material].alpha_tested for r in scene_gl.ranges):
+            self.program_masked = load_program(ctx, "rsm.glsl", defines={"ALPHA_MASK": 1})
+            self.vao_masked = scene_gl.vao(self.program_masked)
         self.targets = [ctx.texture((size, size), 4, dtype="f4") for _ in range(3)]
         for t in self.targets:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -67,15 +73,20 @@ class RSMPass:
             self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
-            p["u_view_proj"].write(vp.T.astype(np.float32).tobytes())
-            p["u_sun_dir"].value = tuple(float(x) for x in sun_direction)
-            p["u_sun_irradiance"].value = tuple(float(x) for x in sun_irradiance)
-            p["u_texel_area"].value = float(self.texel_area)
+            for q in (p, self.program_masked):
+                if q is not None:
+                    q["u_view_proj"].write(vp.T.astype(np.float32).tobytes())
+                    q["u_sun_dir"].value = tuple(float(x) for x in sun_direction)
+                    q["u_sun_irradiance"].value = tuple(float(x) for x in sun_irradiance)
+                    q["u_texel_area"].value = float(self.texel_area)
             for r in self.scene_gl.ranges:
                 m = self.scene_gl.materials[r.material]
                 albedo = np.asarray(m.albedo, np.float64) * self.scene_gl.mean_texture_albedo.get(r.material, 1.0)
-                p["u_albedo"].value = tuple(float(x) for x in albedo)
-                self.vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
+                q, vao = (self.program_masked, self.vao_masked) if m.alpha_tested else (p, self.vao)
+                if m.alpha_tested:
+                    self.scene_gl.bind_alpha_test(q, r.material)
+                q["u_albedo"].value = tuple(float(x) for x in albedo)
+                vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
             ctx.disable(moderngl.DEPTH_TEST)
 
     def read(self) -> VPLs:

@@ -1,7 +1,13 @@
 """The scene's geometry and textures on the GL side, uploaded once (static scenes).
 
 Faces are sorted by material so that each material is one indexed draw range; vertex buffer
-layout: position (3 f4), normal (3 f4), uv (2 f4).
+layout: position (3 f4), normal (3 f4), uv (2 f4); a scene with normal maps has a second buffer of
+tangents (4 f4: xyz and the handedness w, ``Scene.merged_tangents``).
+
+Index buffer order: the shadow casters' opaque triangles, then the casters of alpha-tested
+materials (cut-outs: ``Material.alpha_tested``), then the bottom plane's triangles, each group by
+material — so the shadow pass draws every opaque caster in one call and the cut-outs, which need
+their texture's alpha, range by range.
 """
 
 from __future__ import annotations
@@ -45,8 +51,10 @@ class SceneGL:
         pos, nrm, uv, faces, fmat = scene.merged()
         floor = bottom_plane_triangles(pos, faces)
         # casters first, then the bottom plane's triangles, each grouped by material
-        order = np.lexsort((fmat, floor))
-        faces, fmat, floor = faces[order], fmat[order], floor[order]
+        cut = np.array([m.alpha_tested for m in scene.materials], bool)
+        masked = cut[fmat] if len(fmat) else np.zeros(0, bool)
+        order = np.lexsort((fmat, masked, floor))
+        faces, fmat, floor, masked = faces[order], fmat[order], floor[order], masked[order]
         self.ranges: list[DrawRange] = []
         if len(fmat):
             group = fmat.astype(np.int64) * 2 + floor
@@ -58,23 +66,40 @@ class SceneGL:
         self.caster_index_count = int(np.count_nonzero(~floor)) * 3
         """Indices of the triangles that can cast a sun shadow: all but the bottom plane's, which
         come last in the index buffer (``bottom_plane_triangles``)."""
+        self.opaque_caster_index_count = int(np.count_nonzero(~floor & ~masked)) * 3
+        """The casters that need no alpha test: the first indices of the buffer."""
+        self.masked_caster_ranges = [r for r in self.ranges if scene.materials[r.material].alpha_tested
+                                     and r.first < self.caster_index_count]
+        """Draw ranges of the alpha-tested casters (drawn with the alpha test by the shadow pass)."""
         vertices = np.hstack([pos, nrm, uv]).astype(np.float32)
         self.vbo = ctx.buffer(vertices.tobytes())
         self.ibo = ctx.buffer(faces.astype(np.int32).tobytes())
+        self.tangent_vbo = ctx.buffer(scene.merged_tangents().tobytes()) if scene.has_normal_maps else None
         self.materials = scene.materials
         self.textures = {}
         aniso = anisotropy(ctx)
         self.mean_texture_albedo = {}
         """material index → mean linear RGB of its albedo texture (passes coarser than the texture use it)."""
+        self.normal_textures = {}
+        """material index → its normal map (GL texture)."""
         for i, m in enumerate(scene.materials):
-            if m.albedo_texture is not None:
-                t = m.albedo_texture
+            t = m.albedo_texture
+            # a cut-out keeps its texture's alpha (RGBA); one without a texture reads a white texel
+            c = 4 if m.alpha_tested else 3
+            if t is None and m.alpha_tested:
+                white = np.ones((1, 1, 4), np.float32)
+                self.textures[i] = upload_texture(ctx, white, dtype="f2", mips=[white])
+            elif t is not None:
                 self.mean_texture_albedo[i] = t.mips[0][..., :3].reshape(-1, 3).astype(np.float64).mean(axis=0)
-                self.textures[i] = upload_texture(ctx, t.mips[0][..., :3], dtype="f2",
-                                                      mips=[mm[..., :3] for mm in t.mips], anisotropy=aniso)
+                self.textures[i] = upload_texture(ctx, _channels(t.mips[0], c), dtype="f2",
+                                                  mips=[_channels(mm, c) for mm in t.mips], anisotropy=aniso)
+            if m.normal_texture is not None:
+                nt = m.normal_texture
+                self.normal_textures[i] = upload_texture(ctx, nt.mips[0][..., :3], dtype="f2",
+                                                         mips=[mm[..., :3] for mm in nt.mips], anisotropy=aniso)
         self.triangle_count = len(faces)
 
-    def vao(self, program, with_attributes=("in_position", "in_normal", "in_uv")):
+    def vao(self, program, with_attributes=("in_position", "in_normal", "in_uv", "in_tangent")):
         """A VAO binding this scene's buffers to ``program``'s attributes (unused ones skipped)."""
         fmt, names = [], []
         for attr, f, skip in (("in_position", "3f", "12x"), ("in_normal", "3f", "12x"), ("in_uv", "2f", "8x")):
@@ -84,11 +109,33 @@ class SceneGL:
             else:
                 fmt.append(skip)
         fmt = " ".join(fmt)
-        return self.ctx.vertex_array(program, [(self.vbo, fmt, *names)], index_buffer=self.ibo,
-                                     index_element_size=4)
+        buffers = [(self.vbo, fmt, *names)]
+        if self.tangent_vbo is not None and "in_tangent" in with_attributes and "in_tangent" in program:
+            buffers.append((self.tangent_vbo, "4f", "in_tangent"))
+        return self.ctx.vertex_array(program, buffers, index_buffer=self.ibo, index_element_size=4)
+
+    def bind_alpha_test(self, program, material: int, location: int = 0) -> None:
+        """Bind the texture and set the uniforms an ALPHA_MASK program variant (shadow_depth.glsl,
+        rsm.glsl, gbuffer.glsl) reads for cut-out material ``material``."""
+        m = self.materials[material]
+        self.textures[material].use(location=location)
+        program["u_albedo_tex"].value = location
+        for k in range(2):
+            program[f"u_albedo_uv{k}"].value = tuple(float(x) for x in m.albedo_uv_transform[k])
+        program["u_alpha"].value = float(m.alpha)
+        program["u_alpha_cutoff"].value = float(m.alpha_cutoff)
 
     def release(self):
         self.vbo.release()
         self.ibo.release()
-        for t in self.textures.values():
+        if self.tangent_vbo is not None:
+            self.tangent_vbo.release()
+        for t in (*self.textures.values(), *self.normal_textures.values()):
             t.release()
+
+
+def _channels(a: np.ndarray, c: int) -> np.ndarray:
+    """(H, W, c) of an (H, W, 3|4) mip level: RGB, or RGBA with alpha 1 where it has none."""
+    if c == 3 or a.shape[2] == 4:
+        return a[..., :c]
+    return np.concatenate([a[..., :3], np.ones(a.shape[:2] + (1,), a.dtype)], axis=2)

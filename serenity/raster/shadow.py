@@ -220,6 +220,11 @@ class ShadowPass:
         self.program = load_program(ctx, "shadow_depth.glsl")
         self.vao = scene_gl.vao(self.program, with_attributes=("in_position",))
         self.caster_index_count = scene_gl.caster_index_count
+        self.scene_gl = scene_gl
+        self.program_masked = self.vao_masked = None  # cut-outs' casters: the alpha test (ALPHA_MASK)
+        if scene_gl.masked_caster_ranges:
+            self.program_masked = load_program(ctx, "shadow_depth.glsl", defines={"ALPHA_MASK": 1})
+            self.vao_masked = scene_gl.vao(self.program_masked, with_attributes=("in_position", "in_uv"))
         tiles = 2 if cascades > 1 else 1
         self.depth = ctx.depth_texture((size * tiles, size * tiles))
         self.depth.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -272,8 +277,14 @@ class ShadowPass:
                 clear_depth_rect(ctx, self.fbo, self.depth, tile)
                 self.fbo.viewport = tile
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
-                if self.caster_index_count:  # the casters: the bottom plane shadows nothing
-                    self.vao.render(moderngl.TRIANGLES, vertices=self.caster_index_count)
+                opaque = self.scene_gl.opaque_caster_index_count
+                if opaque:  # the casters: the bottom plane shadows nothing
+                    self.vao.render(moderngl.TRIANGLES, vertices=opaque)
+                if self.program_masked is not None:
+                    self.program_masked["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
+                    for r in self.scene_gl.masked_caster_ranges:
+                        self.scene_gl.bind_alpha_test(self.program_masked, r.material)
+                        self.vao_masked.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
                 self._kept[i] = c
                 self.redrawn += 1
             self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)

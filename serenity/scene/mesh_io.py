@@ -23,10 +23,22 @@ glTF metallic-roughness (m = metallicFactor, r = roughnessFactor, glTF defaults 
   unique, else trimesh's 8-bit copy); albedo_texture = baseColorTexture decoded sRGB → linear with
   mips. Metals keep their base colour as diffuse albedo (the model has no coloured specular).
 - shininess n = 2/α² − 2 with α = r² (the Blinn-Phong ↔ Beckmann correspondence), in [1, 10000].
-- specular k_s = (0.04 + 0.96·m)·(1 − r): a dielectric's 4 % (a metal's 100 %) fading with roughness.
+- specular k_s = (F0 + (1 − F0)·m)·(1 − r), F0 = 0.04: a dielectric's 4 % (a metal's 100 %) fading
+  with roughness.
 - mirror: when m ≥ 0.5 and r ≤ 0.2, reflectivity = m·(1 − r/0.2)·max(baseColor.rgb).
 - glass: transparency = KHR_materials_transmission's transmissionFactor, or 1 − alpha for
   alphaMode BLEND with alpha < 1; ior = KHR_materials_ior's ior (default 1.5), clamped to [1, 4].
+- cut-outs: alphaMode MASK gives alpha = baseColorFactor.a and alpha_cutoff = alphaCutoff (default
+  0.5); the alpha test reads the base colour texture's alpha channel (:attr:`Material.alpha_cutoff`).
+- doubleSided is kept as :attr:`Material.double_sided` (every pass shades and casts both sides).
+- normalTexture (decoded linear, no sRGB) with its ``scale`` → normal_texture, normal_scale.
+- KHR_texture_transform on baseColorTexture / normalTexture → albedo_uv_transform /
+  normal_uv_transform (offset, rotation, scale; converted to the v-up uvs). Only TEXCOORD_0 is
+  read: a texCoord of 1 warns and uses set 0.
+- KHR_materials_specular: the dielectric reflectance at normal incidence F0 = ((ior − 1)/(ior + 1))²
+  (0.04 at ior 1.5) becomes min(F0 · max(specularColorFactor), 1) · specularFactor in the k_s
+  formula above (its textures are not read).
+- an image a .gltf names by a relative ``uri`` must exist: a missing one is a one-line error.
 
 OBJ/MTL: albedo = Kd (taken as linear), albedo_texture = map_Kd (sRGB); specular = max(Ks);
 shininess = Ns (≥ 1); transparency = 1 − d (or Tr); ior = Ni; illum 3, 5 or 7 (ray-traced
@@ -49,6 +61,7 @@ import math
 import os
 import struct
 import warnings
+from urllib.parse import unquote
 
 import numpy as np
 import trimesh
@@ -59,7 +72,7 @@ from trimesh.visual.material import PBRMaterial, SimpleMaterial
 
 from serenity.colour import srgb_to_linear
 from serenity.errors import SceneError
-from serenity.scene.model import Camera, Material, Mesh, Scene, Sky, Texture, vertex_normals
+from serenity.scene.model import IDENTITY_UV, Camera, Material, Mesh, Scene, Sky, Texture, vertex_normals
 from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, sun_from_time
 from serenity.scene.texture import texture_from_image, texture_to_srgb8
 
@@ -153,6 +166,21 @@ def _check_readable_gltf(path: str) -> None:
         raise SceneError(f"{path}: corrupt GLB file (header says {length} bytes, file has {os.path.getsize(path)})")
 
 
+def _check_gltf_images(path: str, js: dict) -> None:
+    """A texture's image given by a relative file ``uri`` must exist (trimesh drops it silently)."""
+    images = js.get("images") or []
+    base = os.path.dirname(os.path.abspath(path))
+    for tex in js.get("textures") or []:
+        src = tex.get("source") if isinstance(tex, dict) else None
+        if not isinstance(src, int) or not (0 <= src < len(images)) or not isinstance(images[src], dict):
+            continue
+        uri = images[src].get("uri")
+        if isinstance(uri, str) and uri and not uri.startswith("data:"):
+            f = os.path.join(base, unquote(uri))
+            if not os.path.isfile(f):
+                raise SceneError(f"{path}: texture image {uri!r} not found ({f})")
+
+
 def load_mesh_file(path) -> tuple[list[Mesh], list[Material]]:
     """Meshes and materials of a .glb/.gltf/.obj/.ply file (see the module docstring)."""
     path = os.fspath(path)
@@ -162,6 +190,8 @@ def load_mesh_file(path) -> tuple[list[Mesh], list[Material]]:
     if not os.path.isfile(path):
         raise SceneError(f"{path}: file not found")
     _check_readable_gltf(path)
+    js = _gltf_json(path) if ext in (".glb", ".gltf") else {}
+    _check_gltf_images(path, js)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -170,7 +200,7 @@ def load_mesh_file(path) -> tuple[list[Mesh], list[Material]]:
         raise
     except Exception as e:  # trimesh raises anything from KeyError to struct.error on bad files
         raise SceneError(f"{path}: cannot read the {ext[1:].upper()} file ({_one_line(e)})") from None
-    gltf = _gltf_materials_by_name(_gltf_json(path)) if ext in (".glb", ".gltf") else {}
+    gltf = _gltf_materials_by_name(js)
 
     order = {g: i for i, g in enumerate(tm.geometry.keys())}
     nodes = []
@@ -328,16 +358,33 @@ class _MaterialConverter:
             k += 1
             m.name = f"{base}_{k}"
 
-    def _texture(self, image, label: str) -> Texture | None:
+    def _texture(self, image, label: str, srgb: bool = True) -> Texture | None:
         if image is None:
             return None
-        if id(image) not in self._textures:
+        key = (id(image), srgb)
+        if key not in self._textures:
             try:
-                self._textures[id(image)] = texture_from_image(image, name=f"{self.path}:{label}", srgb=True)
+                self._textures[key] = texture_from_image(image, name=f"{self.path}:{label}", srgb=srgb)
             except Exception as e:
                 raise SceneError(f"{self.path}: texture of material {label!r} cannot be decoded ({_one_line(e)})") \
                     from None
-        return self._textures[id(image)]
+        return self._textures[key]
+
+    def _uv_transform(self, info, material: str) -> np.ndarray:
+        """KHR_texture_transform of a textureInfo as a (2, 3) map of v-up uvs (module docstring)."""
+        tt = ((info or {}).get("extensions") or {}).get("KHR_texture_transform") if isinstance(info, dict) else None
+        tex_coord = int(info.get("texCoord", 0)) if isinstance(info, dict) else 0
+        if isinstance(tt, dict) and "texCoord" in tt:
+            tex_coord = int(tt["texCoord"])
+        if tex_coord != 0:
+            warnings.warn(f"{self.path}: material {material!r} reads TEXCOORD_{tex_coord}; only TEXCOORD_0 is "
+                          "loaded and used instead", UserWarning, stacklevel=4)
+        if not isinstance(tt, dict):
+            return IDENTITY_UV.copy()
+        try:
+            return gltf_uv_transform(tt.get("offset", (0.0, 0.0)), tt.get("rotation", 0.0), tt.get("scale", (1.0, 1.0)))
+        except (TypeError, ValueError) as e:
+            raise SceneError(f"{self.path}: material {material!r} has a bad KHR_texture_transform ({e})") from None
 
     def _from_pbr(self, mat) -> Material:
         name = mat.name or f"material_{len(self.materials)}"
@@ -357,19 +404,42 @@ class _MaterialConverter:
         elif str(getattr(mat, "alphaMode", None) or js.get("alphaMode", "OPAQUE")).upper() == "BLEND" and rgba[3] < 1:
             transparency = 1.0 - float(rgba[3])
         ior = float(ext.get("KHR_materials_ior", {}).get("ior", 1.5))
+        f0 = 0.04
+        spec_ext = ext.get("KHR_materials_specular")
+        if isinstance(spec_ext, dict):
+            colour = _float_list(spec_ext.get("specularColorFactor", [1.0, 1.0, 1.0])) or [1.0]
+            f0_ior = ((ior - 1.0) / (ior + 1.0)) ** 2
+            f0 = min(f0_ior * max(colour[:3]), 1.0) * float(spec_ext.get("specularFactor", 1.0))
+            f0 = float(np.clip(f0, 0.0, 1.0))
         reflectivity = 0.0
         if metal >= 0.5 and rough <= 0.2:
             reflectivity = metal * (1.0 - rough / 0.2) * float(rgba[:3].max())
         alpha = max(rough * rough, 1e-4)
+        mode = str((js.get("alphaMode") if js else None) or getattr(mat, "alphaMode", None) or "OPAQUE").upper()
+        cutoff = None
+        if mode == "MASK":
+            c = js.get("alphaCutoff") if js else getattr(mat, "alphaCutoff", None)
+            cutoff = float(np.clip(0.5 if c is None else float(c), 0.0, 1.0))
+        double = bool(js.get("doubleSided", False)) if js else bool(getattr(mat, "doubleSided", False))
+        normal_info = js.get("normalTexture") if js else None
+        normal_tex = self._texture(getattr(mat, "normalTexture", None), f"{name}.normal", srgb=False)
+        scale = float(normal_info.get("scale", 1.0)) if isinstance(normal_info, dict) else 1.0
         return Material(
             name,
             albedo=rgba[:3],
             albedo_texture=self._texture(getattr(mat, "baseColorTexture", None), name),
-            specular=float(np.clip((0.04 + 0.96 * metal) * (1.0 - rough), 0.0, 1.0)),
+            specular=float(np.clip((f0 + (1.0 - f0) * metal) * (1.0 - rough), 0.0, 1.0)),
             shininess=float(np.clip(2.0 / alpha**2 - 2.0, 1.0, 10000.0)),
             reflectivity=float(np.clip(reflectivity, 0.0, 1.0)),
             transparency=float(np.clip(transparency, 0.0, 1.0)),
             ior=float(np.clip(ior, 1.0, 4.0)),
+            alpha=float(rgba[3]),
+            alpha_cutoff=cutoff,
+            double_sided=double,
+            normal_texture=normal_tex,
+            normal_scale=scale,
+            albedo_uv_transform=self._uv_transform(pbr.get("baseColorTexture"), name),
+            normal_uv_transform=self._uv_transform(normal_info, name),
         )
 
     def _from_mtl(self, mat) -> Material:
@@ -407,14 +477,36 @@ def _first(v, default):
     return lst[0] if lst else default
 
 
-def _same_material(a: Material, b: Material) -> bool:
-    if not (np.array_equal(a.albedo, b.albedo) and (a.specular, a.shininess, a.reflectivity, a.transparency, a.ior)
-            == (b.specular, b.shininess, b.reflectivity, b.transparency, b.ior)):
-        return False
-    ta, tb = a.albedo_texture, b.albedo_texture
+def gltf_uv_transform(offset, rotation, scale) -> np.ndarray:
+    """KHR_texture_transform's uv' = T(offset)·R(rotation)·S(scale)·uv (glTF uvs, v down; R turns
+    (1, 0) towards (cos, −sin)) as a (2, 3) affine map of the v-up uvs used here (v ↦ 1 − v on both
+    sides)."""
+    ox, oy = (float(x) for x in offset)
+    sx, sy = (float(x) for x in scale)
+    c, s = math.cos(float(rotation)), math.sin(float(rotation))
+    m = np.array([[1.0, 0.0, ox], [0.0, 1.0, oy], [0.0, 0.0, 1.0]]) @ np.array(
+        [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ np.diag([sx, sy, 1.0])
+    flip = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 1.0], [0.0, 0.0, 1.0]])
+    out = (flip @ m @ flip)[:2]
+    if not np.all(np.isfinite(out)):
+        raise ValueError("offset, rotation and scale must be finite")
+    return out
+
+
+def _same_texture(ta, tb) -> bool:
     if ta is None or tb is None:
         return ta is tb
     return ta is tb or (ta.mips[0].shape == tb.mips[0].shape and np.array_equal(ta.mips[0], tb.mips[0]))
+
+
+def _same_material(a: Material, b: Material) -> bool:
+    keys = ("specular", "shininess", "reflectivity", "transparency", "ior", "alpha", "alpha_cutoff", "double_sided",
+            "normal_scale")
+    if not (np.array_equal(a.albedo, b.albedo) and all(getattr(a, k) == getattr(b, k) for k in keys)
+            and np.array_equal(a.albedo_uv_transform, b.albedo_uv_transform)
+            and np.array_equal(a.normal_uv_transform, b.normal_uv_transform)):
+        return False
+    return _same_texture(a.albedo_texture, b.albedo_texture) and _same_texture(a.normal_texture, b.normal_texture)
 
 
 # --------------------------------------------------------------------------------------------- writing
@@ -431,14 +523,15 @@ def _pbr_from_material(m: Material):
     if m.albedo_texture is not None:
         px = texture_to_srgb8(m.albedo_texture)
         image = Image.fromarray(px if px.shape[2] in (3, 4) else px[:, :, :3])
-    alpha = 1.0 - m.transparency
+    alpha = m.alpha if m.alpha_cutoff is not None else 1.0 - m.transparency
     return PBRMaterial(
         name=m.name,
         baseColorFactor=[*np.clip(m.albedo, 0, 1).tolist(), alpha],
         metallicFactor=metal,
         roughnessFactor=rough,
         baseColorTexture=image,
-        alphaMode="BLEND" if alpha < 1.0 else "OPAQUE",
+        alphaMode="MASK" if m.alpha_cutoff is not None else "BLEND" if alpha < 1.0 else "OPAQUE",
+        alphaCutoff=m.alpha_cutoff,
         doubleSided=True,
     )
 

@@ -78,6 +78,21 @@ class Material:
         transparency: fraction of light transmitted in [0, 1] (glass); pixels with
             transparency > 0 are ray traced for refraction.
         ior: index of refraction (glass ≈ 1.5), used for refraction and the Fresnel term.
+        alpha: coverage factor in [0, 1] (glTF baseColorFactor.a), times the albedo texture's alpha
+            channel where it has one; read only by the alpha test.
+        alpha_cutoff: None (opaque) or the cut-out threshold in [0, 1] (glTF ``alphaMode: MASK``):
+            a surface point whose coverage alpha × texture alpha is below it is not there — for
+            the camera, the shadow maps, the RSM and every traced ray alike.
+        double_sided: the source's flag (glTF ``doubleSided``). Every pass shades both sides of a
+            triangle with the normal turned towards the viewer or ray and casts from both sides,
+            single-sided or not (glTF lets a renderer skip back-face culling; thin walls and
+            blinds modelled as single quads would otherwise let light through).
+        normal_texture: optional tangent-space normal map (linear, RGB in [0, 1] ↦ [-1, 1]; +x along
+            the tangent dP/du, +y along dP/dv with v up, +z the vertex normal).
+        normal_scale: the x and y of the normal map's normals are multiplied by this (glTF scale).
+        albedo_uv_transform, normal_uv_transform: (2, 3) affine maps uv ↦ M·(u, v, 1) applied to
+            the mesh's uvs before the albedo (and alpha) / normal texture is read (glTF
+            KHR_texture_transform, converted to the v-up uvs used here); identity by default.
     """
 
     name: str
@@ -88,6 +103,13 @@ class Material:
     reflectivity: float = 0.0
     transparency: float = 0.0
     ior: float = 1.5
+    alpha: float = 1.0
+    alpha_cutoff: float | None = None
+    double_sided: bool = True
+    normal_texture: Texture | None = None
+    normal_scale: float = 1.0
+    albedo_uv_transform: np.ndarray = field(default_factory=lambda: IDENTITY_UV.copy())
+    normal_uv_transform: np.ndarray = field(default_factory=lambda: IDENTITY_UV.copy())
 
     def __post_init__(self):
         self.albedo = _vec3(self.albedo, f"material {self.name!r} albedo")
@@ -104,10 +126,86 @@ class Material:
         self.ior = float(self.ior)
         if not (1.0 <= self.ior <= 4.0):
             raise SceneError(f"material {self.name!r}: ior must be in [1, 4], got {self.ior}")
+        self.alpha = float(self.alpha)
+        if not (0.0 <= self.alpha <= 1.0):
+            raise SceneError(f"material {self.name!r}: alpha must be in [0, 1], got {self.alpha}")
+        if self.alpha_cutoff is not None:
+            self.alpha_cutoff = float(self.alpha_cutoff)
+            if not (0.0 <= self.alpha_cutoff <= 1.0):
+                raise SceneError(f"material {self.name!r}: alpha_cutoff must be in [0, 1], got {self.alpha_cutoff}")
+        self.double_sided = bool(self.double_sided)
+        self.normal_scale = float(self.normal_scale)
+        if not math.isfinite(self.normal_scale):
+            raise SceneError(f"material {self.name!r}: normal_scale must be finite, got {self.normal_scale}")
+        for attr in ("albedo_uv_transform", "normal_uv_transform"):
+            m = np.asarray(getattr(self, attr), np.float64)
+            if m.shape != (2, 3) or not np.all(np.isfinite(m)):
+                raise SceneError(f"material {self.name!r}: {attr} must be a finite (2, 3) matrix")
+            setattr(self, attr, m)
 
     @property
     def needs_ray_tracing(self) -> bool:
         return self.reflectivity > 0.0 or self.transparency > 0.0
+
+    @property
+    def alpha_tested(self) -> bool:
+        """Whether the material is a cut-out (``alpha_cutoff`` set) that can cut anything away:
+        a constant coverage at or above the cutoff without an alpha texture is simply opaque."""
+        if self.alpha_cutoff is None:
+            return False
+        t = self.albedo_texture
+        return self.alpha < self.alpha_cutoff or (t is not None and t.channels == 4)
+
+    def coverage(self, uv: np.ndarray) -> np.ndarray:
+        """(N,) bool: whether the surface is there at (N, 2) mesh uvs (the alpha test, point-sampled
+        bilinearly at mip 0 after ``albedo_uv_transform``); all True for an opaque material."""
+        uv = np.asarray(uv, np.float64).reshape(-1, 2)
+        if not self.alpha_tested:
+            return np.ones(len(uv), bool)
+        a = np.full(len(uv), self.alpha)
+        t = self.albedo_texture
+        if t is not None and t.channels == 4:
+            a = a * bilinear_repeat(t.mips[0][..., 3], apply_uv_transform(self.albedo_uv_transform, uv))
+        return a >= self.alpha_cutoff
+
+
+IDENTITY_UV = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def apply_uv_transform(m: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(N, 2) uvs mapped by the (2, 3) affine ``m``."""
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    return uv @ np.asarray(m, np.float64)[:, :2].T + np.asarray(m, np.float64)[:, 2]
+
+
+def normal_map_frame(m: np.ndarray) -> np.ndarray:
+    """(2, 2): turns a normal map's (x, y), given in the frame of the transformed uvs (the (2, 3)
+    ``m``: KHR_texture_transform), into the frame of the mesh's own uvs, in which the tangents are
+    built — the orthogonal factor of the inverse of m's linear part (a rotation, or a reflection for
+    a mirrored axis; a uniform scale leaves a normal's tilt as it is)."""
+    a = np.asarray(m, np.float64)[:, :2]
+    try:
+        u, _, vt = np.linalg.svd(np.linalg.inv(a))
+    except np.linalg.LinAlgError:
+        return np.eye(2)
+    return u @ vt
+
+
+def bilinear_repeat(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of an (H, W) image (row 0 = top) at (N, 2) uvs with v up and repeat wrap —
+    the ray tracer's and GL's GL_LINEAR on level 0."""
+    img = np.asarray(img, np.float64)
+    h, w = img.shape[:2]
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    x = (uv[:, 0] - np.floor(uv[:, 0])) * w - 0.5
+    y = (1.0 - (uv[:, 1] - np.floor(uv[:, 1]))) * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    tx, ty = x - x0, y - y0
+    c0, c1 = np.mod(x0, w).astype(np.int64), np.mod(x0 + 1, w).astype(np.int64)
+    r0, r1 = np.mod(y0, h).astype(np.int64), np.mod(y0 + 1, h).astype(np.int64)
+    top = img[r0, c0] * (1 - tx) + img[r0, c1] * tx
+    bottom = img[r1, c0] * (1 - tx) + img[r1, c1] * tx
+    return top * (1 - ty) + bottom * ty
 
 
 @dataclass
@@ -174,6 +272,46 @@ def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     ln = np.linalg.norm(n, axis=1, keepdims=True)
     out = np.where(ln > 1e-20, n / np.maximum(ln, 1e-30), np.array([0.0, 1.0, 0.0]))
     return out.astype(np.float32)
+
+
+def vertex_tangents(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 4) float32 per-vertex tangents for tangent-space normal maps (MikkTSpace-like): each
+    face's dP/du and dP/dv (v up) from its uvs, summed over the faces of a vertex weighted by the
+    face's corner angle there, the tangent made orthogonal to the vertex normal (Gram–Schmidt);
+    w = ±1 the handedness, so that the bitangent dP/dv ≈ w · (n × t). A vertex on no face with a
+    usable uv gradient gets any unit vector orthogonal to its normal and w = 1."""
+    p = np.asarray(positions, np.float64)
+    n = np.asarray(normals, np.float64)
+    uv = np.asarray(uvs, np.float64)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    t_sum = np.zeros_like(p)
+    b_sum = np.zeros_like(p)
+    if len(f):
+        e1, e2 = p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]
+        d1, d2 = uv[f[:, 1]] - uv[f[:, 0]], uv[f[:, 2]] - uv[f[:, 0]]
+        det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+        ok = np.abs(det) > 1e-20
+        r = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+        ft = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * r
+        fb = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * r
+        for k in range(3):
+            a = p[f[:, (k + 1) % 3]] - p[f[:, k]]
+            b = p[f[:, (k + 2) % 3]] - p[f[:, k]]
+            la, lb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
+            cos = np.einsum("ij,ij->i", a, b) / np.maximum(la * lb, 1e-30)
+            w = np.arccos(np.clip(cos, -1.0, 1.0))[:, None]
+            np.add.at(t_sum, f[:, k], ft * w)
+            np.add.at(b_sum, f[:, k], fb * w)
+    t = t_sum - n * np.einsum("ij,ij->i", t_sum, n)[:, None]
+    ln = np.linalg.norm(t, axis=1)
+    bad = ln < 1e-20
+    if bad.any():  # any unit vector orthogonal to n
+        helper = np.where(np.abs(n[bad, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        t[bad] = np.cross(n[bad], helper)
+        ln[bad] = np.linalg.norm(t[bad], axis=1)
+    t = t / np.maximum(ln, 1e-30)[:, None]
+    w = np.where(np.einsum("ij,ij->i", np.cross(n, t), b_sum) < 0.0, -1.0, 1.0)
+    return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
 
 
 @dataclass
@@ -251,8 +389,9 @@ class Sun:
 
     Attributes:
         direction: unit vector **towards** the sun (world space, y up).
-        irradiance: (3,) W·m⁻² per channel on a surface facing the sun, at the ground (after the
-            atmosphere's transmittance; the sky issue derives it from the atmosphere model).
+        irradiance: (3,) W·m⁻² per channel on a surface facing the sun, at the ground, used with a
+            constant sky; with the "atmosphere" sky the atmosphere's transmittance gives it instead
+            (``kernels.atmosphere_ref.scene_sun_irradiance``).
         angular_diameter_deg: the disc's apparent diameter (0.53° for the real sun).
         elevation_deg / azimuth_deg: the same direction as angles (azimuth from north to east).
     """
@@ -347,10 +486,10 @@ class OcclusionQuad:
 
 @dataclass
 class Sky:
-    """Sky description. Until the atmosphere model lands this is a constant-radiance sky.
+    """Sky description: the clear-sky atmosphere model, or a constant-radiance sky.
 
-    ``radiance``: (3,) W·m⁻²·sr⁻¹ of a uniform sky (used by the placeholder and as the constant
-    ambient baseline). ``model``: "constant" or "atmosphere".
+    ``radiance``: (3,) W·m⁻²·sr⁻¹ of a uniform sky (the "constant" model's, and the constant
+    ambient baseline's). ``model``: "constant" or "atmosphere".
     """
 
     radiance: np.ndarray = field(default_factory=lambda: np.array([20.0, 30.0, 45.0]))
@@ -455,3 +594,11 @@ class Scene:
             np.concatenate(fac).astype(np.int32),
             np.concatenate(fm).astype(np.int32),
         )
+
+    def merged_tangents(self) -> np.ndarray:
+        """(V, 4) float32 tangents of :meth:`merged`'s vertices (:func:`vertex_tangents`, per mesh)."""
+        return np.concatenate([vertex_tangents(m.positions, m.normals, m.uvs, m.faces) for m in self.meshes])
+
+    @property
+    def has_normal_maps(self) -> bool:
+        return any(m.normal_texture is not None for m in self.materials)

@@ -73,7 +73,8 @@ _SUN_KEYS = {"time", "latitude", "longitude", "utc_offset", "elevation_deg", "az
              "irradiance", "angular_diameter_deg"}
 _SKY_KEYS = {"model", "radiance"}
 _QUAD_KEYS = {"center", "up", "right", "half_up", "half_right"}
-_MATERIAL_KEYS = {"albedo", "albedo_texture", "specular", "shininess", "reflectivity", "transparency", "ior"}
+_MATERIAL_KEYS = {"albedo", "albedo_texture", "specular", "shininess", "reflectivity", "transparency", "ior", "alpha",
+                  "alpha_cutoff", "double_sided", "normal_scale"}
 
 
 def _check_keys(where: str, table, allowed: set[str]) -> None:
@@ -215,5 +216,7 @@ def save_toml(scene: Scene, path, mesh_file: str) -> None:
         lines += ["", f"[materials.{_fmt(m.name)}]"]
         lines += [f"{k} = {_fmt(getattr(m, k))}" for k in
                   ("albedo", "specular", "shininess", "reflectivity", "transparency", "ior")]
+        if m.alpha_cutoff is not None:
+            lines += [f"alpha = {_fmt(m.alpha)}", f"alpha_cutoff = {_fmt(m.alpha_cutoff)}"]
     with open(os.fspath(path), "w", encoding="utf-8") as f:
         f.write("\n".join(lines) + "\n")

@@ -3,13 +3,39 @@
 //   1 normal   xyz = world shading normal facing the camera, w = Phong specular strength k_s
 //   2 position xyz = world position (m), w = 1 where covered (0 = background)
 //   3 material x = Phong exponent, y = reflectivity, z = transparency, w = index of refraction
+// Variants (compiled in, GBufferPass keeps one program per combination it draws): TEXTURE_TAPS (below);
+// ALPHA_MASK = 1: a cut-out (glTF alphaMode MASK) — a fragment whose coverage u_alpha x the albedo
+// texture's alpha is below u_alpha_cutoff is discarded; NORMAL_MAP = 1: the shading normal comes from a
+// tangent-space normal map (per-vertex tangents, xyz and handedness w). Texture coordinates go through
+// the material's uv transforms (KHR_texture_transform) first.
+#ifndef ALPHA_MASK
+#define ALPHA_MASK 0
+#endif
+#ifndef NORMAL_MAP
+#define NORMAL_MAP 0
+#endif
 #define SCENE_VERTEX_UV
+#if NORMAL_MAP
+#define SCENE_VERTEX_TANGENT
+#endif
 #include "scene_vertex.glsl"
 
 #if defined FRAGMENT_SHADER
 in vec3 v_world;
 in vec3 v_normal;
 in vec2 v_uv;
+#if NORMAL_MAP
+in vec4 v_tangent;
+uniform sampler2D u_normal_tex;
+uniform vec3 u_normal_uv0, u_normal_uv1;   // the normal map's uv transform, rows of a 2x3 matrix
+uniform mat2 u_normal_frame;               // turns the map's xy into the untransformed uvs' tangent frame
+uniform float u_normal_scale;
+#endif
+uniform vec3 u_albedo_uv0, u_albedo_uv1;   // the albedo (and alpha) texture's uv transform
+#if ALPHA_MASK
+uniform float u_alpha;
+uniform float u_alpha_cutoff;
+#endif
 // TEXTURE_TAPS (compiled in; GBufferPass builds one program per value it draws with): 0 = an
 // untextured material (no sampling code at all: llvmpipe would run it for every fragment, textured
 // or not); 1 = one trilinear tap (GL's isotropic footprint); N > 1 = N taps along the footprint's
@@ -53,11 +79,29 @@ vec3 sample_albedo(vec2 uv) {
 void main() {
     vec3 albedo = u_albedo;
 #if TEXTURE_TAPS > 0
-    albedo *= sample_albedo(v_uv);
+    vec2 uv = vec2(dot(u_albedo_uv0, vec3(v_uv, 1.0)), dot(u_albedo_uv1, vec3(v_uv, 1.0)));
+#if ALPHA_MASK
+    if (u_alpha * texture(u_albedo_tex, uv).a < u_alpha_cutoff) discard;
+#endif
+    albedo *= sample_albedo(uv);
 #endif
     vec3 n = normalize(v_normal);
     // two-sided: the shading normal faces the viewer (thin walls, glass panes)
-    if (dot(n, u_camera_pos - v_world) < 0.0) n = -n;
+    float side = dot(n, u_camera_pos - v_world) < 0.0 ? -1.0 : 1.0;
+#if NORMAL_MAP
+    vec2 uvn = vec2(dot(u_normal_uv0, vec3(v_uv, 1.0)), dot(u_normal_uv1, vec3(v_uv, 1.0)));
+    vec3 tn = texture(u_normal_tex, uvn).xyz * 2.0 - 1.0;
+    tn.xy = u_normal_frame * (tn.xy * u_normal_scale);
+    vec3 t = v_tangent.xyz - n * dot(n, v_tangent.xyz);
+    float lt = length(t);
+    if (lt > 1e-8) {
+        t /= lt;
+        vec3 b = cross(n, t) * (v_tangent.w < 0.0 ? -1.0 : 1.0);
+        vec3 nm = t * tn.x + b * tn.y + n * tn.z;
+        if (dot(nm, nm) > 1e-12) n = normalize(nm);
+    }
+#endif
+    n *= side;
     o_albedo = vec4(albedo, u_material_index);
     o_normal = vec4(n, u_specular);
     o_position = vec4(v_world, 1.0);

@@ -4,6 +4,14 @@
 //   0 flux     rgb = rho * E * A (W), a = 1 where covered
 //   1 normal   xyz = world normal facing the sun
 //   2 position xyz = world position (m)
+// ALPHA_MASK = 1: a cut-out's variant: fragments whose coverage is below the cutoff are discarded
+// (as in the shadow maps; shadow_depth.glsl).
+#ifndef ALPHA_MASK
+#define ALPHA_MASK 0
+#endif
+#if ALPHA_MASK
+#define SCENE_VERTEX_UV
+#endif
 #include "scene_vertex.glsl"
 
 #if defined FRAGMENT_SHADER
@@ -13,10 +21,21 @@ uniform vec3 u_albedo;   // material albedo x its texture's mean (rsm.py)
 uniform vec3 u_sun_dir;
 uniform vec3 u_sun_irradiance;
 uniform float u_texel_area;
+#if ALPHA_MASK
+in vec2 v_uv;
+uniform sampler2D u_albedo_tex;
+uniform vec3 u_albedo_uv0, u_albedo_uv1;
+uniform float u_alpha;
+uniform float u_alpha_cutoff;
+#endif
 layout(location = 0) out vec4 o_flux;
 layout(location = 1) out vec4 o_normal;
 layout(location = 2) out vec4 o_position;
 void main() {
+#if ALPHA_MASK
+    vec2 uv = vec2(dot(u_albedo_uv0, vec3(v_uv, 1.0)), dot(u_albedo_uv1, vec3(v_uv, 1.0)));
+    if (u_alpha * texture(u_albedo_tex, uv).a < u_alpha_cutoff) discard;
+#endif
     vec3 albedo = u_albedo;
     vec3 n = normalize(v_normal);
     if (dot(n, u_sun_dir) < 0.0) n = -n;
