@@ -6,8 +6,12 @@ Public API (re-exported lazily, so ``import serenity`` loads neither Warp nor Op
 
     import serenity
     scene = serenity.load("courtyard")            # built-in name or .glb/.gltf/.obj/.ply/.toml
-    frame = serenity.Renderer(scene, 640, 360).render()
+    with serenity.Renderer(scene, 640, 360) as renderer:   # the default preset, as `serenity render`
+        frame = renderer.render()
     frame.hdr, frame.ldr, frame.aovs, frame.timings
+
+Another preset: ``serenity.Renderer(scene, 640, 360, config=serenity.RenderConfig.preset("lpv"))``
+(``serenity.config.QUALITY_PRESETS``; the default is ``DEFAULT_QUALITY``, "traced-probes").
 """
 
 from __future__ import annotations
