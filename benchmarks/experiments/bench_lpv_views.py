@@ -1,4 +1,4 @@
-"""Which LPV grid resolution to default to, judged over several views rather than one: the ``medium``
+"""Which LPV grid resolution to default to, judged over several views rather than one: the ``lpv-fast``
 preset with each of ``--resolutions`` cells per cascade axis (everything else as the preset has it),
 the courtyard from 4 camera positions and the Cornell box from 3, at 160×90 against 1024-spp
 references (rendered once and cached; the LPV lives in world space, so a small image judges it).
@@ -57,7 +57,7 @@ def view_scene(name: str, view):
 
 
 def config(resolution: int, lpv: dict | None = None) -> RenderConfig:
-    m = RenderConfig.preset("medium")
+    m = RenderConfig.preset("lpv-fast")
     return dataclasses.replace(m, lpv=dataclasses.replace(m.lpv, resolution=resolution, **(lpv or {})))
 
 
@@ -135,7 +135,7 @@ def chart(results: dict, path: str) -> None:
         ax.set_xticks(sorted({int(k) for r in results.values() for k in r["summary"]}))
         ax.grid(alpha=0.3)
         ax.legend()
-    fig.suptitle(f"LPV grid resolution (medium preset, {SIZE[0]}x{SIZE[1]}, {REF_SPP}-spp references)")
+    fig.suptitle(f"LPV grid resolution (lpv-fast preset, {SIZE[0]}x{SIZE[1]}, {REF_SPP}-spp references)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -171,7 +171,7 @@ def main() -> None:
             print(f"{name:9s} {k:>2s}^3  FLIP {v['flip_mean']:.4f}  relMSE* {v['rel_mse_trimmed_mean']:.4f}  "
                   f"update {v['update_ms']:6.1f} ms")
     write_results(args.json, {"benchmark": "lpv_views", "size": list(SIZE), "reference_spp": REF_SPP,
-                              "preset": "medium", "lpv_overrides": lpv, "resolutions": resolutions,
+                              "preset": "lpv-fast", "lpv_overrides": lpv, "resolutions": resolutions,
                               "frames": args.frames,
                               "update_stages": list(LPV_UPDATE_STAGES), "scenes": results,
                               "seconds": time.perf_counter() - t0})

@@ -7,8 +7,8 @@ viewport: one tile of the 2×2 cascade atlas) by drawing it; ``glClearTexSubImag
 directly (``serenity.raster.context.clear_depth_rect``). Two measurements:
 
 - the clear alone: the median over 25 clears of one cascade tile (``finish()`` before and after) each
-  way, at the two tile sizes ``medium`` uses (512² at 320×180, 1024² at 640×360);
-- in the frame: one ``medium`` renderer on the serial schedule (so that no worker thread shares the
+  way, at the two tile sizes ``lpv-fast`` uses (512² at 320×180, 1024² at 640×360);
+- in the frame: one ``lpv-fast`` renderer on the serial schedule (so that no worker thread shares the
   cores with the stage) along ``serenity bench``'s camera path and moving sun (two tiles redrawn a
   frame), the clear switched between the two ways frame by frame; the median ``shadow maps (CSM)``
   stage and frame of each way, after 8 warm-up frames.
@@ -63,7 +63,7 @@ def in_frame(width: int, height: int, frames: int) -> dict:
 
     scene = load("courtyard")
     cam0, sun0 = scene.camera, np.asarray(scene.sun.direction, np.float64).copy()
-    r = Renderer(scene, width, height, config=RenderConfig.preset("medium", overlap=False))
+    r = Renderer(scene, width, height, config=RenderConfig.preset("lpv-fast", overlap=False))
     native = context._native_clear
     stage = {True: [], False: []}
     wall = {True: [], False: []}
