@@ -7,7 +7,7 @@ EXTRAS ?= test,eval,view
 comma  := ,
 STAMP   = $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
 
-.PHONY: setup sysdeps render test test-all bench lint clean
+.PHONY: setup sysdeps render test test-all bench lint clean figures figures-quick
 
 $(BIN)/python:
 	@$(PYTHON) -m venv $(VENV) 2>/dev/null || { \
@@ -35,7 +35,17 @@ test-all: setup
 	$(BIN)/python -m pytest -m ''
 
 lint: setup
-	$(BIN)/ruff check serenity tests examples benchmarks
+	$(BIN)/ruff check serenity tests examples benchmarks tools
+
+# Every headline result JSON in benchmarks/results, its charts, then every table in README.md and
+# docs/*.md, one job after another (timings must not share the cores): about an hour on 2 cores from a
+# fresh clone. figures-quick re-measures the timings only (frame, kd-tree, frontier, quick start).
+# See benchmarks/README.md; `bash benchmarks/figures.sh list` names the steps.
+figures: setup
+	bash benchmarks/figures.sh all
+
+figures-quick: setup
+	bash benchmarks/figures.sh quick
 
 clean:
 	rm -rf $(VENV) serenity_out tests/_artifacts .serenity_cache

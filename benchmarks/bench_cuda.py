@@ -9,7 +9,7 @@ in both cases; only the Warp kernels change device).
    overlapped CUDA frame at 640×360.
 
     python benchmarks/bench_cuda.py [--json benchmarks/results/cuda.json] [--frames 24]
-                                    [--chart docs/timeline_cuda.png]
+                                    [--chart benchmarks/results/cuda.png]
 
 Without a CUDA device it stops with a one-line message.
 """
@@ -69,7 +69,7 @@ def render_pair(scene_name: str, width: int, height: int, frames: int = 2, devic
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--json", default=os.path.join(ROOT, "benchmarks", "results", "cuda.json"))
-    ap.add_argument("--chart", default=os.path.join(ROOT, "docs", "timeline_cuda.png"))
+    ap.add_argument("--chart", default=os.path.join(ROOT, "benchmarks", "results", "cuda.png"))
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--devices", default="cuda:0,cpu", help="devices to benchmark (default %(default)s)")
     args = ap.parse_args(argv)
