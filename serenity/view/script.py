@@ -39,6 +39,7 @@ try:
 except ImportError:  # Python 3.10
     import tomli as tomllib
 
+from serenity.config import PRESET_ALIASES, preset_name
 from serenity.errors import SerenityError
 
 ACTIONS = ("key", "mouse", "set", "press", "screenshot", "wait", "exit")
@@ -129,6 +130,8 @@ def load_script(path: str) -> Script:
                     isinstance(v, (int, float)) and not isinstance(v, bool) if kind is float else isinstance(v, str))
                 if not ok:
                     raise SerenityError(f"{where}: {k} must be a {kind.__name__}, got {v!r}")
+                if k == "quality" and v in PRESET_ALIASES:  # a former preset name: its current one
+                    value[k] = preset_name(v, where)
         elif act == "screenshot":
             if not isinstance(value, str) or not value.lower().endswith(".png"):
                 raise SerenityError(f"{where}: screenshot must be a .png path, got {value!r}")
