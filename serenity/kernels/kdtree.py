@@ -1,147 +1,36 @@
 """kd-tree traversal in Warp kernels, and the host class that builds, caches and queries a tree (paper §9).
 
-The paper's CPU ray tracer follows Wald's thesis ("Realtime Ray Tracing and Interactive Global
-Illumination", 2004): a kd-tree whose split planes minimise the surface area heuristic (SAH), and
-a front-to-back stack traversal that stops at the first leaf whose hit lies inside it. The build
-(binned SAH, disk cache) is :mod:`serenity.kernels.kdtree_build`; its settings are
-:class:`serenity.config.KdBuildConfig`.
+:class:`KdTree` takes a scene's triangles (vertices (V,3) and faces (F,3)), builds or loads its
+SAH kd-tree (:mod:`serenity.kernels.kdtree_build`, settings :class:`serenity.config.KdBuildConfig`)
+and answers two queries on a device:
+
+- :meth:`KdTree.intersect`: closest hits of rays with origins ``o`` (N,3) and directions ``d``
+  (N,3) float32, t in units of |d| (directions need not be unit), hits with tmin < t < tmax:
+  :class:`Hits` of ``t`` (N,) float32 (inf on a miss), ``prim`` (N,) int32 (−1), barycentrics
+  ``u``, ``v`` (N,) float32 with p = (1−u−v)·v0 + u·v1 + v·v2 (Embree's convention); equal t
+  resolve to the lower triangle index.
+- :meth:`KdTree.occluded`: any hit, (N,) bool.
+
+Degenerate rays (a zero, NaN or infinite direction, a NaN origin, tmax ≤ tmin or NaN) are misses.
+The ray–triangle test is Woop, Benthin & Wald's watertight test with its edge functions in float64,
+so no ray leaks through a closed mesh, and every path — one ray per kernel thread (CUDA, small
+batches), interleaved rays, 16-ray packets, reordered or not, any thread count — returns the same
+hits bit for bit (tests). The tracing kernels are compiled without FMA contraction
+(``TRACE_MODULE_OPTIONS``) so that CUDA's hits equal the CPU's.
 
 Layout on a device (:class:`KdTreeData`, made from the build's arrays by :meth:`KdTree.device_data`;
 ``nodes`` and ``refs`` contiguous, as the traversal's native loads :func:`node_head` etc. assume):
     nodes (nodes,) KdNode, 8 bytes: inner node: ``head`` = (first child << 4) | (right child is an
         empty leaf) << 3 | (left child is an empty leaf) << 2 | axis (children are consecutive: left
         at first child, right at first child + 1), ``split`` = the split position (world units);
-        leaf: ``head`` = (its block's first word in ``refs`` << 2) | 3, ``split`` = its triangle count (a small
-        integer, exact in float32), so a leaf costs no extra load before its triangles. The empty
-        flags let the traversal skip empty leaves (most leaves a ray meets: 6 of 7 on the
-        benchmark's camera rays) without loading them or pushing them on the stack.
-    refs (W,) float32: one block of 10·k words per non-empty leaf of k triangles (the build's leaf
-        blocks in ``prims``: a count, then that many triangle indices): the triangles' vertex
-        coordinates one after the other — the k x of v0, the k y of v0, …, the k z of v2 — then
-        their indices (as int32 bits), 40 bytes per reference; padded by ``REF_PAD`` words. A
-        leaf's triangles lie next to each other in memory (the traversal's time goes much into
-        cache misses on nodes and triangles: a copy per reference trades memory for one miss per
-        leaf, not one per triangle and its index), and a coordinate of up to 8 of them is one
-        vector load (the CPU's SIMD leaf tests, :func:`leaf_simd` and :func:`leaf_pick`).
+        leaf: ``head`` = (its block's first word in ``refs`` << 2) | 3, ``split`` = its triangle count.
+    refs (W,) float32: one block of 10·k words per non-empty leaf of k triangles: the triangles'
+        vertex coordinates (the k x of v0, the k y of v0, …, the k z of v2), then their indices (as
+        int32 bits), 40 bytes per reference; padded by ``REF_PAD`` words.
     tri_verts (3F,) vec3: the three vertices of triangle f at 3f, 3f+1, 3f+2 (for shading a hit).
 
-Traversal (Warp, ``trace_kd``): rays with origin ``o`` (N,3) and direction ``d`` (N,3) float32,
-t in units of |d| (directions need not be unit). Hits are 0 ≤ tmin < t < tmax. Front-to-back with
-a stack of (node, t_near, t_far); near/far intervals overlap by a small tolerance (1e-6 of the scene
-scale) so that rays through split planes, cell corners and box faces never skip a cell; a hit in
-a leaf ends the search once it lies before the leaf's far end. Ray–triangle test: Woop, Benthin &
-Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013), with the edge functions evaluated in
-float64 (products of float32 values are exact there), so shared edges and vertices are hit by one
-of their triangles and no ray leaks through a closed mesh. (A float32 pre-test that rejects on edge
-functions of opposite signs was tried — exact here, since the module is compiled without FMA
-contraction, ``TRACE_MODULE_OPTIONS`` — and measured within the noise of float64 alone in
-interleaved A/Bs, ``kdtree_ab_no_f32.json``: not kept.) Closest-hit results: ``t`` (N,) float32
-(inf on a miss), ``prim`` (N,) int32 (−1), barycentrics ``u``, ``v`` (N,) float32 with
-p = (1−u−v)·v0 + u·v1 + v·v2 (Embree's convention); equal t resolve to the lower triangle index
-within a leaf. Any-hit (``occluded``): (N,) bool, a hit with tmin < t < tmax.
-Degenerate rays — a zero, NaN or infinite direction (or a direction whose largest component is
-below ~1e-30), a NaN origin, tmax ≤ tmin or NaN — are misses.
-
-Ray reordering (``sort`` in :meth:`KdTree.intersect` / :meth:`KdTree.occluded`, :func:`ray_order`;
-Pharr et al., "Rendering complex scenes with memory-coherent ray tracing", 1997; Garanzha & Loop,
-"Fast ray sorting and breadth-first packet traversal for GPU ray tracing", 2010): a batch of
-incoherent rays is traced in the order of a 28-bit key (:func:`ray_sort_key`) — the Morton code of
-the origin's cell on an 8³ grid over the root box, the direction's octant, the origin's cell on a
-4³ grid within that cell, then the direction's cell on a 32×32 grid of the octant's octahedral map
-— so that consecutive rays start near each other and head the same way, walk the same nodes and
-triangles while they are still in the caches, and 16 of them make a packet whose lanes share
-nodes (below, "Packets"). The keys are a Warp kernel (on the CPU 16 rays per kernel thread as
-SIMD lanes, :func:`sort_keys_simd`), the sort a radix sort of two 14-bit digits by counting on the
-CPU (:func:`counting_order`, its placing passes split by runs of keys over the threads) and numpy's
-stable sort on CUDA; the rays are gathered into the sorted order (a
-separate pass: a random read per ray inside the traversal costs more than the pass; tmax only when
-it differs between rays), traced with their results written in that order, and the results
-scattered back to each ray's own index by a pass of their own (:func:`scatter_hits`: one 16-byte
-record per ray, :func:`hit_outputs`; :func:`scatter_in_order` for the any-hit flags), so the results
-do not depend on the order. (Written back from inside the traversal, the four random stores per ray
-cost 60-90 ms of a 0.92 M-ray batch's ~470 ms on one thread, the separate scatter 10 ms: README,
-"The kd-tree ray tracer", round 23; its A/Bs ``benchmarks/results/kdtree_ab_scatter*.json``.) Rays
-already in a coherent order (camera rays; the default ``sort=None`` looks at how often the key
-changes along the batch) and batches below ``SORT_MIN_RAYS`` are traced as they come. On the
-benchmark's incoherent rays: +14-18 % rays per CPU-second, sort and gather included
-(``benchmarks/results/kdtree_ab_final.json``, with the earlier key: octant, then origin); the origin
-first with the finer direction cells, a further ~5-10 % on the interleaved kernel
-(``benchmarks/results/kdtree_ab_sortkey.json``); this key and packets instead of the interleaved
-kernel, +5 % (README, "The kd-tree ray tracer", round 28).
-
-Interleaved rays (CPU, ``rays_per_thread`` 2 or 4: :func:`trace_rays_kernel`; the default for a
-reordered batch until round 28, when packets with a finer sort key overtook it). Warp runs a CPU launch as a
-loop over the kernel's threads, so one ray per thread is one chain of dependent node loads at a
-time, and the traversal's data-dependent branches (which child, push or not) mispredict often on
-incoherent rays, each flush discarding the work in flight. The interleaved kernel gives each kernel
-thread ``CPU_RAYS_PER_THREAD`` slots, each with its own ray state and stack, and steps them in turn
-(a slot takes the thread's next ray when its ray is done), with a branch-free inner-node step
-(:func:`inner_step_flat`: 0/1 arithmetic and selects; Warp turns ``and``/``or`` into branches and
-the compiler turns an integer select on the loop's chain back into one, so the choices are
-arithmetic), so the out-of-order core overlaps the slots' independent chains. Every ray makes the
-same choices as in :func:`trace_kd`: the same hits, bit for bit (tests). The branch-free step costs
-1.4-1.7 times the instructions per ray of the branchy one, so it pays only where that one stalls:
-+6-8 % rays per CPU-second on the benchmark's incoherent (reordered) rays, sort included
-(``benchmarks/results/kdtree_ab_interleave.json``), but a third slower on camera rays, which keep
-one ray per thread. Tried in scratch A/Bs and slower or no better (README, "The kd-tree ray
-tracer", fifth round): interleaving with the branchy step (0.67-0.80x: a mispredicted branch in one
-slot flushes the others), fixed groups of rays instead of refilled slots, 3, 4 or 8 slots, the
-slots as a loop instead of unrolled, the push as a branch, the pop after an empty leaf without
-branches (it lengthens every step's chain), two steps per turn, the slots' rays far apart, a
-float32 pre-reject in the leaves, one ray per kernel thread in a loop of several.
-
-Packets (CPU, reordered batches and batches already in a coherent order:
-:func:`trace_packets_kernel`; Wald's thesis traced SSE packets of four rays). A kernel thread
-traces ``PACKET_LANES`` consecutive rays together: the packet walks the tree once for all of
-them, one node's step for every lane is a few SIMD
-instructions (:func:`packet_step`, a native snippet in clang's vector extensions, since Warp's CPU
-code is scalar), lane masks say which lanes go to each child, the second child's lanes keep their
-intervals on the packet's stack, and a leaf's triangles are tested lane by lane
-(:func:`intersect_leaf`). Each lane keeps trace_kd's own interval, best hit, pushes and pops, and
-the packet visits a node's children in the order of its lanes' direction sign on the node's axis,
-which is the order of every lane that visits both (a packet whose lanes head into different
-octants is traced once per octant, with those lanes), so every ray visits trace_kd's nodes and
-triangles in trace_kd's order: the same hits, bit for bit (tests). A node's load, step and
-branches are shared by the lanes that visit it: many on camera rays (1.5 times the rays per second
-of one ray per kernel thread), fewer on reordered incoherent rays, where packets beat the
-interleaved kernel only once the sort key told nearby origins and directions apart finely enough
-(README, "The kd-tree ray tracer", round 28). The lanes' set-up — trace_kd's ``start_ray``: Woop's
-axes and shears, the inverse direction, the root-box clip — is SIMD too (:func:`packet_setup`):
-as 16 scalar calls it cost a quarter of a camera batch's traversal time (round 29) — and so is a
-leaf's triangle test, 8 triangles of a lane at a time (:func:`leaf_simd`; the one-ray traversal's
-:func:`intersect_leaf` uses the same C through :func:`leaf_pick` on the CPU). Reordered
-batches and coherent ones in the caller's order (:func:`batch_is_coherent`) are traced in packets
-(their arrays contiguous, as the queries make them); anything else one ray per kernel thread.
-
-On the CPU the launches are split over all cores with :func:`serenity.kernels.launch.launch`, in
-balanced chunks that shrink as the batch is used up, handed out as threads free up (rays differ a
-lot in cost).
-
-Where the time goes (``perf record -e cpu-clock`` on the Warp-generated CPU code, incoherent rays,
-samples mapped onto the JIT-loaded code): the largest stalls are the node load of each step and the
-first vertex load of each triangle; the rest is spread over the step's compare-and-branch logic and
-the float64 edge functions. Per ray ~25 inner-node steps against ~6 triangle tests and ~1 non-empty
-leaf (``benchmarks/kdtree_counts.py``): a chain of dependent, data-dependent steps, bound by load
-latency and branch mispredictions. Hence the count in the node, the leaf-contiguous ``refs`` and the
-empty-leaf flags, and fewer empty-space cuts in the build (``KdBuildConfig.min_empty_fraction``:
-12 % fewer steps, 16-22 % faster coherent rays). Warp's CPU code (release mode: no bounds checks;
--O2, -march=native): ``wp.isfinite`` is a call out of line into Warp's runtime, so the ray set-up
-uses :func:`finite` (inline, ~10 per ray); a vector component at a run-time index is a load from
-the stack, so the triangle test is inlined in its six axis permutations with literal axes
-(:func:`intersect_triangle_fixed`); Warp's ``a[i]`` wraps a negative ``i`` and multiplies it by the
-array's run-time stride, both on the chain of dependent node loads, so the nodes and leaf references
-are read by native snippets at a compile-time element size (:func:`node_head`; with the index masks
-that came first, +21 % coherent and +17 % incoherent rays per CPU-second against the plain loads,
-``benchmarks/results/kdtree_ab_issue17.json``), and the stack index is masked to its range.
-Tried without a measurable gain (``benchmarks/bench_kdtree_steps.py``,
-``benchmarks/results/kdtree_ab.json``): ordering the children by the direction's sign instead of the
-origin's side, a branch-free step, selects instead of the step's indexed loads, deeper trees, nodes
-in 64-byte cache-line treelets, 36-byte leaf records (the index in its own array) packed in
-depth-first leaf order, packets of 4 coherent rays sharing one traversal (without SIMD lanes Warp's
-scalar code does each ray's work anyway, plus the packet's bookkeeping: slower), -O3 instead of -O2;
-earlier, two rays per thread with interleaved steps, other SAH cost ratios; the child order as 0/1
-arithmetic instead of a branch (slower: the branch is mostly predicted, the arithmetic lengthens the
-chain to the next node).
+How the traversal, the ray reordering, the packets and the threading work, why each is the way
+it is, and their figures: docs/kdtree.md.
 """
 
 from __future__ import annotations
@@ -205,13 +94,13 @@ CHUNKS_PER_THREAD = 16
 #: ``SORT_COARSE_BITS``-bit grid per axis over the root box, the direction's octant, the origin's
 #: cell on the finer ``SORT_ORIGIN_BITS``-bit grid within the coarse cell, then the direction's cell
 #: on a ``SORT_DIRECTION_BITS``-bit grid per coordinate of the octant's octahedral map, so that
-#: consecutive rays walk the same nodes and triangles (module docstring, "Ray reordering")
+#: consecutive rays walk the same nodes and triangles (docs/kdtree.md, "Ray reordering")
 SORT_MIN_RAYS = 1 << 15
 SORT_MIN_RUN = 4  # ... whose keys change on average more often than every this many rays (``ray_order``)
 #: ... estimated from this many evenly spaced pairs of consecutive rays (a coherent batch is then
 #: traced without a key per ray: 3 % of a camera batch's time)
 SORT_SAMPLE_PAIRS = 4096
-#: interleaved CPU queries (module docstring, "Interleaved rays"; ``rays_per_thread``): the slot
+#: interleaved CPU queries (docs/kdtree.md, "Interleaved rays"; ``rays_per_thread``): the slot
 #: counts the kernel factory ``trace_rays_kernel`` compiles, the usual slot count, and the most rays a
 #: slot takes in turn in one kernel thread (fewer when that would leave a launch too few chunks to
 #: balance the threads: ``_slot_rays``)
@@ -259,7 +148,7 @@ _SORT_SAMPLE_SHIFT = wp.constant(SORT_SAMPLE_SHIFT)
 class KdNode:
     """One node, 8 bytes: ``head`` = (first child << 4) | empty-children flags << 2 | axis, or
     (first reference << 2) | 3 for a leaf; ``split`` = the split position of an inner node, the
-    triangle count of a leaf (module docstring)."""
+    triangle count of a leaf (module docstring, layout)."""
 
     head: wp.int32
     split: wp.float32
@@ -819,8 +708,8 @@ def ray_sort_key(box_lo: wp.vec3, scale: wp.vec3, o: wp.vec3, d: wp.vec3) -> int
     (|d| / (|dx| + |dy| + |dz|), x and y). So rays of
     one coarse cell heading into one octant are together, and within them rays from nearby points
     in nearby directions: 16 neighbours in the order make a packet whose lanes share nodes
-    (module docstring, "Ray reordering"). Straight-line code (loops over axes with a run-time index
-    cost 8.8 ms of a 0.92 M-ray batch on one thread in round 24, this kind of code 4.7)."""
+    (docs/kdtree.md, "Ray reordering"). Straight-line code: loops over the axes with a run-time
+    index take about twice as long."""
     origin = (spread_bits(origin_cell(o[0], box_lo[0], scale[0]))
               | (spread_bits(origin_cell(o[1], box_lo[1], scale[1])) << 1)
               | (spread_bits(origin_cell(o[2], box_lo[2], scale[2])) << 2))
@@ -1002,9 +891,9 @@ def count_keys(
 
 
 #: how many keys ahead the counting sort's placing passes prefetch, for writing, the line of the place
-#: a key will take (its bin's next free place now; 0: none). The 0.92 M keys of the benchmark's
-#: incoherent rays, cold caches: 8.0-9.9 → 7.7-8.0 ms on one thread, and within the noise on two
-#: (5.5-6.9 either way); 32 or 64 ahead alike, 16 gains nothing (round 30, scratch timings)
+#: a key will take (its bin's next free place now; 0: none): on one thread the placing of the
+#: benchmark's incoherent rays' keys is a few per cent faster with cold caches, on two within the
+#: noise; 32 or 64 ahead alike, 16 gains nothing
 SORT_PREFETCH = 32
 
 
@@ -1233,14 +1122,12 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
     (:func:`place_low_runs`), then each thread takes a share of the low digits' bins and places their
     keys, run after run, by the high digit (:func:`place_high_runs`: the order a one-thread first
     pass gives, so the same result). The same order as ``np.argsort(keys, kind="stable")`` (tests).
-    With one 16-bit digit (round 26's 16-bit key) it took 4.5 ms on 0.92 M keys on one thread
-    against 8.2-8.3 ms for numpy's radix sort. Until round 29 the first pass put each run's keys at
-    the run's own places in every global bin, so the two threads' writes met at every bin's border
-    and shared most cache lines of the 2-byte high digits: that pass took 6.5-6.9 ms on 2 threads
-    inside the incoherent query, about what the whole one-thread sort's two passes take; within its
-    own places, 3.5-5.5 ms (round 30; split by spans of bins instead, each thread reading every key
-    and placing its own, branch-free, it was no faster than one thread; a radix sort of three 9-10-bit
-    digits, 1.7x slower on one thread: scratch timings)."""
+    On one thread it takes about half the time of numpy's radix sort of the same keys. Each run's
+    keys are placed within the run's own places so that two threads' writes do not meet at every
+    bin's border and share the cache lines of the 2-byte high digits (placed at the run's places in
+    every global bin, the first pass on two threads took as long as the one-thread sort's two
+    passes). Split by spans of bins instead (each thread reading every key and placing its own) it
+    is no faster than one thread; three digits of 9-10 bits are slower (docs/kdtree.md)."""
     runs = max(1, min(threads or cpu_threads(), n // SORT_MIN_KEYS_PER_THREAD))
     per_run = -(-n // runs)
     bins = 1 << SORT_DIGIT_BITS
@@ -1310,9 +1197,9 @@ def scatter_array(
 
 #: rays per kernel thread of the CPU's reordering passes (:func:`move_in_order`, :func:`scatter_hits`),
 #: and how many rays ahead each prefetches the lines it will read or write at random: the
-#: out-of-order core alone keeps too few of those misses in flight (0.92 M incoherent rays, cold
-#: caches, one thread: the gather 9.5 → 8.0 ms, the scatter 6.4 → 4.8; two threads: 6.7 → 5.1-5.7
-#: and 4.4 → 2.8-3.4, against one ray per kernel thread without prefetches; round 30, scratch timings)
+#: out-of-order core alone keeps too few of those misses in flight (on the benchmark's 0.92 M
+#: incoherent rays with cold caches the gather takes about 1/6 less time and the scatter 1/4 less,
+#: against one ray per kernel thread without prefetches; docs/kdtree.md, "Reordering")
 REORDER_BLOCK = 4096
 GATHER_PREFETCH = 64
 SCATTER_PREFETCH = 128
@@ -1641,7 +1528,7 @@ def trace_rays_kernel(rays: int, any_hit: bool):
 # packets (CPU: reordered batches and batches in a coherent order)
 # ----------------------------------------------------------------------------------------------
 
-#: rays per packet (module docstring, "Packets"): the lanes of one SIMD node step, and the bits of
+#: rays per packet (docs/kdtree.md, "Packets"): the lanes of one SIMD node step, and the bits of
 #: the lane masks (an int32 holds them)
 PACKET_LANES = 16
 #: a batch left in the caller's order is traced in packets when it has at least this many rays and
@@ -1912,7 +1799,7 @@ def leaf_simd(refs: wp.array(dtype=float), first: int, k: int, o: wp.vec3, kx: i
 
 @kernel_factory(any_hit=(False, True))
 def trace_packets_kernel(any_hit: bool):
-    """The CPU query kernel for batches in a coherent order (module docstring, "Packets"): kernel
+    """The CPU query kernel for batches in a coherent order (docs/kdtree.md, "Packets"): kernel
     thread g traces rays g·PACKET_LANES … as one packet through the tree, the lanes' node steps as
     SIMD (:func:`packet_step`), a leaf's triangles lane by lane (:func:`leaf_simd`), each lane
     with its own interval, best hit and entries on the packet's stack, so that every ray visits the
@@ -2085,11 +1972,10 @@ def hit_outputs(n: int, device: str, reordered: bool) -> tuple[list, wp.array | 
     on the CPU the (n,) vec4 array of 16-byte records (t, prim's bits, u, v) whose columns they are
     (prim's viewed as int32); else four arrays and None (CUDA: coalesced per array). A reordered
     batch's results are scattered back as records (:func:`scatter_hits`): one random store of 16
-    bytes per ray, where four arrays took four of 4 bytes to four cache lines, the store buffer
-    filling with misses (the scatter of 0.92 M incoherent rays, 10.3 ms → 6.7 on one thread, 8.2 →
-    4.7 on two, round 30: scratch timings, each phase timed in the query). A batch traced in its own
-    order writes its results in order: there the columns of records made camera rays' traversal
-    1.5-2.5 % slower beside incoherent queries (scratch timings), so it keeps four arrays."""
+    bytes per ray, where four arrays take four of 4 bytes to four cache lines, the store buffer
+    filling with misses (the scatter of the benchmark's incoherent rays takes about a third less
+    time). A batch traced in its own order writes its results in order: there the columns of
+    records make camera rays' traversal 1.5-2.5 % slower, so it keeps four arrays."""
     if not (reordered and device.startswith("cpu")):
         return [wp.empty(n, dtype=dt, device=device) for dt in (float, wp.int32, float, float)], None
     records = wp.empty(n, dtype=wp.vec4, device=device)  # Warp's allocator: numpy's fresh pages cost faults
