@@ -137,3 +137,22 @@ def test_former_preset_names_still_work_with_a_one_line_warning(old, new):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the current names warn of nothing
         assert preset_name(new) == new and RenderConfig.preset(new, exposure=0.5) == cfg
+
+
+def test_sweep_files_and_viewer_scripts_take_former_preset_names(tmp_path):
+    """A sweep file's quality list and a viewer script's ``set = { quality = ... }`` accept the former
+    names too: each becomes the current name (task keys, output names and the panel use it), with
+    a warning that names the file."""
+    from serenity.config import PresetRenamedWarning
+    from serenity.sweep import load_spec
+    from serenity.view.script import load_script
+
+    sweep = tmp_path / "day.toml"
+    sweep.write_text('[sweep]\nscenes = ["plane"]\nsizes = ["8x8"]\nquality = ["low", "lpv", "baseline"]\n')
+    with pytest.warns(PresetRenamedWarning, match=r"day\.toml \[sweep\]\.quality: quality preset 'low' is now "
+                                                  r"called 'traced-probes'"):
+        assert load_spec(str(sweep)).qualities == ("traced-probes", "lpv", "baseline")
+    script = tmp_path / "s.toml"
+    script.write_text('[[step]]\nframe = 1\nset = { quality = "medium" }\n')
+    with pytest.warns(PresetRenamedWarning, match=r"s\.toml.*quality preset 'medium' is now called 'lpv-fast'"):
+        assert load_script(str(script)).steps[0].value == {"quality": "lpv-fast"}
