@@ -235,6 +235,15 @@ def frame_summary(*benches: dict) -> str:
                "cores busy", "no schedule beats (ms)"], rows)
 
 
+@table("frame-cost", *_frame_sources(DEFAULT_PRESET))
+def frame_cost(small: dict, large: dict) -> str:
+    """One sentence: the default preset's frame while the sun moves, at both sizes (README)."""
+    cores = large.get("machine", {}).get("cores") or large.get("machine", {}).get("cpus")
+    return (f"While the sun moves, a frame of the default preset costs **{f1(large['overlapped']['frame_ms'])} ms** "
+            f"at {size_label(large['size'])} and **{f1(small['overlapped']['frame_ms'])} ms** at "
+            f"{size_label(small['size'])} on {cores} CPU cores without a GPU.")
+
+
 @table("frame-repeat", "results/frame_repeat_lpv-fast_320x180.json")
 def frame_repeat(rep: dict) -> str:
     """The same frame bench run several times in a row: how far one run's figure moves."""
