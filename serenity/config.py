@@ -315,7 +315,7 @@ class LPVConfig:
     resolution: int | tuple[int, ...] = 12
     """Cells per axis of each cascade's cubic grid; an int for all cascades or one per cascade.
     12³, not the paper's 32³: at 32³ cells are finer than the propagation can cross in a frame's
-    budget; over 7 views of the courtyard and the Cornell box (``benchmarks/bench_lpv_views.py``)
+    budget; over 7 views of the courtyard and the Cornell box (``benchmarks/experiments/bench_lpv_views.py``)
     12³ has a lower mean FLIP and relMSE than 16³ in both scenes, for about half the update."""
     cascades: int = 3
     """Nested grids around the camera (1..3), finest first."""

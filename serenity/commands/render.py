@@ -44,7 +44,7 @@ def register(subparsers) -> None:
 
 def format_report(report: dict) -> str:
     """What ``serenity render`` prints, from the dict its ``--json`` writes (so that a document can
-    print a recorded run exactly as the command printed it: ``benchmarks/frame_tables.py --render``)."""
+    print a recorded run exactly as the command printed it: ``tools/doc_tables.py``, render-output)."""
     from serenity.frame import format_timings
 
     (w, h), sun = report["size"], report["sun"]
