@@ -563,13 +563,13 @@ class RayTracer:
             rays = [wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
                     wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev)]
             tree = self.data.tree
-            scratch = self.tree.scratch(dev)
-            order = ray_order(tree.box_lo, tree.box_hi, rays[0], rays[1], n, sort, dev, threads, scratch)
+            buffers = self.tree.scratch(dev)  # the tree's grow-only buffers for this thread
+            order = ray_order(tree.box_lo, tree.box_hi, rays[0], rays[1], n, sort, dev, threads, buffers)
             reordered = order.shape[0] > 0
             if reordered:
-                rays = gather_in_order(order, rays, dev, threads, scratch)
+                rays = gather_in_order(order, rays, dev, threads, buffers)
             # a reordered batch is traced into working arrays in its order, then scattered back
-            traced = buffers_like([*outs, back], "traced", dev, scratch) if reordered else [*outs, back]
+            traced = buffers_like([*outs, back], "traced", dev, buffers) if reordered else [*outs, back]
             args = [self.data, *rays, float(self.ray_epsilon if tmin is None else tmin), float(tmax),
                     int(max(0, transmissions)), wp.vec3(*(float(x) for x in sun)),
                     int(sun_direction is not None), *traced]
