@@ -383,6 +383,11 @@ class LPVConfig:
     lags the camera and the light by at most ``cascades`` updates; a cascade that did not change
     is skipped, and a still scene converges to what updating all at once gives). The finer
     cascades' hand-over from a coarser one is rebuilt every update from its last propagation."""
+    temporal_blend: float = 0.35
+    """Fraction of the way from the light the lookups read in the last frame to the newest propagation
+    that each frame moves them (1 = switch at once): a re-injected or staggered cascade is blended in
+    over a few frames instead of switched, so that the VPLs' sampling of a moving sun does not pop
+    (``LightPropagationVolume.update``'s ``blend``; ``docs/stability.md``)."""
     view_distance: float = 64.0
     """Metres the outermost cascade reaches along the view direction (capped by the scene size)."""
     cascade_scale: float = 2.0
@@ -424,6 +429,8 @@ class LPVConfig:
             raise ConfigError(f"LPVConfig.glossy_steps must be >= 1, got {self.glossy_steps}")
         if not self.glossy_step > 0:
             raise ConfigError(f"LPVConfig.glossy_step must be positive, got {self.glossy_step}")
+        if not 0.0 < self.temporal_blend <= 1.0:
+            raise ConfigError(f"LPVConfig.temporal_blend must be in (0, 1], got {self.temporal_blend}")
 
     @property
     def iteration_counts(self) -> tuple[int, ...]:

@@ -79,7 +79,7 @@ STAGES = (
     "upload",
     "g-buffer", "ray casting buffer", "kd-tree build", "cpu ray tracing",  # sync 1, the tracer starts
     "sky volume build", "sky volume update", "wait for volumes", "sky upload",  # paper §7
-    "rsm", "lpv inputs", "lpv inject", "lpv propagate",                # paper §8
+    "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv blend",   # paper §8
     "shadow maps (CSM)", "low-res guide", "ssao", "lpv upload",        # the main view
     "sun visibility", "direct lighting", "sky lighting", "lpv lighting",
     "wait for ray tracing", "rt g-buffer upload", "shadow maps (OSM)",  # sync 2, paper §9
@@ -92,7 +92,9 @@ lighting", which then includes their upsampling: one full-resolution pass). "rsm
 read-back of the RSM and of the G-buffer's samples; with the volume worker
 (``RenderConfig.overlap_volumes``) "sky volume update", "lpv inputs", "lpv inject" and "lpv
 propagate" run on its lane beside the GL stages, and "wait for volumes" is what the main thread
-waited for them."""
+waited for them. "lpv propagate" includes a step of the LPV's temporal blend; "lpv blend" is that
+step alone, in a frame whose LPV inputs did not change while its light is still blended in
+(``LPVConfig.temporal_blend``)."""
 LPV_UPDATE_STAGES = ("rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv upload")
 """The parts of the paper's "Light Propagation Volumes Update" (Table 1)."""
 SKY_UPDATE_STAGES = ("sky volume update", "sky upload")
@@ -508,8 +510,10 @@ class Renderer:
         if self.lpv is None:
             return
         view_changed = self._lpv_view_changed(light)
-        if view_changed or self._lpv_sky_version != self._sky_volume_version or self.lpv.pending_levels:
-            self._lpv_job(view_changed, self._read_lpv_inputs(gbuf, light.sun_irradiance))
+        sky_changed = self._lpv_sky_version != self._sky_volume_version
+        if view_changed or sky_changed or self.lpv.pending_levels:
+            wanted = view_changed or sky_changed or self.lpv.stale_levels  # else only a blend step
+            self._lpv_job(view_changed, self._read_lpv_inputs(gbuf, light.sun_irradiance) if wanted else None)
             self._upload_lpv()
 
     def _plan_lpv(self, light: LightingInputs, sky_may_change: bool):
@@ -522,7 +526,8 @@ class Renderer:
         view_changed = self._lpv_view_changed(light)
         if not (view_changed or sky_may_change or self.lpv.pending_levels):
             return None
-        return view_changed, self._read_rsm(light.sun_irradiance)
+        wanted = view_changed or sky_may_change or self.lpv.stale_levels  # else only a blend step
+        return view_changed, self._read_rsm(light.sun_irradiance) if wanted else None
 
     def _start_lpv(self, gbuf, plan):
         """With the volume worker, after the G-buffer: its samples read back and the LPV's kernels
@@ -531,7 +536,8 @@ class Renderer:
         if plan is None:
             return None
         view_changed, rsm = plan
-        return self._volume_pool.submit(self._lpv_job, view_changed, (rsm, self._read_gbuffer_samples(gbuf)))
+        inputs = None if rsm is None else (rsm, self._read_gbuffer_samples(gbuf))
+        return self._volume_pool.submit(self._lpv_job, view_changed, inputs)
 
     def _lpv_view_changed(self, light: LightingInputs) -> bool:
         """Whether the LPV's inputs other than the sky volume (the sun, its irradiance, the camera)
@@ -544,12 +550,19 @@ class Renderer:
     def _lpv_job(self, view_changed: bool, inputs) -> None:
         """Re-inject and propagate when the LPV's inputs changed (the view, or the sky volume since the
         LPV last read it: the sky-light VPLs) or a staggered LPV's cascades are still behind
-        (``LPVConfig.stagger``); else nothing (the inputs were read for a sky that did not change)."""
+        (``LPVConfig.stagger``); one step of the blend of its light when only that is left
+        (``LPVConfig.temporal_blend``; ``inputs`` may then be None); else nothing (the inputs were read
+        for a sky that did not change)."""
         sky_changed = self._lpv_sky_version != self._sky_volume_version
         if view_changed or sky_changed:
             self._lpv_inputs_version += 1
             self._lpv_sky_version = self._sky_volume_version
         elif not self.lpv.pending_levels:
+            return
+        elif not self.lpv.stale_levels:  # every cascade holds these inputs: their light's blend goes on
+            with self._cpu_stage("lpv blend"):
+                if self.lpv.blend(self.config.lpv.temporal_blend):
+                    self._lpv_pending_upload = True
             return
         self._compute_lpv(*inputs)
 
@@ -702,7 +715,8 @@ class Renderer:
             vpls, surfels = self._lpv_inputs(rsm, g)
         t0 = time.perf_counter()
         # the key: which change of the inputs this is (a staggered LPV's cascades catch up under one key)
-        self.lpv.update(self.scene.camera, self.scene_gl.bounds, vpls, surfels, key=self._lpv_inputs_version)
+        self.lpv.update(self.scene.camera, self.scene_gl.bounds, vpls, surfels, key=self._lpv_inputs_version,
+                        blend=self.config.lpv.temporal_blend)
         t_inject = (self.lpv.timings.get("inject", 0.0) + self.lpv.timings.get("inject_geometry", 0.0)) / 1e3
         t1 = time.perf_counter()
         lane = VOLUME_LANE if self._on_volume_worker() else MAIN_LANE

@@ -67,14 +67,17 @@ def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
     """``lpv-fast``'s sky layer cycle and LPV stagger: after frames with the camera and sun moving, a
     still scene keeps updating (one sky layer, one LPV cascade per frame; the LPV again after the sky
     volume's last layer, since its sky-light VPLs read that volume) only until every layer and
-    cascade holds the newest inputs, then skips the volume work; its image is then the one a renderer
+    cascade holds the newest inputs and shows them (``LPVConfig.temporal_blend``), then skips the
+    volume work; its image is then the one a renderer
     that updates everything every frame draws of the same still scene (the same volumes, up to float
     summation order)."""
     import dataclasses
 
+    from serenity.kernels.lpv.volume import blend_updates
+
     fast = RenderConfig.preset("lpv-fast", overlap=False)
     every = dataclasses.replace(fast, sky=dataclasses.replace(fast.sky, transfer_layers=0),
-                                lpv=dataclasses.replace(fast.lpv, stagger=False))
+                                lpv=dataclasses.replace(fast.lpv, stagger=False, temporal_blend=1.0))
     scenes = [copy.deepcopy(courtyard), copy.deepcopy(courtyard)]
     rs = [Renderer(s, *SIZE, config=c) for s, c in zip(scenes, (fast, every), strict=True)]
     try:
@@ -93,7 +96,8 @@ def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
         while amortised.lpv.pending_levels or amortised.sky_volume.pending_layers:
             f = amortised.render(read_back=False)
             catch_up += 1
-            assert catch_up <= layers + cascades  # the LPV's sky-light VPLs read the sky volume
+            # the LPV's sky-light VPLs read the sky volume; its last update's light is then blended in
+            assert catch_up <= layers + cascades + blend_updates(fast.lpv.temporal_blend)
         still = amortised.render(read_back={"hdr"})
         assert not set(LPV_UPDATE_STAGES) & set(still.timings) and "sky upload" not in still.timings
         rs[1].render(read_back=False)

@@ -108,6 +108,24 @@ are neither propagated nor looked up.
 Every VPL is injected into every cascade it falls in; lookups take the finest cascade (blended
 at its border, see "cascades" above).
 
+Injection (``kernels.inject_vpls``): a VPL at p with normal n goes to the point u = (p − origin)/s +
+``injection_offset``·n (cells); along the normal's dominant axis it stays in the one layer of cells
+holding u, and across the other two axes its lobe is split bilinearly between the 4 cells whose centres
+surround u (clamped to the grid). Put in the single cell holding u, a regular grid of VPLs (an RSM's
+texels on a flat ground) moved across the cell borders a whole row at a time as the sun moved, and
+under a sun sinking 0.05° per frame the image popped (``docs/stability.md``); split, a VPL's light
+moves between cells as smoothly as the VPL does. Along the normal nothing is split, so no light is put behind the
+surface it leaves.
+
+Temporal blend (``LPVConfig.temporal_blend`` = α, ``LightPropagationVolume.update``'s ``blend``): what
+lookups read moves a fraction α per update from what they read after the last update to the newest
+propagation, per cascade and in world space (a cascade whose box moved by whole cells is blended where
+the old and new boxes overlap, the rest is the newest light), and after ``blend_updates(α)`` updates
+(under 1 % of the change left) it is the newest light exactly. A staggered cascade's refresh and the
+VPL sampling's remaining frame-to-frame noise are blended in over a few frames instead of switched;
+the light lags a moving sun by about (1 − α)/α frames. A still scene ends exactly where no blending
+gets, ``blend_updates(α)`` updates after its inputs stopped changing.
+
 Reach. N iterations carry light about N cells, so on its own the finest cascade would only see
 light from sources within N of its (small) cells. Two measures, both on by default:
     cross_scene: the coarsest fitted cascade runs max(N, ⌈largest scene side / its cell⌉)

@@ -415,6 +415,39 @@ def cascade_radiance(grids: wp.array(dtype=wp.vec4), g: Cascade, last: bool, q: 
 # ----------------------------------------------------------------------------------------------
 
 
+@wp.func
+def splat_axes(n: wp.vec3) -> wp.vec3i:
+    """(the normal's dominant axis, the two others): a VPL's light is split between the cells beside
+    each other along its surface (bilinearly along the two others) but kept in the one layer of cells
+    in front of the surface along the first (``inject_vpls``)."""
+    ax = wp.abs(n[0])
+    ay = wp.abs(n[1])
+    az = wp.abs(n[2])
+    if ax >= ay and ax >= az:
+        return wp.vec3i(0, 1, 2)
+    if ay >= az:
+        return wp.vec3i(1, 0, 2)
+    return wp.vec3i(2, 0, 1)
+
+
+@wp.func
+def splat_cell(u: wp.vec3, axes: wp.vec3i, k: int, res: int) -> wp.vec4:
+    """Corner ``k`` (0..3) of the bilinear splat of point ``u`` (cells): (x, y, z, weight); the cell
+    containing u along axes[0], the two cell centres around u along axes[1] and axes[2] (clamped to
+    the grid: a point within half a cell of the border keeps all of its weight inside)."""
+    out = wp.vec4(wp.floor(u[0]), wp.floor(u[1]), wp.floor(u[2]), 1.0)
+    for j in range(2):
+        a = axes[j + 1]
+        v = u[a] - 0.5
+        v0 = wp.floor(v)
+        f = v - v0
+        bit = (k >> j) & 1
+        c = v0 + float(bit)
+        out[a] = wp.clamp(c, 0.0, float(res - 1))
+        out[3] = out[3] * wp.where(bit == 1, f, 1.0 - f)
+    return out
+
+
 @wp.kernel(enable_backward=False)
 def inject_vpls(
     # inputs
@@ -430,7 +463,9 @@ def inject_vpls(
     grid: wp.array(dtype=wp.vec4),
     offset: int,
 ):
-    """Add each VPL's clamped-cosine intensity lobe to the cell at p + shift·s·n of every cascade."""
+    """Add each VPL's clamped-cosine intensity lobe at p + shift·s·n to every cascade: to the layer of cells
+    that holds that point along the normal's dominant axis, split bilinearly between the 4 cells around it
+    across the other two (package doc, "Injection")."""
     i = wp.tid() + offset
     n = normals[i]
     ln = wp.length(n)
@@ -446,10 +481,13 @@ def inject_vpls(
         u = grid_coord(g, positions[i]) + n * shift
         if inside(u, res):
             n3 = res * res * res
-            cell = sbase + g.base + (int(u[2]) * res + int(u[1])) * res + int(u[0])
-            wp.atomic_add(grid, cell, lobe * f[0])
-            wp.atomic_add(grid, cell + n3, lobe * f[1])
-            wp.atomic_add(grid, cell + 2 * n3, lobe * f[2])
+            axes = splat_axes(n)
+            for k in range(4):
+                s = splat_cell(u, axes, k, res)
+                cell = sbase + g.base + (int(s[2]) * res + int(s[1])) * res + int(s[0])
+                wp.atomic_add(grid, cell, lobe * (f[0] * s[3]))
+                wp.atomic_add(grid, cell + n3, lobe * (f[1] * s[3]))
+                wp.atomic_add(grid, cell + 2 * n3, lobe * (f[2] * s[3]))
 
 
 @wp.kernel(enable_backward=False)
@@ -910,3 +948,34 @@ def lookup_glossy(
             acc += wp.vec3(s[0], s[1], s[2])
             keep = keep - s[3]
     out[i] = acc / float(steps)
+
+
+@wp.kernel(enable_backward=False)
+def blend_shown(
+    # inputs
+    target: wp.array(dtype=wp.vec4),
+    previous: wp.array(dtype=wp.vec4),
+    base: int,
+    res: int,
+    shift: wp.vec3i,
+    alpha: float,
+    # outputs
+    shown: wp.array(dtype=wp.vec4),
+    offset: int,
+):
+    """One level's shown light (3·res³ vec4 from ``base``) a fraction ``alpha`` of the way from what it
+    showed before (``previous``, in a grid ``shift`` cells away: cell i of the new grid is cell i + shift
+    of the old one) to ``target``; cells the old grid did not hold take the target."""
+    i = wp.tid() + offset
+    n3 = res * res * res
+    ch = i // n3
+    k = i - ch * n3
+    x = k % res + shift[0]
+    y = (k // res) % res + shift[1]
+    z = k // (res * res) + shift[2]
+    t = target[base + i]
+    if x >= 0 and y >= 0 and z >= 0 and x < res and y < res and z < res:
+        p = previous[base + ch * n3 + (z * res + y) * res + x]
+        shown[base + i] = p + alpha * (t - p)
+    else:
+        shown[base + i] = t

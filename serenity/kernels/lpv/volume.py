@@ -30,6 +30,7 @@ from serenity.kernels.lpv.basis import MAX_CASCADES, SH_FLUX
 from serenity.kernels.lpv.cascades import CascadeGrid, fit_cascades
 from serenity.kernels.lpv.kernels import (
     Cascade,
+    blend_shown,
     eval_face_transmittance,
     hand_over_far,
     inject_geometry,
@@ -39,6 +40,14 @@ from serenity.kernels.lpv.kernels import (
     measure_cells,
     propagate_kernel,
 )
+
+
+def blend_updates(alpha: float) -> int:
+    """Updates a temporal blend of ``alpha`` (``LightPropagationVolume.update``) takes to show new light
+    exactly: the first after which under 1 % of a change is still to come, (1 − alpha)^k < 0.01."""
+    if alpha >= 1.0:
+        return 1
+    return max(1, math.ceil(math.log(0.01) / math.log(1.0 - alpha)))
 
 
 @dataclass
@@ -144,6 +153,13 @@ class LightPropagationVolume:
         self._scene_size = 0.0  # largest side of the scene bounds given to ``fit`` (m)
         self._gv_dirty = True
         self._has_result = False
+        # temporal blend (``update``'s ``blend``): what lookups read, per level in the grid it was shown in,
+        # and how many more updates each level blends before it shows its newest light exactly
+        self._shown: wp.array | None = None
+        self._shown_prev: wp.array | None = None
+        self._shown_grids: dict[int, CascadeGrid] = {}
+        self._blend_left: dict[int, int] = {}
+        self._showing = False
 
     # -- helpers ---------------------------------------------------------------------------------
 
@@ -351,6 +367,7 @@ class LightPropagationVolume:
                                    [self._far, self._cas_table, len(self.grids), c, self._lookup])
         self.iterations_run = [int(self._done[g.level]) for g in self.fitted]
         self._has_result = True
+        self._showing = False  # lookups read this propagation's light until ``update`` blends it in
         self._timed("propagate", t0)
         return self.iterations_run
 
@@ -379,21 +396,46 @@ class LightPropagationVolume:
 
     @property
     def pending_levels(self) -> int:
-        """Cascades that do not yet hold what the last ``update`` asked for (> 0 only while
-        ``LPVConfig.stagger`` works through them: call ``update`` again with the same inputs)."""
+        """Cascades that do not yet hold and show what the last ``update`` asked for (> 0 only while
+        ``LPVConfig.stagger`` works through them or ``update``'s ``blend`` still blends their light in:
+        call ``update`` again with the same inputs; ``stale_levels`` says how many need them)."""
+        return sum(1 for lv, want in self._target.items() if self._held.get(lv) != want or lv in self._blend_left)
+
+    @property
+    def stale_levels(self) -> int:
+        """Cascades that do not yet hold what the last ``update`` asked for: the next ``update`` with the
+        same inputs re-injects and propagates one (0: it at most blends, ``blend`` does the same)."""
         return sum(1 for lv, want in self._target.items() if self._held.get(lv) != want)
 
-    def update(self, camera, scene_bounds, vpls, surfels=None, key=None) -> bool:
+    def blend(self, alpha: float) -> bool:
+        """One step of ``update``'s temporal blend without new inputs (for a caller that knows that
+        ``stale_levels`` is 0 and keeps the inputs to itself); returns whether what lookups read changed."""
+        if not self._blend_left:
+            return False
+        t0 = time.perf_counter()
+        self._blend(alpha, restart=False, was_showing=self._showing)
+        self._timed("blend", t0)
+        return True
+
+    def update(self, camera, scene_bounds, vpls, surfels=None, key=None, blend: float = 1.0) -> bool:
         """One frame: refit; re-inject and propagate only the cascades whose inputs or cells changed.
 
         ``vpls``: a sequence of (positions, normals, flux) sets (sun RSM, sky-lit G-buffer, …), or a
         zero-argument callable returning one (called only when work is needed); ``surfels`` likewise
         with (positions, normals, areas). ``key``: any hashable that changes when the inputs do (sun
         direction, scene version, …); None → ``input_key`` fingerprints the arrays. Returns True
-        when it re-injected and propagated. Every changed cascade is refreshed, or with
-        ``LPVConfig.stagger`` one of them, the next in turn (``pending_levels`` says how many wait).
+        when what lookups read changed (it re-injected and propagated, or blended). Every changed cascade
+        is refreshed, or with ``LPVConfig.stagger`` one of them, the next in turn (``pending_levels``
+        says how many wait).
+
+        ``blend`` < 1 (``LPVConfig.temporal_blend``): lookups read light that moves this fraction of the
+        way from what they read after the last update to the newest propagation, per cascade and in
+        world space (a cascade whose box moved is blended where the boxes overlap), until
+        ``blend_updates(blend)`` updates after the last propagation, when they read it exactly; meanwhile
+        ``pending_levels`` counts those cascades and an update with unchanged inputs only blends.
         """
         t0 = time.perf_counter()
+        was_showing = self._showing
         wanted = self._place(camera, scene_bounds)
         ikey = key if key is not None else self.input_key(vpls, surfels)
         self._target = {g.level: (g, ikey) for g in wanted}
@@ -402,8 +444,11 @@ class LightPropagationVolume:
         stale = [g for g in wanted if ikey is None or self._held.get(g.level) != self._target[g.level]]
         if self._has_result and not stale:
             self.fitted = wanted
+            blending = bool(self._blend_left)
+            if blending:
+                self._blend(blend, restart=False, was_showing=was_showing)
             self.timings["update"] = (time.perf_counter() - t0) * 1e3
-            return False
+            return blending
         if not self.config.stagger or not self._has_result or any(g.level not in self._held for g in wanted):
             stale = wanted  # every cascade (the paper's update; and whenever one holds no light yet)
         elif len(stale) > 1:
@@ -427,8 +472,54 @@ class LightPropagationVolume:
         for g in stale:
             self._held[g.level] = self._target[g.level]
         self._next_level = (max(chosen) + 1) % len(self._levels)
+        self._blend(blend, restart=True, was_showing=was_showing)
         self._timed("update", t0)
         return True
+
+    def _blend(self, alpha: float, restart: bool, was_showing: bool) -> None:
+        """``update``'s temporal blend: each active level's shown light one step towards its newest
+        (``restart``: a propagation just made it), or, where there is nothing to blend from (the first
+        update, a level that was not shown, ``alpha`` ≥ 1), its newest at once."""
+        if alpha >= 1.0:
+            self._shown_grids, self._blend_left, self._showing = {}, {}, False
+            return
+        if self._shown is None:
+            self._shown = wp.zeros(self._n_vec, dtype=wp.vec4, device=self.device)
+            self._shown_prev = wp.zeros(self._n_vec, dtype=wp.vec4, device=self.device)
+        active = {g.level: g for g in self.grids}
+        for lv in [lv for lv in self._shown_grids if lv not in active]:
+            del self._shown_grids[lv]
+            self._blend_left.pop(lv, None)
+        steps = blend_updates(alpha)
+        for lv, g in active.items():
+            v = self._levels[lv]
+            old = self._shown_grids.get(lv)
+            if restart:
+                if not was_showing or old is None or old.cell_size != g.cell_size or old.resolution != g.resolution:
+                    self._blend_left.pop(lv, None)  # nothing shown to blend from: show it at once
+                    wp.copy(self._shown, self._lookup, dest_offset=v.base, src_offset=v.base, count=v.size)
+                    self._shown_grids[lv] = g
+                    continue
+                self._blend_left[lv] = steps
+            left = self._blend_left.get(lv, 0) - 1
+            if left < 0:
+                continue
+            if left == 0:  # the last step: exactly the newest light
+                del self._blend_left[lv]
+                wp.copy(self._shown, self._lookup, dest_offset=v.base, src_offset=v.base, count=v.size)
+            else:
+                self._blend_left[lv] = left
+                wp.copy(self._shown_prev, self._shown, dest_offset=v.base, src_offset=v.base, count=v.size)
+                shift = np.rint((np.asarray(g.origin) - np.asarray(old.origin)) / g.cell_size).astype(int)
+                self._launch_cells(blend_shown, v.size, [self._lookup, self._shown_prev, v.base, v.res,
+                                                         wp.vec3i(*shift.tolist()), float(alpha), self._shown])
+            self._shown_grids[lv] = g
+        self._showing = True
+
+    def _lookups(self) -> wp.array:
+        """The SH grids lookups and exports read: the blended light while ``update`` blends, else the
+        last propagation's."""
+        return self._shown if self._showing else self._lookup
 
     # -- lookup --------------------------------------------------------------------------------
 
@@ -443,9 +534,9 @@ class LightPropagationVolume:
         out = self._staging.buffer("out", p.shape[0], wp.vec3)
         cfg = self.config
         launch(self._lookup_irradiance, p.shape[0],
-               [p, n, self._lookup, self._open, self._plane, self._cas_table, len(self.grids), float(cfg.lookup_offset),
-                float(cfg.edge_margin), float(cfg.blend_cells if blend else 0.0), float(cfg.self_damping),
-                float(cfg.self_damping_power), out],
+               [p, n, self._lookups(), self._open, self._plane, self._cas_table, len(self.grids),
+                float(cfg.lookup_offset), float(cfg.edge_margin), float(cfg.blend_cells if blend else 0.0),
+                float(cfg.self_damping), float(cfg.self_damping_power), out],
                device=self.device, threads=self.threads)
         res = out.numpy().copy()
         self._timed("lookup", t0)
@@ -466,7 +557,7 @@ class LightPropagationVolume:
         out = self._staging.buffer("out", p.shape[0], wp.vec3)
         cfg = self.config
         launch(lookup_glossy, p.shape[0],
-               [p, d, s, self._lookup, self._cas_table, len(self.grids), int(cfg.glossy_steps),
+               [p, d, s, self._lookups(), self._cas_table, len(self.grids), int(cfg.glossy_steps),
                 float(self.glossy_step_length()), float(cfg.edge_margin), float(cfg.blend_cells), out],
                device=self.device, threads=self.threads)
         res = out.numpy().copy()
@@ -507,7 +598,7 @@ class LightPropagationVolume:
             return self._gv.array.numpy()[lv.gv_base:lv.gv_base + r1**3].reshape(r1, r1, r1, 4)
         if which == "inj":
             self._inj.gather()
-        arr = {"accum": self._lookup, "own": self._accum, "inj": self._inj.array}.get(which)
+        arr = {"accum": self._lookups(), "own": self._accum, "inj": self._inj.array}.get(which)
         if which == "last":
             arr = self._last_wavefront(level)
         if arr is None:
