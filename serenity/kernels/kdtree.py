@@ -1112,7 +1112,7 @@ def sort_starts_high(
                 acc += high_counts[(r * runs + q) * _SORT_BINS + h]
 
 
-def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: Staging | None = None) -> wp.array:
+def counting_order(keys: wp.array, n: int, threads: int | None = None, workspace: Staging | None = None) -> wp.array:
     """The stable ascending order of ``n`` 32-bit ``keys`` (below 2^(2·SORT_DIGIT_BITS)) on the CPU:
     a radix sort of two digits by counting. The threads count contiguous runs of the keys per digit
     and bin (:func:`count_keys`), a one-thread kernel sums the runs' counts into each bin's first
@@ -1131,12 +1131,12 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
     runs = max(1, min(threads or cpu_threads(), n // SORT_MIN_KEYS_PER_THREAD))
     per_run = -(-n // runs)
     bins = 1 << SORT_DIGIT_BITS
-    counts = scratch_buffer(scratch, "sort_counts", runs * 2 * bins, wp.int32, "cpu")
+    counts = workspace_buffer(workspace, "sort_counts", runs * 2 * bins, wp.int32, "cpu")
     launch(count_keys, runs, [keys, n, per_run, counts], device="cpu", threads=runs, min_items=1)
-    first = scratch_buffer(scratch, "sort_first", n, wp.int32, "cpu")
-    high = scratch_buffer(scratch, "sort_high", n, wp.uint16, "cpu")
-    order = scratch_buffer(scratch, "order", n, wp.int32, "cpu")
-    starts = scratch_buffer(scratch, "sort_starts", max(runs, 2) * bins, wp.int32, "cpu")  # one run: both digits
+    first = workspace_buffer(workspace, "sort_first", n, wp.int32, "cpu")
+    high = workspace_buffer(workspace, "sort_high", n, wp.uint16, "cpu")
+    order = workspace_buffer(workspace, "order", n, wp.int32, "cpu")
+    starts = workspace_buffer(workspace, "sort_starts", max(runs, 2) * bins, wp.int32, "cpu")  # one run: both digits
     if runs == 1:
         wp.launch(sort_starts_one, 1, [counts, starts, 0], device="cpu")
         wp.launch(place_keys, 1, [keys, n, starts, first, high, order, 0], device="cpu")
@@ -1145,14 +1145,14 @@ def counting_order(keys: wp.array, n: int, threads: int | None = None, scratch: 
     # places the keys of its share of the low digits' bins, run after run, by the high digit; the
     # prefix sums between the passes are one-thread kernels (numpy's took ~0.6 ms per step with
     # its array views, all of it time the other thread waits)
-    seg = scratch_buffer(scratch, "sort_seg", runs * bins, wp.int32, "cpu")
-    owner = scratch_buffer(scratch, "sort_owner", bins, wp.int32, "cpu")
-    bin_lo = scratch_buffer(scratch, "sort_bin_lo", runs + 1, wp.int32, "cpu")
-    hc = scratch_buffer(scratch, "sort_high_counts", runs * runs * bins, wp.int32, "cpu")
+    seg = workspace_buffer(workspace, "sort_seg", runs * bins, wp.int32, "cpu")
+    owner = workspace_buffer(workspace, "sort_owner", bins, wp.int32, "cpu")
+    bin_lo = workspace_buffer(workspace, "sort_bin_lo", runs + 1, wp.int32, "cpu")
+    hc = workspace_buffer(workspace, "sort_high_counts", runs * runs * bins, wp.int32, "cpu")
     wp.launch(sort_starts_low, 1, [counts, n, runs, per_run, seg, starts, owner, bin_lo, hc, 0], device="cpu")
     launch(place_low_runs, runs, [keys, n, per_run, owner, starts, first, high, hc], device="cpu", threads=runs,
            min_items=1)
-    starts2 = scratch_buffer(scratch, "sort_starts2", runs * bins, wp.int32, "cpu")
+    starts2 = workspace_buffer(workspace, "sort_starts2", runs * bins, wp.int32, "cpu")
     wp.launch(sort_starts_high, 1, [hc, runs, starts2, 0], device="cpu")
     launch(place_high_runs, runs, [first, high, runs, bin_lo, seg, starts, starts2, order], device="cpu",
            threads=runs, min_items=1)
@@ -1534,7 +1534,7 @@ PACKET_LANES = 16
 #: a batch left in the caller's order is traced in packets when it has at least this many rays and
 #: is coherent (:func:`batch_is_coherent`, the test ``ray_order`` makes; else one ray per thread)
 PACKET_MIN_RAYS = 4 * PACKET_LANES
-# a packet's scratch (float32 per lane, per worker thread): origin and inverse direction per axis,
+# a packet's workspace (float32 per lane, per worker thread): origin and inverse direction per axis,
 # interval tolerance, current interval (t0, t1), best hit t, then a (t0, t1) pair per stack level
 _PK_O = 0
 _PK_IA = 3 * PACKET_LANES
@@ -1551,11 +1551,11 @@ _PK_SX = 15 * PACKET_LANES
 _PK_OCT = 18 * PACKET_LANES
 _PK_HIT = 19 * PACKET_LANES  # leaf_simd's best hit: t, u, v (3 floats)
 _PK_STACK = 20 * PACKET_LANES
-PACKET_SCRATCH = _PK_STACK + 2 * STACK_SIZE * PACKET_LANES  # floats per worker
+PACKET_WORKSPACE = _PK_STACK + 2 * STACK_SIZE * PACKET_LANES  # floats per worker
 _PK_ALL = wp.constant(wp.int32((1 << PACKET_LANES) - 1))
 _PK_LANE_MASK = wp.constant(wp.int32(PACKET_LANES - 1))
 _PK_FIELD = (1 << 20) - 1  # one lane mask in packet_step's result
-assert PACKET_LANES & (PACKET_LANES - 1) == 0 and PACKET_LANES <= 16 and PACKET_SCRATCH % 16 == 0
+assert PACKET_LANES & (PACKET_LANES - 1) == 0 and PACKET_LANES <= 16 and PACKET_WORKSPACE % 16 == 0
 
 # The packet's lane arithmetic as native snippets: Warp's CPU code is scalar, and clang's vector
 # extensions (``ext_vector_type``; the module is compiled for the host CPU, so AVX2/AVX-512 where
@@ -1607,7 +1607,7 @@ return m;
 #endif
 """)
 def packet_step(s: wp.array(dtype=float), base: int, axis: int, split: float, a_side: int, level: int) -> wp.int64:
-    """One inner node's step for a packet's lanes (scratch ``s`` from ``base``): each lane's
+    """One inner node's step for a packet's lanes (workspace ``s`` from ``base``): each lane's
     :func:`inner_step_flat` on the node's ``axis`` and ``split``, the packet's first child being the
     left one (``a_side`` 0) or the right one (1). Writes the second child's intervals (t0, t1) at stack
     ``level`` and the first child's t1 as the lanes' current one; returns three lane masks, bits 0,
@@ -1751,7 +1751,7 @@ def packet_setup(lo: wp.vec3, hi: wp.vec3, scale: float, origins: wp.array(dtype
     as SIMD lanes: the same float32 operations lane by lane (tests: the packets' hits are the one-ray
     traversal's bit for bit). Writes each lane's origin, inverse direction (+-inf where parallel,
     see the kernel), tolerance, tmax as its best t, interval at the root box, Woop's axes and
-    shears and octant into the scratch ``s`` from ``base``; returns the mask of the lanes with
+    shears and octant into the workspace ``s`` from ``base``; returns the mask of the lanes with
     something to trace (bits 0 …) and, from bit 20, the octants among them (a bit per octant)."""
     ...
 
@@ -1791,9 +1791,9 @@ def leaf_simd(refs: wp.array(dtype=float), first: int, k: int, o: wp.vec3, kx: i
     operations per triangle, then the hits in the triangles' order under intersect_leaf's rule
     (closer, or as close with a lower index; the first one for ``any_hit``), so the same triangle,
     t, u and v (:func:`leaf_pick` for the one-ray traversal, which takes the winner's t, u, v from
-    its own test instead: slower for packets, whose lanes have their scratch). Returns the best
+    its own test instead: slower for packets, whose lanes have their workspace). Returns the best
     triangle after the leaf (``prim`` if none beat it) and, when one did, writes its t, u, v at the
-    packet scratch's ``_PK_HIT``. CPU only."""
+    packet workspace's ``_PK_HIT``. CPU only."""
     ...
 
 
@@ -1805,7 +1805,7 @@ def trace_packets_kernel(any_hit: bool):
     with its own interval, best hit and entries on the packet's stack, so that every ray visits the
     nodes and triangles :func:`trace_kd` visits, in its order: the same hits, bit for bit. A packet
     whose lanes head into different octants is traced once per octant, with those lanes.
-    ``scratch``: ``PACKET_SCRATCH`` floats per worker thread (``launch(..., worker_arg=True)``)."""
+    ``workspace``: ``PACKET_WORKSPACE`` floats per worker thread (``launch(..., worker_arg=True)``)."""
     vec_i = wp.types.vector(length=PACKET_LANES, dtype=wp.int32)
     vec_f = wp.types.vector(length=PACKET_LANES, dtype=wp.float32)
     stack_v = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
@@ -1819,7 +1819,7 @@ def trace_packets_kernel(any_hit: bool):
         tmin: float,
         tmax: wp.array(dtype=float),
         n: int,
-        scratch: wp.array(dtype=float),
+        workspace: wp.array(dtype=float),
         # outputs
         hit_t: wp.array(dtype=float),
         hit_prim: wp.array(dtype=wp.int32),
@@ -1831,7 +1831,7 @@ def trace_packets_kernel(any_hit: bool):
     ):
         first = (wp.tid() + offset) * PACKET_LANES
         count = wp.min(PACKET_LANES, n - first)
-        base = worker * PACKET_SCRATCH
+        base = worker * PACKET_WORKSPACE
         prim = vec_i()
         hu = vec_f()
         hv = vec_f()
@@ -1839,7 +1839,7 @@ def trace_packets_kernel(any_hit: bool):
         st_lanes = stack_v()
         tlo = wp.max(tmin, 0.0)
         m0 = packet_setup(tree.box_lo, tree.box_hi, tree.scale, origins, directions, tmax, tmin, first, count,
-                          scratch, base)
+                          workspace, base)
         live = wp.int32(m0 & wp.int64(_PK_FIELD))  # lanes with a ray to trace
         octants = wp.int32(m0 >> wp.int64(20))  # the octants among them (bit per octant)
         for r in range(PACKET_LANES):
@@ -1849,7 +1849,7 @@ def trace_packets_kernel(any_hit: bool):
         oc = int(0)
         while octants != 0:
             if (octants & 1) != 0:
-                lanes = packet_octant(scratch, base, oc) & live
+                lanes = packet_octant(workspace, base, oc) & live
                 node = int(0)
                 sp = int(0)
                 tracing = int(1)
@@ -1859,7 +1859,7 @@ def trace_packets_kernel(any_hit: bool):
                     descend = int(0)
                     if axis != 3:
                         a_side = (oc >> axis) & 1
-                        m = packet_step(scratch, base, axis, node_split(tree.nodes, node), a_side, sp & _STACK_MASK)
+                        m = packet_step(workspace, base, axis, node_split(tree.nodes, node), a_side, sp & _STACK_MASK)
                         to_a = wp.int32(m & wp.int64(_PK_FIELD)) & lanes
                         to_b = wp.int32((m >> wp.int64(20)) & wp.int64(_PK_FIELD)) & lanes
                         within = wp.int32((m >> wp.int64(40)) & wp.int64(_PK_FIELD))
@@ -1890,29 +1890,29 @@ def trace_packets_kernel(any_hit: bool):
                         while todo != 0:
                             r = lowest_lane(todo) & _PK_LANE_MASK
                             todo = todo & (todo - 1)
-                            rt = scratch[base + _PK_BT + r]
+                            rt = workspace[base + _PK_BT + r]
                             rp = leaf_simd(tree.refs, first_ref, count_tris, origins[first + r],
-                                           int(scratch[base + _PK_KX + r]),
-                                           int(scratch[base + _PK_KX + PACKET_LANES + r]),
-                                           int(scratch[base + _PK_KX + 2 * PACKET_LANES + r]),
-                                           scratch[base + _PK_SX + r], scratch[base + _PK_SX + PACKET_LANES + r],
-                                           scratch[base + _PK_SX + 2 * PACKET_LANES + r], tlo, rt, prim[r],
-                                           wp.static(1 if any_hit else 0), scratch, base)
+                                           int(workspace[base + _PK_KX + r]),
+                                           int(workspace[base + _PK_KX + PACKET_LANES + r]),
+                                           int(workspace[base + _PK_KX + 2 * PACKET_LANES + r]),
+                                           workspace[base + _PK_SX + r], workspace[base + _PK_SX + PACKET_LANES + r],
+                                           workspace[base + _PK_SX + 2 * PACKET_LANES + r], tlo, rt, prim[r],
+                                           wp.static(1 if any_hit else 0), workspace, base)
                             ru = hu[r]
                             rv = hv[r]
                             if rp != prim[r]:
-                                rt = scratch[base + _PK_HIT]
-                                ru = scratch[base + _PK_HIT + 1]
-                                rv = scratch[base + _PK_HIT + 2]
+                                rt = workspace[base + _PK_HIT]
+                                ru = workspace[base + _PK_HIT + 1]
+                                rv = workspace[base + _PK_HIT + 2]
                             prim[r] = rp
-                            scratch[base + _PK_BT + r] = rt
+                            workspace[base + _PK_BT + r] = rt
                             hu[r] = ru
                             hv[r] = rv
                             if rp >= 0:
                                 hits = hits | (1 << r)
                                 if wp.static(any_hit):
                                     finished = finished | (1 << r)
-                                elif rt <= scratch[base + _PK_T1 + r]:
+                                elif rt <= workspace[base + _PK_T1 + r]:
                                     finished = finished | (1 << r)
                     while descend == 0:
                         if sp == 0:
@@ -1923,7 +1923,7 @@ def trace_packets_kernel(any_hit: bool):
                             k = sp & _STACK_MASK
                             popped = st_lanes[k] & (finished ^ _PK_ALL)
                             if popped != 0:
-                                popped = popped & packet_pop(scratch, base, k)
+                                popped = popped & packet_pop(workspace, base, k)
                                 if popped != 0:
                                     node = st_node[k]
                                     lanes = popped
@@ -1937,7 +1937,7 @@ def trace_packets_kernel(any_hit: bool):
                     occluded[i] = wp.where(prim[r] >= 0, 1, 0)
                 else:
                     hit_prim[i] = prim[r]
-                    hit_t[i] = wp.where(prim[r] >= 0, scratch[base + _PK_BT + r], _INF)
+                    hit_t[i] = wp.where(prim[r] >= 0, workspace[base + _PK_BT + r], _INF)
                     hit_u[i] = hu[r]
                     hit_v[i] = hv[r]
 
@@ -1987,13 +1987,13 @@ def hit_outputs(n: int, device: str, reordered: bool) -> tuple[list, wp.array | 
     return columns, records
 
 
-def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float, scratch: Staging) -> list:
+def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float, workspace: Staging) -> list:
     """The kernels' ray inputs (origins, directions, tmin, tmax): views of the numpy arrays on the CPU
     (no copy: serial work before the threads start), copies on a GPU; a scalar tmax (0-d ``tm``) is
-    ``scratch``'s buffer filled with it (:meth:`Staging.filled`: refilled only when it changes)."""
+    ``workspace``'s buffer filled with it (:meth:`Staging.filled`: refilled only when it changes)."""
     copy = not dev.startswith("cpu")
     if np.ndim(tm) == 0:
-        tmax = scratch.filled("tmax_uniform", len(o), float, float(tm))
+        tmax = workspace.filled("tmax_uniform", len(o), float, float(tm))
     else:
         tmax = wp.array(tm, dtype=float, device=dev, copy=copy)
     return [wp.array(o, dtype=wp.vec3, device=dev, copy=copy), wp.array(d, dtype=wp.vec3, device=dev, copy=copy),
@@ -2001,7 +2001,7 @@ def _ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: fl
 
 
 def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: wp.array, n: int, sort: bool | None,
-              device: str, threads: int | None = None, scratch: Staging | None = None) -> wp.array:
+              device: str, threads: int | None = None, workspace: Staging | None = None) -> wp.array:
     """The order in which to trace ``n`` rays: their indices sorted by :func:`ray_sort_key` (stable:
     ties keep the caller's order), or an empty array = as they come. ``sort=None`` sorts batches of
     ≥ ``SORT_MIN_RAYS`` whose keys change, in the caller's order, on average more often than every
@@ -2010,14 +2010,14 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
     consecutive rays before any key per ray is made; ``True`` always, ``False`` never. The keys come from a Warp
     kernel (over all cores on the CPU) and are sorted by a counting sort on the CPU
     (:func:`counting_order`), by numpy's radix sort of 16-bit integers on the host on CUDA (the keys
-    and the order make a round trip). ``scratch``:
-    where the keys go (a grow-only buffer, :meth:`KdTree.scratch`), else a new array."""
+    and the order make a round trip). ``workspace``:
+    where the keys go (a grow-only buffer, :meth:`KdTree.workspace`), else a new array."""
     if (sort is False) or n < 2 or (sort is None and n < SORT_MIN_RAYS):
         return wp.empty(0, dtype=wp.int32, device=device)
     if sort is None and batch_is_coherent(box_lo, box_hi, origins, directions, n, device, threads):
         return wp.empty(0, dtype=wp.int32, device=device)
     scale = sort_scale(box_lo, box_hi)
-    keys = scratch_buffer(scratch, "keys", n, wp.uint32, device)
+    keys = workspace_buffer(workspace, "keys", n, wp.uint32, device)
     simd = 0
     if device.startswith("cpu") and origins.is_contiguous and directions.is_contiguous:
         simd = n // KEY_LANES
@@ -2025,7 +2025,7 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
     launch(sort_keys, n - simd * KEY_LANES, [box_lo, scale, origins, directions, keys], device=device, threads=threads,
            start=simd * KEY_LANES)
     if device.startswith("cpu"):
-        return counting_order(keys, n, threads, scratch)
+        return counting_order(keys, n, threads, workspace)
     order = np.argsort(keys.numpy(), kind="stable").astype(np.int32)
     return wp.array(order, dtype=wp.int32, device=device)
 
@@ -2044,11 +2044,11 @@ def batch_is_coherent(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, direc
 
 
 def gather_in_order(order: wp.array, arrays: list, device: str, threads: int | None = None,
-                    scratch: Staging | None = None) -> list:
+                    workspace: Staging | None = None) -> list:
     """Per-ray arrays (vec3 or float) in the traced order of :func:`ray_order`: ``out[i] = a[order[i]]``
-    (a separate pass: a random read per ray inside the traversal costs more). ``scratch``: the
+    (a separate pass: a random read per ray inside the traversal costs more). ``workspace``: the
     outputs are its grow-only buffers (:func:`buffers_like`), else new arrays."""
-    out = buffers_like(arrays, "gather", device, scratch)
+    out = buffers_like(arrays, "gather", device, workspace)
     for a, b in zip(arrays, out, strict=True):
         _move(order, a, b, False, device, threads)
     return out
@@ -2077,16 +2077,16 @@ def scatter_in_order(order: wp.array, arrays: list, outs: list, device: str, thr
             _move(order, a, b, True, device, threads)
 
 
-def scratch_buffer(scratch: Staging | None, name: str, n: int, dtype, device: str) -> wp.array:
-    """``n`` elements of ``dtype``: ``scratch``'s grow-only buffer ``name`` (valid until its next use;
-    :meth:`KdTree.scratch`), or a new array without one."""
-    return wp.empty(n, dtype=dtype, device=device) if scratch is None else scratch.buffer(name, n, dtype)
+def workspace_buffer(workspace: Staging | None, name: str, n: int, dtype, device: str) -> wp.array:
+    """``n`` elements of ``dtype``: ``workspace``'s grow-only buffer ``name`` (valid until its next use;
+    :meth:`KdTree.workspace`), or a new array without one."""
+    return wp.empty(n, dtype=dtype, device=device) if workspace is None else workspace.buffer(name, n, dtype)
 
 
-def buffers_like(arrays: list, prefix: str, device: str, scratch: Staging | None = None) -> list:
-    """An array of the shape and dtype of each of ``arrays`` (:func:`scratch_buffer`: ``scratch``'s
+def buffers_like(arrays: list, prefix: str, device: str, workspace: Staging | None = None) -> list:
+    """An array of the shape and dtype of each of ``arrays`` (:func:`workspace_buffer`: ``workspace``'s
     buffers ``prefix``0, ``prefix``1, ..., or new ones)."""
-    return [scratch_buffer(scratch, f"{prefix}{k}", a.shape[0], a.dtype, device) for k, a in enumerate(arrays)]
+    return [workspace_buffer(workspace, f"{prefix}{k}", a.shape[0], a.dtype, device) for k, a in enumerate(arrays)]
 
 
 def _slot_rays(n: int, slots: int, threads: int | None) -> int:
@@ -2098,20 +2098,20 @@ def _slot_rays(n: int, slots: int, threads: int | None) -> int:
 
 
 def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs: list, device: str,
-                  threads: int | None, rays_per_thread: int | None, scratch: Staging | None = None,
+                  threads: int | None, rays_per_thread: int | None, workspace: Staging | None = None,
                   coherent: bool = False, records: wp.array | None = None) -> None:
     """Launch the closest-hit (``any_hit=False``; outputs t, prim, u, v) or occlusion query (outputs
     [occluded]) over ``n`` rays ``inputs`` (tree, origins, directions, tmin, tmax) given in the trace
     order ``order`` (empty: the caller's; else ray i is the caller's ray ``order[i]``: the results
-    are traced into scratch arrays in that order and scattered back by :func:`scatter_in_order`).
+    are traced into workspace arrays in that order and scattered back by :func:`scatter_in_order`).
     On the CPU a reordered batch and a ``coherent`` one in the caller's order (camera rays:
     :func:`batch_is_coherent`) go to packets of ``PACKET_LANES`` rays (:func:`trace_packets_kernel`),
     any other batch to one ray per kernel thread (``intersect_rays`` / ``occlude_rays``; module
     docstring); ``rays_per_thread`` forces 1 (one ray), a slot count of ``INTERLEAVE_FACTORS``
     (interleaved rays, :func:`trace_rays_kernel`) or ``PACKET_LANES`` (packets). CUDA traces one
     ray per thread (its parallelism is threads).
-    ``scratch``: where the reordered results are traced and the packets keep their lanes
-    (:meth:`KdTree.scratch`), else new arrays. ``records``: the closest-hit outputs' record array
+    ``workspace``: where the reordered results are traced and the packets keep their lanes
+    (:meth:`KdTree.workspace`), else new arrays. ``records``: the closest-hit outputs' record array
     (:func:`hit_outputs`), into which a reordered batch's results are scattered in one pass."""
     one_ray = occlude_rays if any_hit else intersect_rays
     on_cpu = device.startswith("cpu")
@@ -2123,7 +2123,7 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         raise SerenityError(f"rays_per_thread={k}: 1, one of {INTERLEAVE_FACTORS} or {PACKET_LANES} (packets)")
     if k == PACKET_LANES and not all(a.is_contiguous for a in inputs[1:3] + inputs[4:5]):
         k = 1  # packet_setup loads its lanes' rays as contiguous vectors
-    traced = buffers_like(outputs, "traced", device, scratch) if reordered else outputs
+    traced = buffers_like(outputs, "traced", device, workspace) if reordered else outputs
     none_f = wp.empty(0, dtype=float, device=device)
     none_i = wp.empty(0, dtype=wp.int32, device=device)
     outs = [none_f, none_i, none_f, none_f, *traced] if any_hit else [*traced, none_i]
@@ -2131,7 +2131,7 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         launch(one_ray, n, [*inputs, *traced], device=device, threads=threads, balanced=True)
     elif k == PACKET_LANES:
         workers = threads or cpu_threads()
-        lanes = scratch_buffer(scratch, "packets", workers * PACKET_SCRATCH, float, device)
+        lanes = workspace_buffer(workspace, "packets", workers * PACKET_WORKSPACE, float, device)
         lanes.zero_()
         launch(trace_packets_kernel(any_hit), -(-n // PACKET_LANES), [*inputs, n, lanes, *outs], device=device,
                threads=threads, balanced=True, worker_arg=True,
@@ -2140,7 +2140,7 @@ def _launch_query(any_hit: bool, n: int, inputs: list, order: wp.array, outputs:
         per = k * _slot_rays(n, k, threads)
         launch(trace_rays_kernel(k, any_hit), -(-n // per), [*inputs, n, per, *outs], device=device,
                threads=threads, balanced=True)
-    if reordered and records is not None:  # traced into new or scratch arrays: contiguous
+    if reordered and records is not None:  # traced into new or workspace arrays: contiguous
         launch(scatter_hits, -(-n // REORDER_BLOCK), [order, *traced, records], device=device, threads=threads,
                min_items=1)
     elif reordered:
@@ -2163,7 +2163,7 @@ class KdTree:
         self.box = arrays["box"]
         self.stats = stats
         self._device_data: dict[str, KdTreeData] = {}
-        self._scratch = threading.local()  # per thread: scratch()
+        self._workspace = threading.local()  # per thread: workspace()
         self._masked: np.ndarray | None = None  # (F,) bool: triangles the alpha test applies to
         self._coverage = None
 
@@ -2260,15 +2260,15 @@ class KdTree:
             self._device_data[device] = data
         return data
 
-    def scratch(self, device: str) -> Staging:
-        """The calling thread's grow-only scratch buffers on ``device`` for queries of this tree (the
+    def workspace(self, device: str) -> Staging:
+        """The calling thread's grow-only workspace buffers on ``device`` for queries of this tree (the
         reordered rays, their keys, the results traced in their order; the ray tracer's queries use
         them too), reused from one query to the next. New arrays each query cost first-touch page
         faults: ~3,000 per 0.92 M-ray batch, 1-2 ms per 11 MB array on the 2-core machine. Per
         thread, because a tree may be queried from several threads at once."""
-        bufs = getattr(self._scratch, "buffers", None)
+        bufs = getattr(self._workspace, "buffers", None)
         if bufs is None:
-            bufs = self._scratch.buffers = {}
+            bufs = self._workspace.buffers = {}
         staging = bufs.get(device)
         if staging is None:
             staging = bufs[device] = Staging(device)
@@ -2283,7 +2283,7 @@ class KdTree:
         if len(o) != len(d):
             raise SerenityError(f"{len(o)} ray origins but {len(d)} directions")
         if np.ndim(tmax) == 0:
-            return o, d, np.float32(tmax)  # one value: a filled scratch buffer (_ray_arrays)
+            return o, d, np.float32(tmax)  # one value: a filled workspace buffer (_ray_arrays)
         tm = np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, np.float32), (len(o),)))
         return o, d, tm
 
@@ -2294,15 +2294,15 @@ class KdTree:
         tmax, 0-d when every ray has the same (then it needs no reordering). Third: whether a batch
         left in its order is coherent (:func:`batch_is_coherent`; on the CPU it is traced in packets)."""
         data = self.device_data(dev)
-        scratch = self.scratch(dev)
-        origins, directions, tmin, tmax = _ray_arrays(o, d, tm, dev, tmin, scratch)
+        workspace = self.workspace(dev)
+        origins, directions, tmin, tmax = _ray_arrays(o, d, tm, dev, tmin, workspace)
         n = len(o)
-        order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads, scratch)
+        order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads, workspace)
         coherent = False
         if order.shape[0]:
-            origins, directions = gather_in_order(order, [origins, directions], dev, threads, scratch)
+            origins, directions = gather_in_order(order, [origins, directions], dev, threads, workspace)
             if np.ndim(tm) > 0:  # a scalar tmax (0-d ``tm``, :meth:`_rays`) needs no reordering
-                (tmax,) = gather_in_order(order, [tmax], dev, threads, scratch)
+                (tmax,) = gather_in_order(order, [tmax], dev, threads, workspace)
         elif dev.startswith("cpu") and n >= PACKET_MIN_RAYS:
             # with sort=None, ray_order leaves a big batch in its order only when it found it coherent
             coherent = (sort is None and n >= SORT_MIN_RAYS) or batch_is_coherent(
@@ -2332,7 +2332,7 @@ class KdTree:
         if n:
             args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
             columns, records = hit_outputs(n, dev, order.shape[0] > 0)
-            _launch_query(False, n, args, order, columns, dev, threads, rays_per_thread, self.scratch(dev), coherent,
+            _launch_query(False, n, args, order, columns, dev, threads, rays_per_thread, self.workspace(dev), coherent,
                           records)
         else:
             columns, _ = hit_outputs(0, dev, False)
@@ -2376,7 +2376,7 @@ class KdTree:
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
             args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
-            _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, self.scratch(dev), coherent)
+            _launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, self.workspace(dev), coherent)
         occ = out.numpy().astype(bool)
         if self._masked is not None and occ.any():
             # an any hit may be a rejected cut-out: the occluded rays look for their nearest kept hit
@@ -2387,7 +2387,7 @@ class KdTree:
 
 
 __all__ = ["CACHE_MIN_TRIANGLES", "CHUNKS_PER_THREAD", "CPU_RAYS_PER_THREAD", "INTERLEAVE_FACTORS", "KEY_LANES",
-           "PACKET_LANES", "PACKET_MIN_RAYS", "PACKET_SCRATCH", "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS",
+           "PACKET_LANES", "PACKET_MIN_RAYS", "PACKET_WORKSPACE", "PROGRESS_MIN_TRIANGLES", "SORT_DIRECTION_BITS",
            "SORT_MIN_RAYS", "SORT_ORIGIN_BITS", "Hits", "KdBuildConfig", "KdNode", "KdStats", "KdTree",
            "KdTreeData", "batch_is_coherent", "buffers_like", "cache_dir", "finite", "gather_array",
            "gather_in_order", "hit_outputs", "inner_step_flat", "intersect_rays",

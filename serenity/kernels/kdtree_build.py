@@ -85,7 +85,7 @@ class KdStats:
 # ----------------------------------------------------------------------------------------------
 
 
-class _Scratch:
+class _Workspace:
     """Warp arrays on the CPU reused from level to level (fresh memory costs page faults): ``get``
     returns the first n elements of a buffer of at least n, grown by half when too small."""
 
@@ -133,13 +133,13 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         return dict(node_head=np.array([3], np.int32), node_split=np.zeros(1, np.float32),
                     prims=np.zeros(1, np.int32), box=np.zeros((2, 3), np.float32),
                     stats=dict(nodes=1, leaves=1, empty_leaves=1, references=0, depth=0, valid_triangles=0))
-    scratch = _Scratch(wp_)
+    workspace = _Workspace(wp_)
     buf = [("tri_a", "lo_a", "hi_a"), ("tri_b", "lo_b", "hi_b")]  # ping-pong reference buffers
     lo0, hi0 = lo_w.numpy()[ids], hi_w.numpy()[ids]
     root_box = np.stack([lo0.min(axis=0), hi0.max(axis=0)])
-    r_tri = scratch.put("tri_a", ids, wp.int32)
-    r_lo = scratch.put("lo_a", lo0, wp.vec3)
-    r_hi = scratch.put("hi_a", hi0, wp.vec3)
+    r_tri = workspace.put("tri_a", ids, wp.int32)
+    r_lo = workspace.put("lo_a", lo0, wp.vec3)
+    r_hi = workspace.put("hi_a", hi0, wp.vec3)
     del lo0, hi0, valid_w, lo_w, hi_w
     ref_start = np.array([0, nvalid], np.int32)
     n_lo, n_hi = root_box[:1].copy(), root_box[1:].copy()
@@ -158,11 +158,11 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         m = len(n_lo)
         n_ref = int(ref_start[-1])
         counts = np.diff(ref_start)
-        w_start = scratch.put("start", ref_start, wp.int32)
-        w_nlo = scratch.put("n_lo", n_lo, wp.vec3)
-        w_nhi = scratch.put("n_hi", n_hi, wp.vec3)
-        w_axis = scratch.get("axis", m, wp.int32)
-        w_pos = scratch.get("pos", m, float)
+        w_start = workspace.put("start", ref_start, wp.int32)
+        w_nlo = workspace.put("n_lo", n_lo, wp.vec3)
+        w_nhi = workspace.put("n_hi", n_hi, wp.vec3)
+        w_axis = workspace.get("axis", m, wp.int32)
+        w_pos = workspace.get("pos", m, float)
         run(node_splits, m, [w_start, r_lo, r_hi, w_nlo, w_nhi, int(depth < max_depth), int(cfg.bins), ct, ci,
                                  float(cfg.empty_bonus), float(cfg.min_empty_fraction), w_axis, w_pos])
         best_axis = w_axis.numpy()[:m].copy()
@@ -184,7 +184,7 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         if total_block:
             arr = wp_.empty(total_block, dtype=wp.int32, device=dev)
             run(emit_leaves, m, [w_start, r_tri, w_axis,
-                                     scratch.put("block", (block_start - prim_len).astype(np.int32), wp.int32), arr])
+                                     workspace.put("block", (block_start - prim_len).astype(np.int32), wp.int32), arr])
             prims.append(arr.numpy())
             prim_len += total_block
         heads.append(head)
@@ -198,10 +198,10 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         if n_split == 0:
             break
         # --- distribute the references of split nodes to their children
-        side = scratch.get("side", n_ref, wp.int32)
-        l_lo, l_hi = scratch.get("l_lo", n_ref, wp.vec3), scratch.get("l_hi", n_ref, wp.vec3)
-        q_lo, q_hi = scratch.get("q_lo", n_ref, wp.vec3), scratch.get("q_hi", n_ref, wp.vec3)
-        c_l, c_r = scratch.get("c_l", m, wp.int32), scratch.get("c_r", m, wp.int32)
+        side = workspace.get("side", n_ref, wp.int32)
+        l_lo, l_hi = workspace.get("l_lo", n_ref, wp.vec3), workspace.get("l_hi", n_ref, wp.vec3)
+        q_lo, q_hi = workspace.get("q_lo", n_ref, wp.vec3), workspace.get("q_hi", n_ref, wp.vec3)
+        c_l, c_r = workspace.get("c_l", m, wp.int32), workspace.get("c_r", m, wp.int32)
         run(clip_refs, m, [w_start, r_tri, r_lo, r_hi, w_nlo, w_nhi, w_axis, w_pos, w_verts, w_faces,
                                side, l_lo, l_hi, q_lo, q_hi, c_l, c_r])
         cl, cr = c_l.numpy()[:m].astype(np.int64), c_r.numpy()[:m].astype(np.int64)
@@ -210,12 +210,12 @@ def build_arrays(vertices: np.ndarray, faces: np.ndarray, cfg: KdBuildConfig, pr
         first_r = first_l + cl
         n_new = int(pair.sum())
         names = buf[(depth + 1) % 2]
-        new_tri = scratch.get(names[0], n_new, wp.int32)
-        new_lo = scratch.get(names[1], n_new, wp.vec3)
-        new_hi = scratch.get(names[2], n_new, wp.vec3)
+        new_tri = workspace.get(names[0], n_new, wp.int32)
+        new_lo = workspace.get(names[1], n_new, wp.vec3)
+        new_hi = workspace.get(names[2], n_new, wp.vec3)
         run(scatter_refs, m, [w_start, r_tri, side, l_lo, l_hi, q_lo, q_hi, w_axis,
-                                  scratch.put("first_l", first_l.astype(np.int32), wp.int32),
-                                  scratch.put("first_r", first_r.astype(np.int32), wp.int32),
+                                  workspace.put("first_l", first_l.astype(np.int32), wp.int32),
+                                  workspace.put("first_r", first_r.astype(np.int32), wp.int32),
                                   new_tri, new_lo, new_hi])
         r_tri, r_lo, r_hi = new_tri, new_lo, new_hi
         sidx = np.flatnonzero(split)

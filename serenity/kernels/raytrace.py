@@ -563,7 +563,7 @@ class RayTracer:
             rays = [wp.array(o, dtype=wp.vec3, device=dev), wp.array(d, dtype=wp.vec3, device=dev),
                     wp.array(cw, dtype=float, device=dev), wp.array(cs, dtype=float, device=dev)]
             tree = self.data.tree
-            buffers = self.tree.scratch(dev)  # the tree's grow-only buffers for this thread
+            buffers = self.tree.workspace(dev)  # the tree's grow-only buffers for this thread
             order = ray_order(tree.box_lo, tree.box_hi, rays[0], rays[1], n, sort, dev, threads, buffers)
             reordered = order.shape[0] > 0
             if reordered:

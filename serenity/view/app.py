@@ -88,7 +88,7 @@ class Viewer:
         self.job = None
         self.comparison: dict | None = None
         self._mesh_file = None
-        self._scratch = None
+        self._workspace = None
         self._rt_mask_tex = None
 
         self.renderer = None
@@ -393,12 +393,12 @@ class Viewer:
         w, h = max(1, int(round(self.width * s))), max(1, int(round(self.height * s)))
         return (bw - w) // 2, (bh - h) // 2, w, h
 
-    def _scratch_tex(self):
-        if self._scratch is None:
-            self._scratch = self.ctx.texture((self.width, self.height), 4, dtype="f4")
-            self._scratch_fbo = self.ctx.framebuffer(color_attachments=[self._scratch])
-        self._scratch_fbo.clear(0.0, 0.0, 0.0, 0.0)
-        return self._scratch
+    def _workspace_tex(self):
+        if self._workspace is None:
+            self._workspace = self.ctx.texture((self.width, self.height), 4, dtype="f4")
+            self._workspace_fbo = self.ctx.framebuffer(color_attachments=[self._workspace])
+        self._workspace_fbo.clear(0.0, 0.0, 0.0, 0.0)
+        return self._workspace
 
     def view_texture(self):
         """(texture, mode) for the current view, or None when this view has nothing to show."""
@@ -415,11 +415,11 @@ class Viewer:
         if view == "direct":
             return out["direct"], present.HDR
         if view == "sky light" and r.sky_volume is not None:
-            tex = self._scratch_tex()
+            tex = self._workspace_tex()
             r.sky_pass.render(tex, gbuf, r.sky_gl.bind, r.scene.camera.position)
             return tex, present.HDR
         if view == "lpv indirect" and r.lpv is not None and r.lpv_gl.count:
-            tex = self._scratch_tex()
+            tex = self._workspace_tex()
             c = r.config.lpv  # the panel's diffuse / glossy switches
             r.lpv_pass.render(tex, gbuf, r.lpv_gl.bind, r.scene.camera.position, diffuse=c.diffuse, glossy=c.glossy)
             return tex, present.HDR

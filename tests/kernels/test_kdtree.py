@@ -354,12 +354,12 @@ def test_counting_order_is_numpys_stable_argsort():
     """The CPU's radix sort of the keys by counting (``counting_order``, two digits) gives the order
     numpy's stable argsort gives, on one thread and on several (runs of uneven length, keys at both
     ends of the range and of each digit, many ties, a batch too small to split; nearly every key in
-    one bin), into fresh arrays and into reused scratch."""
+    one bin), into fresh arrays and into reused workspace."""
     from serenity.kernels.kdtree import SORT_DIGIT_BITS, SORT_KEY_BITS, SORT_MIN_KEYS_PER_THREAD, counting_order
     from serenity.kernels.launch import Staging
 
     rng = np.random.default_rng(3)
-    scratch = Staging("cpu")
+    workspace = Staging("cpu")
     top = (1 << SORT_KEY_BITS) - 1
     for n in (1, 1000, 3 * SORT_MIN_KEYS_PER_THREAD + 17):
         keys = rng.integers(0, top + 1, n).astype(np.uint32)
@@ -369,19 +369,19 @@ def test_counting_order_is_numpys_stable_argsort():
         wk = wp.array(keys, dtype=wp.uint32, device="cpu")
         for threads in (1, 2, 3, 8):
             assert np.array_equal(counting_order(wk, n, threads).numpy(), expected), (n, threads)
-            assert np.array_equal(counting_order(wk, n, threads, scratch).numpy(), expected), (n, threads)
+            assert np.array_equal(counting_order(wk, n, threads, workspace).numpy(), expected), (n, threads)
     # one bin of the low digit holds every key (or nearly): the second pass's other threads get none
     n = 3 * SORT_MIN_KEYS_PER_THREAD + 5
     for keys in (np.full(n, 5 << SORT_DIGIT_BITS, np.uint32), np.full(n, 77, np.uint32)):
         keys[::1000] = rng.integers(0, top + 1, len(keys[::1000]))
         for threads in (2, 3):
-            got = counting_order(wp.array(keys, dtype=wp.uint32, device="cpu"), n, threads, scratch).numpy()
+            got = counting_order(wp.array(keys, dtype=wp.uint32, device="cpu"), n, threads, workspace).numpy()
             assert np.array_equal(got, np.argsort(keys, kind="stable")), threads
 
 
-def test_query_scratch_is_reused_without_aliasing_results():
-    """Reordered queries trace into per-thread scratch buffers that grow and are reused
-    (``KdTree.scratch``): a later, bigger or smaller batch leaves an earlier call's results as they
+def test_query_workspace_is_reused_without_aliasing_results():
+    """Reordered queries trace into per-thread workspace buffers that grow and are reused
+    (``KdTree.workspace``): a later, bigger or smaller batch leaves an earlier call's results as they
     were, each batch's hits equal a fresh tree's, and two threads querying one tree at once each
     get their own batch's hits."""
     v, f = lumpy_mesh(3)

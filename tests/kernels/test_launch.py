@@ -137,7 +137,7 @@ def test_balanced_launch_covers_exactly_once_in_any_order():
 
 def test_worker_arg_names_the_worker_thread_of_each_chunk():
     """``worker_arg``: every chunk gets the index of the worker that runs it, below the thread
-    count (per-worker scratch memory relies on it), one index per chunk; 0 for a single chunk."""
+    count (per-worker workspace memory relies on it), one index per chunk; 0 for a single chunk."""
     n = 200_000
     for threads, k in ((1, False), (2, False), (2, True), (3, True), (8, True)):
         out = wp.full(n, wp.vec2i(-1, -1), dtype=wp.vec2i, device="cpu")
