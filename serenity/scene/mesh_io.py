@@ -19,12 +19,25 @@ Degenerate triangles — repeated indices or zero area (twice the area ≤ (1e-7
 Material mapping (documented approximations; the renderer is Phong + mirror + glass):
 
 glTF metallic-roughness (m = metallicFactor, r = roughnessFactor, glTF defaults 1 and 1):
-- albedo = baseColorFactor.rgb (linear, exact from the file's JSON when the material name is
-  unique, else trimesh's 8-bit copy); albedo_texture = baseColorTexture decoded sRGB → linear with
-  mips. Metals keep their base colour as diffuse albedo (the model has no coloured specular).
+- base = baseColorFactor.rgb (linear, exact from the file's JSON when the material name is unique,
+  else trimesh's 8-bit copy); albedo_texture = baseColorTexture decoded sRGB → linear with mips.
 - shininess n = 2/α² − 2 with α = r² (the Blinn-Phong ↔ Beckmann correspondence), in [1, 10000].
-- specular k_s = (F0 + (1 − F0)·m)·(1 − r), F0 = 0.04: a dielectric's 4 % (a metal's 100 %) fading
-  with roughness.
+- energy-conserving split into the Phong model's diffuse ρ (per channel) and scalar k_s, with
+  F0 = 0.04 (a dielectric's reflectance at normal incidence) and g = 1 − r the fraction of the
+  specular energy kept as a glossy lobe (a lobe as wide as a rough material's is nearly Lambertian,
+  and our indirect light only follows the diffuse term, so the rest is spread as diffuse):
+
+      k_s = g·((1 − m)·F0 + m·lum(base))
+      ρ   = albedo = base·((1 − m)·(1 − g·F0) + m·(1 − g))
+
+  A metal reflects its base colour and transmits nothing into a diffuse layer; the model's k_s is
+  grey, so the metal's glossy share carries the base's luminance and the share spread by roughness
+  keeps its colour (a rough metal is its base colour, diffusely; a grey metal reflects exactly its
+  base). Per channel ρ + k_s is a convex mix of (1 − m)·(base(1 − gF0) + gF0) and
+  m·(base(1 − g) + g·lum(base)), so ρ + k_s ≤ 1 whenever base ≤ 1: no material reflects more than
+  it receives (keeping a metal's base colour as ρ beside a k_s near 1 reflected up to 1.6 of the
+  light and made closed rooms diverge in the path-traced reference). A dielectric keeps its base
+  as ρ where it is rough (g = 0) and loses the g·F0 its specular lobe takes where it is not.
 - mirror: when m ≥ 0.5 and r ≤ 0.2, reflectivity = m·(1 − r/0.2)·max(baseColor.rgb).
 - glass: transparency = KHR_materials_transmission's transmissionFactor, or 1 − alpha for
   alphaMode BLEND with alpha < 1; ior = KHR_materials_ior's ior (default 1.5), clamped to [1, 4].
@@ -36,8 +49,8 @@ glTF metallic-roughness (m = metallicFactor, r = roughnessFactor, glTF defaults 
   normal_uv_transform (offset, rotation, scale; converted to the v-up uvs). Only TEXCOORD_0 is
   read: a texCoord of 1 warns and uses set 0.
 - KHR_materials_specular: the dielectric reflectance at normal incidence F0 = ((ior − 1)/(ior + 1))²
-  (0.04 at ior 1.5) becomes min(F0 · max(specularColorFactor), 1) · specularFactor in the k_s
-  formula above (its textures are not read).
+  (0.04 at ior 1.5) becomes min(F0 · max(specularColorFactor), 1) · specularFactor in the k_s and ρ
+  formulas above (its textures are not read).
 - an image a .gltf names by a relative ``uri`` must exist: a missing one is a one-line error.
 
 OBJ/MTL: albedo = Kd (taken as linear), albedo_texture = map_Kd (sRGB); specular = max(Ks);
@@ -70,13 +83,13 @@ from trimesh.visual import TextureVisuals
 from trimesh.visual.color import ColorVisuals
 from trimesh.visual.material import PBRMaterial, SimpleMaterial
 
-from serenity.colour import srgb_to_linear
+from serenity.colour import LUMA_REC709, srgb_to_linear
 from serenity.errors import SceneError
 from serenity.scene.model import IDENTITY_UV, Camera, Material, Mesh, Scene, Sky, Texture, vertex_normals
 from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, sun_from_time
 from serenity.scene.texture import texture_from_image, texture_to_srgb8
 
-__all__ = ["MESH_EXTENSIONS", "load_mesh_file", "scene_from_meshes", "frame_bounds", "export_glb"]
+__all__ = ["MESH_EXTENSIONS", "load_mesh_file", "scene_from_meshes", "frame_bounds", "export_glb", "gltf_phong_split"]
 
 MESH_EXTENSIONS = (".glb", ".gltf", ".obj", ".ply")
 _DEFAULT_ALBEDO = 0.8
@@ -424,11 +437,12 @@ class _MaterialConverter:
         normal_info = js.get("normalTexture") if js else None
         normal_tex = self._texture(getattr(mat, "normalTexture", None), f"{name}.normal", srgb=False)
         scale = float(normal_info.get("scale", 1.0)) if isinstance(normal_info, dict) else 1.0
+        diffuse, specular = gltf_phong_split(rgba[:3], metal, rough, f0)
         return Material(
             name,
-            albedo=rgba[:3],
+            albedo=diffuse,
             albedo_texture=self._texture(getattr(mat, "baseColorTexture", None), name),
-            specular=float(np.clip((f0 + (1.0 - f0) * metal) * (1.0 - rough), 0.0, 1.0)),
+            specular=specular,
             shininess=float(np.clip(2.0 / alpha**2 - 2.0, 1.0, 10000.0)),
             reflectivity=float(np.clip(reflectivity, 0.0, 1.0)),
             transparency=float(np.clip(transparency, 0.0, 1.0)),
@@ -470,6 +484,20 @@ class _MaterialConverter:
             transparency=float(np.clip(transparency, 0.0, 1.0)),
             ior=float(np.clip(ior, 1.0, 4.0)),
         )
+
+
+def gltf_phong_split(base, metallic: float, roughness: float, f0: float = 0.04) -> tuple[np.ndarray, float]:
+    """(diffuse albedo ρ (3,), specular k_s) of a glTF metallic-roughness material (module docstring):
+    ρ + k_s ≤ 1 per channel for base colours in [0, 1]. For a textured base, ``base`` is the factor
+    and ρ scales the texture as the factor does."""
+    base = np.clip(np.asarray(base, np.float64).reshape(3), 0.0, 1.0)
+    m = float(np.clip(metallic, 0.0, 1.0))
+    g = 1.0 - float(np.clip(roughness, 0.0, 1.0))
+    f0 = float(np.clip(f0, 0.0, 1.0))
+    lum = float(base @ LUMA_REC709.astype(np.float64))
+    specular = g * ((1.0 - m) * f0 + m * lum)
+    diffuse = base * ((1.0 - m) * (1.0 - g * f0) + m * (1.0 - g))
+    return diffuse, float(np.clip(specular, 0.0, 1.0))
 
 
 def _first(v, default):
