@@ -27,14 +27,16 @@ stopping on the glass as if it were an opaque diffuse wall.
 
 Surfels: the rays' hit points quantised to cubes of ``gather_surfel_size`` metres and the dominant
 axis of their normal (so the two faces of a thin wall are two surfels), each with the mean position,
-normal and albedo (the tracer's ray-cone-filtered texture × material albedo) of its hits. V_s is
-one shadow ray from the surfel towards the sun's centre through the kd-tree, re-traced when the sky
-map is rebaked (the sun moved). Rays that hit a back face (the probe sits inside or under geometry)
-mark the probe: a probe with more than ``BACKFACE_LIMIT`` of its rays on back faces is moved by up
-to half a cell to a free spot (DDGI's probe relocation, Majercik et al. 2019); its texel stays on
-the grid. Directions: ``DIRECTION_SETS`` spherical Fibonacci sets of R directions, each turned by its
-own random rotation; probe p uses set p mod ``DIRECTION_SETS`` (neighbouring probes sample
-different directions, so the quantisation of one set does not line up across the volume).
+normal and albedo (the tracer's ray-cone-filtered texture × material albedo) of its hits. V_s is one
+shadow ray towards the sun's centre through the kd-tree, from a point of the surfel's square fixed
+per surfel (``shadow_ray_offsets``: from the centres, which lie on a grid, a straight shadow edge
+flipped a whole row at once), re-traced when the sky map is rebaked (the sun moved). Rays that hit a
+back face (the probe sits inside or under geometry) mark the probe: a probe with more than
+``BACKFACE_LIMIT`` of its rays on back faces is moved by up to half a cell to a free spot (DDGI's
+probe relocation, Majercik et al. 2019); its texel stays on the grid. Directions: ``DIRECTION_SETS``
+spherical Fibonacci sets of R directions, each turned by its own random rotation; probe p uses set p
+mod ``DIRECTION_SETS`` (neighbouring probes sample different directions, so the quantisation of one
+set does not line up across the volume).
 
 Costs (``benchmarks/``): the rays are traced once per scene (``ProbeGather.build``); a pass is one
 surfel update (a volume lookup per surfel) and one gather of R loads per probe.
@@ -347,6 +349,25 @@ def oct_texel_directions(size: int) -> np.ndarray:
     return oct_decode_np(np.stack([u.ravel(), v.ravel()], axis=1))
 
 
+def shadow_ray_offsets(normals: np.ndarray, size: float) -> np.ndarray:
+    """(S, 3) float64: where in its square each surfel's shadow ray starts, relative to its mean
+    position: surfel i's point of the R2 low-discrepancy sequence (Roberts 2018), frac(½ + i·(1/g, 1/g²))
+    with g the plastic number, on the size × size square across its normal. The surfels' centres lie
+    on a grid; from the centres, a roof's straight shadow edge moving with the sun crossed a whole row
+    of them in one frame and the gathered light popped (``docs/stability.md``). Surfels are numbered
+    along the grid's z, then y, then x (``_make_surfels``), so the surfels of a row get points spread
+    evenly across the square, and the edge crosses them one at a time."""
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    g = 1.32471795724474602596
+    i = np.arange(len(n), dtype=np.float64)[:, None]
+    uv = ((0.5 + i * np.array([[1.0 / g, 1.0 / (g * g)]])) % 1.0 - 0.5) * float(size)
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(n, helper)
+    t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-12)
+    t2 = np.cross(n, t1)
+    return uv[:, :1] * t1 + uv[:, 1:] * t2
+
+
 def visibility_atlas(moments: np.ndarray, resolution) -> np.ndarray:
     """The probes' depth moments ((P, VIS_OCT², 2), storage order z, y, x) as one (Z·T, Y, X·T, 2)
     float32 array (T = VIS_TILE): probe (x, y, z)'s tile at [z·T : z·T + T, y, x·T : x·T + T], its map
@@ -428,6 +449,7 @@ class ProbeGather:
         self.tracer = tracer
         self.glossy_energy = None if glossy_energy is None else np.asarray(glossy_energy, np.float32)
         self.transmissions = int(transmissions)
+        self.surfel_size = float(surfel_size)
         self.dirs = direction_sets(self.rays)
         self.from_cache = False
         path = None
@@ -622,9 +644,11 @@ class ProbeGather:
         self._sp = wp.array(sp.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sn = wp.array(sn.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sa = wp.array(sa.astype(np.float32), dtype=wp.vec3, device=dev)
+        self._vis_offsets = shadow_ray_offsets(sn, self.surfel_size)
 
     def update_visibility(self, sun_direction, parts: int = 1) -> None:
-        """V_s towards a new sun: one shadow ray per surfel (from just off the surfel), all of them
+        """V_s towards a new sun: one shadow ray per surfel (from just off the surfel, at its own point
+        of the surfel's square: ``shadow_ray_offsets``), all of them
         now (``parts`` = 1) or in ``parts`` slices, the first now and one per :meth:`refresh_visibility`
         (the slices continue the cycle where it stood: under a sun that moves every frame each surfel
         is re-traced once every ``parts`` frames, against the newest sun)."""
@@ -646,7 +670,8 @@ class ProbeGather:
         b = min(m, a + n)
         sun = self._vis_sun
         eps = self.tracer.ray_epsilon
-        o = (self.surfel_positions[a:b] + self.surfel_normals[a:b] * (4 * eps)).astype(np.float32)
+        o = (self.surfel_positions[a:b] + self._vis_offsets[a:b] + self.surfel_normals[a:b] * (4 * eps))
+        o = o.astype(np.float32)
         d = np.broadcast_to(sun.astype(np.float32), o.shape)
         occ = self.tracer.tree.occluded(o, d, tmin=eps)
         self._visible_host[a:b] = (~occ).astype(np.float32) * (self.surfel_normals[a:b] @ sun > 0)
