@@ -62,6 +62,18 @@ What is exported, and how faithfully:
   one scattering event lit by sun/sky), "one-bounce" = 3, "full" = unlimited (Russian roulette
   from depth 5), and "indirect" = full − direct (each rendered and cached on its own).
 
+**Bounds.** No surface can send out more than the brightest radiance that reaches it when its BSDF
+reflects at most what it receives, so no reference pixel may exceed the brightest emitter's
+radiance, per channel: max(the sun's disc, the sky map's brightest texel)
+(:func:`emitter_radiance_bound`). A render that does raises :class:`ReferenceBoundError` naming
+the scene, the count of such pixels and the maximum, and is not cached; the tolerance
+(:data:`RADIANCE_BOUND_TOLERANCE`) covers the sun's calibration (±0.3 %), Monte Carlo weights
+slightly above one and the built-in glass's Phong surface (below). Before that, the export
+warns (one line, naming the material) of every material whose exported BSDF can reflect more than
+it receives (:func:`material_gain` > 1): T + (1 − T)·(R + (1 − R)·(max ρ + k_s)). The built-in glass
+(ρ 0.95, k_s 0.5, T 0.9: 1.045) is one, on purpose (above); in a closed room such a material makes
+the path tracer's estimate grow without bound with the path length.
+
 Results are cached as ``.npy`` in ``$SERENITY_CACHE`` (default ``~/.cache/serenity/reference``),
 keyed by a SHA-256 of every scene array and field, the sky map, the settings and the Mitsuba version.
 """
@@ -72,6 +84,7 @@ import copy
 import hashlib
 import math
 import os
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -92,6 +105,10 @@ SKY_MAP_SIZE = (1024, 512)
 SUN_DISTANCE_FACTOR = 1.0e4
 """Sun sphere distance, in scene radii (parallax over the scene ≤ 1/this rad)."""
 DEFAULT_CHUNK_SPP = 4
+RADIANCE_BOUND_TOLERANCE = 1.1
+"""A reference pixel may exceed the brightest emitter's radiance by this factor (module doc, Bounds)."""
+MATERIAL_GAIN_TOLERANCE = 1e-3
+"""A material whose exported BSDF reflects more than 1 + this of what it receives is warned of."""
 
 _AUTO = object()
 
@@ -156,6 +173,34 @@ def diffuse_exceeds_one(material) -> bool:
     rho = material.albedo if material.albedo_texture is None else (
         np.asarray(material.albedo_texture.mips[0], np.float32)[..., :3] * material.albedo.astype(np.float32))
     return bool(np.max(rho) / (1.0 - ks) > 1.0)
+
+
+def material_gain(material) -> float:
+    """The most the exported BSDF of ``material`` reflects of the light it receives, over channels
+    and texels: T + (1 − T)·(R + (1 − R)·(max ρ + k_s)) (the blends of :func:`material_bsdf`; each
+    lobe reflects at most its weight). Above 1 the material creates energy."""
+    ks = float(material.specular)
+    rho = material.albedo if material.albedo_texture is None else (
+        np.asarray(material.albedo_texture.mips[0], np.float32)[..., :3] * material.albedo.astype(np.float32))
+    surface = 1.0 if ks >= 1.0 else float(np.max(rho)) + max(ks, 0.0)
+    r, t = float(material.reflectivity), float(material.transparency)
+    opaque = r + (1.0 - r) * surface if t <= 0.0 else surface  # glass: no mirror blend (material_bsdf)
+    return t + (1.0 - t) * opaque
+
+
+def warn_energy_gain(scene) -> list[str]:
+    """Warn (one line each, naming the scene and the material) of every material of ``scene`` whose
+    exported BSDF reflects more than it receives (:func:`material_gain`); returns their names."""
+    names = []
+    for m in scene.materials:
+        gain = material_gain(m)
+        if gain > 1.0 + MATERIAL_GAIN_TOLERANCE:
+            names.append(m.name)
+            warnings.warn(f"reference of {scene.name!r}: material {m.name!r} reflects up to {gain:.3g} of the light "
+                          f"it receives (albedo {float(np.max(m.albedo)):.3g} + specular {float(m.specular):.3g}, "
+                          f"reflectivity {float(m.reflectivity):.3g}, transparency {float(m.transparency):.3g}); "
+                          "light bouncing between such surfaces gains energy", UserWarning, stacklevel=3)
+    return names
 
 
 def _albedo_spec(mi, material, scale: float) -> dict:
@@ -304,6 +349,7 @@ def mitsuba_scene_dict(scene, width: int, height: int, max_depth: int = -1, sky:
     ``sky``: (H, W, 3) equirect radiance map or None (black); see :func:`sky_map`.
     Mesh ids are ``m<material index>`` (the sun sphere is ``sun``)."""
     mi = mitsuba()
+    warn_energy_gain(scene)
     d: dict = {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": int(max_depth), "hide_emitters": False},
@@ -408,6 +454,46 @@ def scene_hash(scene, settings: dict, sky: np.ndarray | None = None) -> str:
     return h.hexdigest()
 
 
+# ------------------------------------------------------------------------------------------- bounds
+
+
+class ReferenceBoundError(SerenityError):
+    """A reference render brighter than its scene's emitters can make it (module doc, Bounds)."""
+
+
+def emitter_radiance_bound(scene, sky: np.ndarray | None) -> np.ndarray:
+    """(3,) the brightest radiance any emitter of the exported ``scene`` sends, per channel: the sun's
+    disc (when it is up and lit; ``scene`` carries the sun the reference uses, see
+    :func:`with_effective_sun`) and the sky map's brightest texel."""
+    bound = np.zeros(3)
+    if scene.sun.is_up and np.any(scene.sun.irradiance > 0):
+        bound = np.maximum(bound, np.asarray(scene.sun.radiance, np.float64))
+    if sky is not None:
+        bound = np.maximum(bound, np.asarray(sky, np.float64)[..., :3].reshape(-1, 3).max(axis=0))
+    return bound
+
+
+def check_radiance_bound(img: np.ndarray, scene, sky: np.ndarray | None, what: str = "",
+                         tolerance: float = RADIANCE_BOUND_TOLERANCE) -> None:
+    """Raise :class:`ReferenceBoundError` when a pixel of ``img`` (or a non-finite value) exceeds
+    ``tolerance`` × :func:`emitter_radiance_bound` in some channel."""
+    bound = emitter_radiance_bound(scene, sky) * float(tolerance)
+    a = np.asarray(img, np.float64)[..., :3]
+    over = ~np.isfinite(a) | (a > bound)
+    bad = over.any(axis=-1)
+    if not bad.any():
+        return
+    finite = a[np.isfinite(a)]
+    peak = float(finite.max()) if finite.size else float("inf")
+    if not np.isfinite(a).all():
+        peak = float("inf")
+    raise ReferenceBoundError(
+        f"reference of {scene.name!r}{' ' + what if what else ''}: {int(bad.sum())} of {bad.size} pixels exceed "
+        f"the brightest emitter's radiance ({float(bound.max() / tolerance):.3g} W/m^2/sr, x{tolerance:g} "
+        f"tolerance), maximum {peak:.3g}: a material reflects more than it receives or the export divides "
+        "by nearly zero")
+
+
 def _cached(path: str) -> np.ndarray | None:
     try:
         return np.load(path)
@@ -476,9 +562,11 @@ def render_reference(scene, width: int, height: int, spp: int = 64, component: s
     path = os.path.join(cache_dir(), scene_hash(scene, settings, sky) + ".npy")
     if info is not None:
         info["cache_paths"].append(path)
+    what = f"({width}x{height}, {spp} spp, depth {max_depth})"
     if cache:
         img = _cached(path)
         if img is not None and img.shape == (height, width, 3):
+            check_radiance_bound(img, scene, sky, what)
             return img
     if info is not None:
         info["cached"] = False
@@ -493,9 +581,11 @@ def render_reference(scene, width: int, height: int, spp: int = 64, component: s
     with bar:
         for k, n in enumerate(chunks):
             img = np.array(mi.render(mscene, spp=n, seed=int(seed) * 1_000_003 + k), dtype=np.float64)[..., :3]
-            acc += np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0) * n
+            acc += np.nan_to_num(img, nan=0.0, posinf=np.inf, neginf=0.0) * n  # +inf: caught by the bound
             bar.update(n)
-    img = (acc / spp).astype(np.float32)
+    with np.errstate(invalid="ignore", over="ignore"):
+        img = (acc / spp).astype(np.float32)
+    check_radiance_bound(img, scene, sky, what)
     if cache:
         _store(path, img)
     return img
