@@ -2,6 +2,9 @@
 
     serenity reference courtyard --spp 256 --size 320x180 --component full -o ref.exr
 
+An even spp renders two independent halves and prints their noise floor (FLIP and relMSE between
+them, ``serenity.eval.reference.reference_with_floor``); the EXR is their mean.
+
 Needs the ``eval`` extra (Mitsuba 3); without it the command says so in one line.
 """
 
@@ -32,7 +35,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from serenity.eval.reference import COMPONENTS, render_reference
+    from serenity.eval.reference import COMPONENTS, reference_with_floor, render_reference
     from serenity.io.exr import write_exr
     from serenity.scene import load
 
@@ -43,8 +46,14 @@ def run(args) -> int:
     out = args.output or os.path.join(DEFAULT_OUT_DIR, f"{scene_stem(args.scene)}_ref.exr")
     t0 = time.perf_counter()
     info: dict = {}
-    img = render_reference(scene, width, height, spp=args.spp, component=args.component, seed=args.seed,
-                           max_depth=args.depth, cache=not args.no_cache, progress=not args.quiet, info=info)
+    kw = dict(component=args.component, seed=args.seed, max_depth=args.depth, cache=not args.no_cache,
+              progress=not args.quiet)
+    floor = None
+    if args.spp >= 2 and args.spp % 2 == 0:
+        ref = reference_with_floor(scene, width, height, spp=args.spp, **kw)
+        img, floor, info["cached"] = ref.image, ref.floor, ref.cached
+    else:
+        img = render_reference(scene, width, height, spp=args.spp, info=info, **kw)
     secs = time.perf_counter() - t0
     make_parent_dir(out)
     write_exr(out, {"beauty": img})
@@ -52,5 +61,10 @@ def run(args) -> int:
     print(f"reference {scene.name}: {width}x{height}, {args.spp} spp, {what}, {secs:.1f} s"
           f"{' (from the cache)' if info['cached'] else ''}")
     print(f"mean radiance {img.reshape(-1, 3).mean(0).round(3).tolist()} W/m^2/sr")
+    if floor is not None:
+        print(f"noise floor (two halves of {args.spp // 2} spp): FLIP {floor['flip']:.4f}, "
+              f"relMSE {floor['rel_mse']:.4g}")
+    else:
+        print("noise floor: not measured (needs an even spp: two halves)")
     print(f"wrote {out}")
     return 0

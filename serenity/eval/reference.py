@@ -74,6 +74,16 @@ it receives (:func:`material_gain` > 1): T + (1 − T)·(R + (1 − R)·(max ρ 
 (ρ 0.95, k_s 0.5, T 0.9: 1.045) is one, on purpose (above); in a closed room such a material makes
 the path tracer's estimate grow without bound with the path length.
 
+**Noise floor.** :func:`reference_with_floor` renders a reference as two independent halves
+(different seeds, half the samples each) and reports the FLIP and relMSE between them
+(:class:`Reference`'s ``floor``, stored beside the cached halves as ``.floor.json``): an error
+measured against the reference means something only well above it. The floor is conservative:
+two halves differ by twice the variance of one, four times that of their mean, the reference, so
+the reference's own relMSE against the converged image is about a quarter of the floor's.
+:func:`reference_for_error` doubles the samples (each half a sum of cached blocks of 1, 1, 2, 4…
+times the first block's samples, so a larger request renders only the new blocks) until the floor
+is at most a quarter of a given error, or says it could not within ``max_spp``.
+
 Results are cached as ``.npy`` in ``$SERENITY_CACHE`` (default ``~/.cache/serenity/reference``),
 keyed by a SHA-256 of every scene array and field, the sky map, the settings and the Mitsuba version.
 """
@@ -82,10 +92,12 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import json
 import math
 import os
 import warnings
 from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
@@ -589,6 +601,133 @@ def render_reference(scene, width: int, height: int, spp: int = 64, component: s
     if cache:
         _store(path, img)
     return img
+
+
+# ------------------------------------------------------------------------------------------- noise floor
+
+
+@dataclass
+class Reference:
+    """A reference rendered as two independent halves (module doc, Noise floor).
+
+    image: (H, W, 3) float32, the mean of the halves; spp: its samples per pixel (both halves);
+    floor: {"flip", "rel_mse"} between the halves (metrics of :mod:`serenity.eval.metrics`, the
+    first half against the second); converged / message: :func:`reference_for_error`'s verdict
+    (None / "" from :func:`reference_with_floor`); cached: nothing was rendered."""
+
+    image: np.ndarray
+    spp: int
+    floor: dict
+    halves: tuple = field(repr=False, default=())
+    converged: bool | None = None
+    message: str = ""
+    cached: bool = False
+
+
+def _half_seed(seed: int, half: int, block: int) -> int:
+    """Seed of ``block`` of ``half`` (0 or 1): distinct from each other and from a plain reference's."""
+    return (int(seed) * 64 + int(block)) * 2 + int(half) + 1
+
+
+def _blocks(first: int, level: int) -> list[int]:
+    """Samples of each block of a half at ``level``: first, first, 2·first, 4·first, … (sum first·2^level)."""
+    return [first] + [first * 2 ** (j - 1) for j in range(1, level + 1)]
+
+
+def _floor_of(a: np.ndarray, b: np.ndarray, exposure: float) -> dict:
+    from serenity.eval.metrics import flip, rel_mse
+
+    return {"flip": float(flip(a, b, exposure=exposure)), "rel_mse": float(rel_mse(a, b))}
+
+
+def _reference_level(scene, width, height, first: int, level: int, seed: int, exposure: float, cache: bool,
+                     **kw) -> Reference:
+    halves, paths, cached = [], [], True
+    blocks = _blocks(first, level)
+    for h in (0, 1):
+        acc = None
+        for j, n in enumerate(blocks):
+            info: dict = {}
+            img = render_reference(scene, width, height, spp=n, seed=_half_seed(seed, h, j), cache=cache, info=info,
+                                   **kw).astype(np.float64) * n
+            paths += [os.path.basename(p) for p in info["cache_paths"]]
+            cached = cached and info["cached"]
+            acc = img if acc is None else acc + img
+        halves.append((acc / sum(blocks)).astype(np.float32))
+    key = hashlib.sha256(repr((sorted(paths), float(exposure))).encode()).hexdigest()
+    floor_path = os.path.join(cache_dir(), f"{key}.floor.json")
+    floor = None
+    if cache:
+        try:
+            with open(floor_path) as f:
+                floor = {k: float(v) for k, v in json.load(f)["floor"].items()}
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            floor = None
+    if floor is None:
+        floor = _floor_of(halves[0], halves[1], exposure)
+        if cache:
+            os.makedirs(cache_dir(), exist_ok=True)
+            tmp = f"{floor_path}.{os.getpid()}.tmp"
+            with open(tmp, "w") as f:
+                json.dump({"scene": scene.name, "size": [width, height], "spp": 2 * sum(blocks),
+                           "exposure": float(exposure), "floor": floor}, f)
+            os.replace(tmp, floor_path)
+    image = ((halves[0].astype(np.float64) + halves[1]) / 2).astype(np.float32)
+    return Reference(image, 2 * sum(blocks), floor, tuple(halves), cached=cached)
+
+
+def _exposure(exposure):
+    if exposure is not None:
+        return float(exposure)
+    from serenity.config import DEFAULT_EXPOSURE
+
+    return float(DEFAULT_EXPOSURE)
+
+
+def reference_with_floor(scene, width: int, height: int, spp: int = 64, component: str = "full", seed: int = 0, *,
+                         exposure: float | None = None, cache: bool = True, progress: bool = True,
+                         **kw) -> Reference:
+    """A reference of ``spp`` samples per pixel (even, ≥ 2) as two halves of ``spp/2`` with their
+    noise floor (module doc); ``exposure`` is FLIP's (default: the renderer's). Other keywords
+    (``max_depth``, ``sky_envmap``, ``chunk_spp``) as :func:`render_reference`'s."""
+    if not int(spp) >= 2 or int(spp) % 2:
+        raise SerenityError(f"a reference with its noise floor needs an even spp >= 2 (two halves), got {spp}")
+    return _reference_level(scene, width, height, int(spp) // 2, 0, seed, _exposure(exposure), cache,
+                            component=component, progress=progress, **kw)
+
+
+def reference_for_error(scene, width: int, height: int, *, flip: float | None = None, rel_mse: float | None = None,
+                        spp: int = 16, max_spp: int = 4096, component: str = "full", seed: int = 0,
+                        exposure: float | None = None, cache: bool = True, progress: bool = True,
+                        **kw) -> Reference:
+    """A reference whose noise floor is at most a quarter of the error being measured: ``flip`` and/or
+    ``rel_mse`` (the errors of an image against this reference). Starts at ``spp`` and doubles
+    (every render cached; a larger request renders only the new blocks) until each given metric's
+    floor ≤ error/4. When ``max_spp`` is reached first, the result has ``converged=False`` and a
+    ``message`` naming the scene, the floor and the error, also given as a ``UserWarning``."""
+    targets = {k: float(v) for k, v in (("flip", flip), ("rel_mse", rel_mse)) if v is not None}
+    if not targets:
+        raise SerenityError("reference_for_error needs the error being measured: flip= and/or rel_mse=")
+    if any(not (v > 0 and math.isfinite(v)) for v in targets.values()):
+        raise SerenityError(f"the errors being measured must be positive, got {targets}")
+    if not int(spp) >= 2 or int(spp) % 2 or int(max_spp) < int(spp):
+        raise SerenityError(f"spp must be even and >= 2 and max_spp >= spp, got spp {spp}, max_spp {max_spp}")
+    first, level, exposure = int(spp) // 2, 0, _exposure(exposure)
+    while True:
+        ref = _reference_level(scene, width, height, first, level, seed, exposure, cache, component=component,
+                               progress=progress, **kw)
+        if all(ref.floor[k] <= v / 4 for k, v in targets.items()):
+            ref.converged = True
+            return ref
+        if ref.spp * 2 > int(max_spp):
+            worst = ", ".join(f"{k} floor {ref.floor[k]:.3g} > {v:.3g}/4" for k, v in targets.items()
+                              if ref.floor[k] > v / 4)
+            ref.converged = False
+            ref.message = (f"reference of {scene.name!r} ({width}x{height}): noise floor not below a quarter of the "
+                           f"error at {ref.spp} spp (max_spp {int(max_spp)}): {worst}")
+            warnings.warn(ref.message, UserWarning, stacklevel=2)
+            return ref
+        level += 1
 
 
 def cast_primary(scene, width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -22,6 +22,8 @@ def test_reference_then_compare(tmp_path, capsys):
                  "-o", ref]) == 0
     out = capsys.readouterr().out
     assert "32x18, 4 spp, component direct" in out and "from the cache" not in out
+    floor = out.split("noise floor (two halves of 2 spp): FLIP ")[1].split()
+    assert 0 < float(floor[0].rstrip(",")) < 1 and floor[1] == "relMSE" and float(floor[2]) > 0
     img = read_exr(ref)["beauty"]
     assert img.shape == (18, 32, 3) and img.max() > 100
     assert main(["reference", "plane", "--size", "32x18", "--spp", "4", "--depth", "2", "-q", "-o", ref]) == 0
