@@ -272,6 +272,9 @@ class DeferredPass(FullscreenPass):
             # a normal's image under the linear part L is L^-T n; GL reads a mat3 column by column
             planes[i] = np.linalg.inv(c.view_proj[:3, :3])  # (L^-T)^T, row-major = L^-T column-major
         p["u_cascade_vp"].write(mats.tobytes())
+        for name, value in shadow.blend_uniforms().items():  # the tiles' atlas slots and cross-fades
+            if (u := uniform(p, name)) is not None:
+                u.write(value)
         if (u := uniform(p, "u_cascade_plane")) is not None:
             u.write(planes.tobytes())
 

@@ -10,7 +10,10 @@ space, so shadows do not shimmer as the camera moves (a one-texel camera move ch
 the map's content, only which texels are used). The light-space depth range is extended to the
 whole scene's bounds so casters outside the slice still cast.
 
-Atlas. Cascade i occupies tile (i % 2, i // 2) of a (2S × 2S) depth texture (S = ``size``).
+Atlas. Cascade i occupies slot i, tile (i % 2, i // 2), of a (2S × 2S) depth texture (S = ``size``).
+With ``ShadowPass.render``'s stagger (3 or 4 cascades) the atlas is 3S × 3S (slot s at tile (s % 3,
+s // 3)): each cascade after the first has a second slot, and a redrawn tile goes to the slot its
+cascade is not in, so that the version before stays for the lookups to fade from.
 
 Depth comparison (``glsl/shadow_sampling.glsl``): each tap compares the map's depth with the
 receiver's tangent plane at the centre of the texel it reads (receiver-plane depth bias; the plane's
@@ -34,6 +37,7 @@ the frame's relMSE), and the bias detaches the courtyard's eave shadows from the
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -112,6 +116,12 @@ class Cascade:
     sphere: tuple[np.ndarray, float] | None = None
     #: the tile as drawn: (light rotation (3,3), light-space centre (2,), half width m)
     tile: tuple[np.ndarray, np.ndarray, float] | None = None
+    #: where the tile lies in the atlas: slot s is tile (s mod T, s div T) of a T × T atlas
+    slot: int = 0
+    #: with ``ShadowPass.render``'s stagger: the tile as drawn before its last redraw, which lookups
+    #: still take ``previous_weight`` of (cross-faded into the new one over the stagger's cycle)
+    previous: Cascade | None = None
+    previous_weight: float = 0.0
 
     def covers(self, other: Cascade) -> bool:
         """Whether this tile, as drawn, still holds every texel ``other`` needs: ``other``'s sphere,
@@ -129,6 +139,24 @@ class ShadowMaps:
     depth: object               # the atlas depth texture
     cascades: list[Cascade]
     tile_size: int
+
+    def blend_uniforms(self) -> dict[str, bytes]:
+        """``glsl/shadow_sampling.glsl``'s uniforms for where each cascade's tile lies and what it
+        cross-fades from (``Cascade.slot``, ``previous``, ``previous_weight``), as float32 bytes."""
+        slot, prev_slot, weight, texel, depth = (np.zeros(4, np.float32) for _ in range(5))
+        vp, plane = np.zeros((4, 4, 4), np.float32), np.zeros((4, 3, 3), np.float32)
+        for i, c in enumerate(self.cascades):
+            slot[i] = c.slot
+            q = c.previous
+            if q is None or c.previous_weight <= 0.0:
+                continue
+            prev_slot[i], weight[i], texel[i], depth[i] = q.slot, c.previous_weight, q.texel_world, q.depth_range
+            vp[i] = q.view_proj.T
+            plane[i] = np.linalg.inv(q.view_proj[:3, :3])  # as u_cascade_plane (DeferredPass)
+        return {"u_cascade_slot": slot.tobytes(), "u_cascade_prev_slot": prev_slot.tobytes(),
+                "u_cascade_prev_weight": weight.tobytes(), "u_cascade_prev_texel": texel.tobytes(),
+                "u_cascade_prev_depth_range": depth.tobytes(), "u_cascade_prev_vp": vp.tobytes(),
+                "u_cascade_prev_plane": plane.tobytes()}
 
 
 def fit_shadow_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, count: int,
@@ -225,20 +253,28 @@ class ShadowPass:
         if scene_gl.masked_caster_ranges:
             self.program_masked = load_program(ctx, "shadow_depth.glsl", defines={"ALPHA_MASK": 1})
             self.vao_masked = scene_gl.vao(self.program_masked, with_attributes=("in_position", "in_uv"))
-        tiles = 2 if cascades > 1 else 1
+        self._atlas(2 if cascades > 1 else 1)
+        self._kept: list[Cascade | None] = [None] * cascades   # the cascade each tile was drawn for
+        self._age = [0] * cascades                               # frames since each tile was drawn
+        self._slot = list(range(cascades))                       # the atlas slot each tile is in
+        self._previous: list[Cascade | None] = [None] * cascades  # each tile before its last redraw
+        #: tiles drawn by the last ``render`` (the others were still valid)
+        self.redrawn = 0
+
+    def _atlas(self, tiles: int) -> None:
+        """A depth atlas of ``tiles`` × ``tiles`` slots of ``size``² texels (nothing drawn)."""
+        ctx, size = self.ctx, self.size
+        self.tiles = tiles
         self.depth = ctx.depth_texture((size * tiles, size * tiles))
         self.depth.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth.repeat_x = self.depth.repeat_y = False
         self.depth.compare_func = ""  # sampled as plain depth; the shader compares (PCF/PCSS)
         self.fbo = ctx.framebuffer(depth_attachment=self.depth)
-        self._kept: list[Cascade | None] = [None] * cascades   # the cascade each tile was drawn for
-        self._age = [0] * cascades                               # frames since each tile was drawn
-        #: tiles drawn by the last ``render`` (the others were still valid)
-        self.redrawn = 0
 
     def invalidate(self) -> None:
         """Redraw every tile next time (after the scene's geometry changed in place)."""
         self._kept = [None] * self.count
+        self._previous = [None] * self.count
 
     def render(self, cascades: list[Cascade], stagger: bool = False) -> ShadowMaps:
         """Draw the scene's depth into one atlas tile per cascade (from ``fit_shadow_cascades`` or
@@ -250,10 +286,20 @@ class ShadowPass:
         sphere (``Cascade.covers``; fit with ``pad`` > 0 to leave room), and at most one of those
         is redrawn per frame, the one kept longest: with the sun moving every frame, the first
         tile follows it each frame and the others within ``count − 1`` frames (their shadows lag
-        the sun by as many frames), so 2 tiles are drawn per frame instead of ``count``. The
-        returned cascades are the tiles as drawn, with this frame's split depths."""
+        the sun by as many frames), so 2 tiles are drawn per frame instead of ``count``. A tile
+        after the first is then redrawn into a second slot of the atlas (3 × 3 slots) and keeps its
+        version before, which lookups cross-fade from over ``count − 1`` frames (the weight of the
+        old version (count − 1 − k)/(count − 1) in the k-th frame after the redraw,
+        ``Cascade.previous``): a redraw changes the shadow maps' aliasing wherever a shadow's
+        detail is near a texel (under a grazing sun, an eave's shadow on a wall), and switched at
+        once it popped (``docs/stability.md``). The returned cascades are the tiles as drawn, with
+        this frame's split depths."""
         ctx = self.ctx
         self.redrawn = 0
+        blend = stagger and self.count > 2
+        if blend and self.tiles < 3:  # a second slot per cascade after the first
+            self._atlas(3)
+            self.invalidate()
         cascades = list(cascades[: self.count])
         draw = []
         stale = []
@@ -273,7 +319,13 @@ class ShadowPass:
             ctx.disable(moderngl.CULL_FACE)
             for i in sorted(draw):
                 c = cascades[i]
-                tile = ((i % 2) * self.size, (i // 2) * self.size, self.size, self.size)
+                if blend and i > 0 and self._kept[i] is not None:  # the version before stays for the fade
+                    self._previous[i] = dataclasses.replace(self._kept[i], slot=self._slot[i], previous=None)
+                    self._slot[i] = self.count + i - 1 if self._slot[i] == i else i
+                else:
+                    self._previous[i] = None
+                slot = self._slot[i]
+                tile = ((slot % self.tiles) * self.size, (slot // self.tiles) * self.size, self.size, self.size)
                 clear_depth_rect(ctx, self.fbo, self.depth, tile)
                 self.fbo.viewport = tile
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
@@ -293,6 +345,15 @@ class ShadowPass:
         for i, c in enumerate(cascades):
             self._age[i] = 0 if i in draw else self._age[i] + 1
             k = self._kept[i]
-            used.append(c if k is c else  # a kept tile: as drawn, with this frame's split depth
-                        Cascade(k.view_proj, c.far, k.texel_world, k.depth_range, sphere=c.sphere, tile=k.tile))
+            if k is not c:  # a kept tile: as drawn, with this frame's split depth
+                k = Cascade(k.view_proj, c.far, k.texel_world, k.depth_range, sphere=c.sphere, tile=k.tile)
+            k = dataclasses.replace(k, slot=self._slot[i])
+            prev = self._previous[i]
+            if prev is not None:
+                w = 1.0 - (self._age[i] + 1) / (self.count - 1)
+                if w > 0.0:
+                    k = dataclasses.replace(k, previous=prev, previous_weight=w)
+                else:
+                    self._previous[i] = None
+            used.append(k)
         return ShadowMaps(self.depth, used, self.size)

@@ -8,9 +8,18 @@
 #define SHADOW_PCF 1
 #define SHADOW_PCSS 2
 
-uniform sampler2D u_shadow_map;       // depth atlas, cascade i at tile (i % 2, i / 2)
+uniform sampler2D u_shadow_map;       // depth atlas of T x T tiles: slot s at tile (s % T, s / T)
 uniform int u_cascade_count;
-uniform float u_atlas_tiles;          // tiles per side (1 or 2)
+uniform float u_atlas_tiles;          // tiles per side T (1, 2, or 3 with a staggered atlas's second slots)
+uniform vec4 u_cascade_slot;          // the atlas slot of each cascade's tile
+// A staggered tile's version before its last redraw (ShadowPass.render), cross-faded into the new
+// one: its weight (0 = none), slot, light matrix, plane transform, texel (m) and depth extent (m)
+uniform vec4 u_cascade_prev_weight;
+uniform vec4 u_cascade_prev_slot;
+uniform mat4 u_cascade_prev_vp[4];
+uniform mat3 u_cascade_prev_plane[4];
+uniform vec4 u_cascade_prev_texel;
+uniform vec4 u_cascade_prev_depth_range;
 uniform mat4 u_cascade_vp[4];         // world -> light clip
 uniform mat3 u_cascade_plane[4];      // inverse transpose of each cascade's linear part: a world
                                       // normal -> the normal of that plane in the map's coordinates
@@ -57,10 +66,11 @@ vec2 rotated(vec2 p, vec2 rot) {
 // grows with them (which detached and shortened the shadows of eaves on walls under a grazing sun).
 struct AtlasTile { vec2 base; float scale; vec2 lo; vec2 hi; float texels; vec2 grad; float z; };
 
-// s: the receiver in the cascade's [0,1]^3 map coordinates; m: its normal there (u_cascade_plane);
+// s: the receiver in the tile's [0,1]^3 map coordinates; m: its normal there (u_cascade_plane);
 // bias: depth units subtracted from the receiver
-AtlasTile atlas_tile(int cascade, vec3 s, vec3 m, vec2 texel, float max_grad, float bias) {
-    vec2 tile = vec2(cascade % 2, cascade / 2);
+AtlasTile atlas_tile(int slot, vec3 s, vec3 m, vec2 texel, float max_grad, float bias) {
+    int t = int(u_atlas_tiles + 0.5);
+    vec2 tile = vec2(slot % t, slot / t);
     float scale = 1.0 / u_atlas_tiles;
     // depth per unit of tile coordinates along the plane, no steeper than max_grad
     vec2 grad = clamp(-m.xy / (abs(m.z) > 1e-6 ? m.z : 1e-6), -max_grad, max_grad);
@@ -76,20 +86,21 @@ vec2 tap_centre(AtlasTile t, vec2 o) {
 // texel holds (a plane steep in the map would otherwise pass behind it within a wide filter)
 float plane_depth(AtlasTile t, vec2 a) { return min(t.z + dot(t.grad, a - t.base), 1.0); }
 
-float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
-    float texel_w = u_cascade_texel[c];
-    float range = u_cascade_depth_range[c];
+// The sun's visibility from one tile (light matrix vp, plane transform, atlas slot, texel_w m per
+// texel, range m of depth); -1 where p lies outside it.
+float tile_visibility(mat4 vp, mat3 plane, int slot, float texel_w, float range, vec3 p, vec3 n, float ndl,
+                      float size) {
     float slope = clamp(sqrt(max(0.0, 1.0 - ndl * ndl)) / max(ndl, 0.05), 1.0, 4.0);
     vec3 q = p + n * texel_w * u_normal_offset * slope;
-    vec4 lp = u_cascade_vp[c] * vec4(q, 1.0);
+    vec4 lp = vp * vec4(q, 1.0);
     vec3 s = lp.xyz / lp.w * 0.5 + 0.5;
-    if (any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0))) || s.z > 1.0) return 1.0;
+    if (any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0))) || s.z > 1.0) return -1.0;
     vec2 texel = vec2(1.0 / size);
     float phi = 6.2831853 * interleaved_gradient_noise(gl_FragCoord.xy);
     vec2 rot = vec2(cos(phi), sin(phi));
     // at most MAX_PLANE_SLOPE metres of depth per metre across the map (a plane ~88 deg from the sun)
     float max_grad = MAX_PLANE_SLOPE * size * texel_w / range;
-    AtlasTile tile = atlas_tile(c, s, u_cascade_plane[c] * n, texel, max_grad, u_shadow_bias * texel_w / range);
+    AtlasTile tile = atlas_tile(slot, s, plane * n, texel, max_grad, u_shadow_bias * texel_w / range);
     float radius = 0.0;  // filter radius, texels
 #if SHADOW_FILTER == SHADOW_PCF
     radius = u_pcf_radius;
@@ -121,6 +132,24 @@ float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
     }
     return lit / float(FILTER_SAMPLES);
 #endif
+}
+
+// Cascade c's visibility: its tile's, or while the tile's version before its last redraw still has a
+// weight w (a staggered cascade, ShadowPass.render), that version's at a fraction w of the pixels
+// (those whose noise is below w: the expected value is the cross-fade, each pixel switches once, and
+// the parameters are chosen per pixel so that a block of pixels runs one filter, not two); 1 outside
+// the tile (and the new version where p lies outside the old one).
+float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
+    bool before = interleaved_gradient_noise(gl_FragCoord.xy + vec2(13.0, 29.0)) < u_cascade_prev_weight[c];
+    float v = tile_visibility(before ? u_cascade_prev_vp[c] : u_cascade_vp[c],
+                              before ? u_cascade_prev_plane[c] : u_cascade_plane[c],
+                              int(before ? u_cascade_prev_slot[c] : u_cascade_slot[c]),
+                              before ? u_cascade_prev_texel[c] : u_cascade_texel[c],
+                              before ? u_cascade_prev_depth_range[c] : u_cascade_depth_range[c], p, n, ndl, size);
+    if (v < 0.0 && before)
+        v = tile_visibility(u_cascade_vp[c], u_cascade_plane[c], int(u_cascade_slot[c]), u_cascade_texel[c],
+                            u_cascade_depth_range[c], p, n, ndl, size);
+    return v < 0.0 ? 1.0 : v;
 }
 
 // One texel (m) of the first cascade that holds view depth ``view_depth`` (before any blending).
