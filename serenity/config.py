@@ -93,8 +93,10 @@ class ShadowConfig:
     """Redraw the cascades after the first in turn, one per frame, while each still covers its slice
     (tiles fitted 10 % larger to leave room), instead of every cascade whose light matrix moved: with
     the sun moving every frame, 2 tiles are drawn per frame instead of 4 and the far cascades' shadows
-    lag the sun by up to 3 frames. The same for the overlapped shadow maps. A still frame is
-    unchanged apart from the 10 % coarser tiles (``ShadowPass.render``)."""
+    lag the sun by up to 3 frames. A redrawn tile is faded in over those frames, pixel by pixel,
+    from its version before (a second slot per tile in the atlas), instead of switched at once. The
+    same for the overlapped shadow maps. A still frame is unchanged apart from the 10 % coarser
+    tiles (``ShadowPass.render``)."""
     contact_steps: int = 6
     """Steps of the screen-space contact-shadow march towards the sun (main view; 0 = off): a
     receiver touching a blocker closer than the map's texels (``glsl/deferred.glsl``). 6: the
@@ -383,7 +385,7 @@ class LPVConfig:
     lags the camera and the light by at most ``cascades`` updates; a cascade that did not change
     is skipped, and a still scene converges to what updating all at once gives). The finer
     cascades' hand-over from a coarser one is rebuilt every update from its last propagation."""
-    temporal_blend: float = 0.35
+    temporal_blend: float = 0.15
     """Fraction of the way from the light the lookups read in the last frame to the newest propagation
     that each frame moves them (1 = switch at once): a re-injected or staggered cascade is blended in
     over a few frames instead of switched, so that the VPLs' sampling of a moving sun does not pop
