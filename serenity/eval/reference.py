@@ -102,8 +102,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from serenity.config import check_image_size
+from serenity.config import DEFAULT_EXPOSURE, check_image_size
 from serenity.errors import SerenityError
+from serenity.eval import metrics
 from serenity.kernels.atmosphere import equirect_sky, scene_sun_irradiance
 from serenity.optional import require
 from serenity.scene.model import IDENTITY_UV, normal_map_frame
@@ -635,9 +636,7 @@ def _blocks(first: int, level: int) -> list[int]:
 
 
 def _floor_of(a: np.ndarray, b: np.ndarray, exposure: float) -> dict:
-    from serenity.eval.metrics import flip, rel_mse
-
-    return {"flip": float(flip(a, b, exposure=exposure)), "rel_mse": float(rel_mse(a, b))}
+    return {"flip": float(metrics.flip(a, b, exposure=exposure)), "rel_mse": float(metrics.rel_mse(a, b))}
 
 
 def _reference_level(scene, width, height, first: int, level: int, seed: int, exposure: float, cache: bool,
@@ -677,11 +676,7 @@ def _reference_level(scene, width, height, first: int, level: int, seed: int, ex
 
 
 def _exposure(exposure):
-    if exposure is not None:
-        return float(exposure)
-    from serenity.config import DEFAULT_EXPOSURE
-
-    return float(DEFAULT_EXPOSURE)
+    return float(DEFAULT_EXPOSURE if exposure is None else exposure)
 
 
 def reference_with_floor(scene, width: int, height: int, spp: int = 64, component: str = "full", seed: int = 0, *,
