@@ -562,6 +562,11 @@ class RenderConfig:
     indirect_scale: int = 2
     """The main view's SSAO and indirect light (sky volume, LPV) are computed at 1/scale of the
     view per axis and joint-bilaterally upsampled (1 = full resolution, the paper's)."""
+    indirect_history: float = 0.3
+    """With ``indirect_scale`` > 1: the weight of this frame's upsampled indirect light against the
+    last frame's at the same surface point (reprojected per pixel; disocclusions take this frame's
+    alone), 1 = none of the last frame's. Against the light that slid over the surfaces with the
+    low-res points as the camera moved (``raster/temporal.py``; ``docs/stability.md``)."""
     lowres_tile_balance: bool = True
     """Lay those reduced-resolution images out centred on the GL rasteriser's 64-pixel tiles
     (``raster/context.LowResLayout``): llvmpipe shades each tile on one thread, and at 320×180 a
@@ -597,6 +602,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.rt_sun_shadows must be traced or osm, got {self.rt_sun_shadows!r}")
         if not (isinstance(self.indirect_scale, int) and 1 <= self.indirect_scale <= 8):
             raise ConfigError(f"RenderConfig.indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
+        if not (isinstance(self.indirect_history, (int, float)) and 0.0 < self.indirect_history <= 1.0):
+            raise ConfigError(f"RenderConfig.indirect_history must be in (0, 1], got {self.indirect_history!r}")
         if isinstance(self.sync_stages, bool):
             object.__setattr__(self, "sync_stages", "each" if self.sync_stages else "none")
         if self.sync_stages not in ("each", "cpu", "none"):

@@ -71,6 +71,7 @@ from serenity.raster.scene_gl import SceneGL
 from serenity.raster.shadow import STAGGER_PAD, ShadowPass, fit_overlapped, fit_shadow_cascades
 from serenity.raster.sky import SkyTexturesGL
 from serenity.raster.ssao import SSAOPass
+from serenity.raster.temporal import IndirectHistory
 from serenity.raster.tonemap import TonemapPass
 from serenity.threads import lower_thread_priority, single_threaded_blas
 
@@ -302,9 +303,13 @@ class Renderer:
         (paper §8), each when enabled."""
         cfg, ctx = self.config, self.ctx
         self.lowres = None
+        self.indirect_history = None
         if cfg.indirect_scale > 1 and (cfg.sky.enabled or cfg.lpv.enabled):
             self.lowres = LowResIndirect(ctx, cfg.indirect_scale, cfg.lowres_tile_balance)
             self.lowres.resize(self.width, self.height)
+            if cfg.indirect_history < 1.0:  # the upsampled light blended with the last frame's (raster/temporal.py)
+                self.indirect_history = IndirectHistory(ctx, cfg.indirect_scale)
+                self.indirect_history.resize(self.width, self.height)
         self.sky_volume = None
         self._sky_map_version = -1
         self._sky_volume_version = 0  # counts the sky volume's updates (the sky-light VPLs read it)
@@ -585,7 +590,10 @@ class Renderer:
         lo.clear()
         lo.use_depth(self.lowres_guide.depth)  # the texels' classes: the passes shade only theirs
         self._indirect_passes(lo, gbuf, ao, sky_gl, full_res=False)
-        with self._stage("direct lighting"):  # the upsampling included
+        with self._stage("direct lighting"):  # the upsampling included (and the indirect light's history)
+            if self.indirect_history is not None:
+                lo, guide = self.indirect_history.render(lo, guide, gbuf, light.view_proj, self.scene.camera,
+                                                         self.config.indirect_history)
             return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide), visibility=vis)
 
     def _indirect_passes(self, target, gbuf, ao, sky_gl, full_res: bool) -> None:

@@ -1,0 +1,54 @@
+"""The upsampled indirect light's temporal hysteresis (``RenderConfig.indirect_history``,
+``raster/temporal.py``): a pixel's indirect light moves a fraction a of the way to this frame's at
+the same surface point, and a still view shows the light it would without it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from serenity.eval.stability import preset_config
+from serenity.frame import Renderer
+from serenity.scene import load
+
+pytestmark = pytest.mark.gl
+SIZE = (96, 54)
+
+
+def _pair(history: float):
+    """Renderers of lpv-fast (quarter-resolution indirect light) without the LPV's own temporal blend
+    and stagger, with and without the history."""
+    out = []
+    for a in (history, 1.0):
+        cfg = preset_config("lpv-fast", {"indirect_history": a, "lpv.temporal_blend": 1.0, "lpv.stagger": False,
+                                         "sky.transfer_layers": 0})
+        out.append(Renderer(load("courtyard"), *SIZE, config=cfg))
+    return out
+
+
+def test_a_step_of_the_light_is_blended_in_at_the_history_weight(gl_ctx):
+    """Camera still, the sun's irradiance doubled from one frame to the next: the indirect light
+    (HDR − direct) of the renderer with the history is then, at every surface pixel, the last
+    frame's plus a·(this frame's − the last frame's) of the renderer without it; and a still view
+    shows what it shows without the history."""
+    a = 0.3
+    hist, plain = _pair(a)
+    try:
+        frames = {}
+        for name, r in (("hist", hist), ("plain", plain)):
+            first = r.render()
+            r.render()  # the same light again: nothing to blend
+            again = r.render()
+            r.scene.sun.irradiance = np.asarray(r.scene.sun.irradiance) * 2.0
+            frames[name] = (first, again, r.render())
+        (h1, h_again, h2), (p1, p_again, p2) = frames["hist"], frames["plain"]
+        surf = np.isfinite(p1.aovs["depth"][..., 0]) & (p1.aovs["rt_mask"][..., 0] == 0)
+        ind = {k: (f.hdr - f.aovs["direct"])[surf] for k, f in (("h1", h1), ("h2", h2), ("p1", p1), ("p2", p2))}
+        scale = float(np.abs(ind["p2"]).mean())
+        np.testing.assert_allclose(h_again.hdr[surf], p_again.hdr[surf], rtol=2e-3, atol=2e-3 * scale)
+        want = ind["p1"] + a * (ind["p2"] - ind["p1"])
+        assert float(np.abs(ind["h2"] - want).mean()) < 0.01 * scale
+        assert float(np.abs(ind["h2"] - ind["p2"]).mean()) > 0.3 * float(np.abs(ind["p2"] - ind["p1"]).mean())
+    finally:
+        hist.close()
+        plain.close()
