@@ -13,6 +13,7 @@ import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program, uniform
+from serenity.raster.culling import CulledRanges
 from serenity.scene.model import normal_map_frame
 
 
@@ -50,6 +51,11 @@ class GBufferPass:
             self.program_textured, self.vao_textured = self._variant(True, False, False)
         self.size = None
         self.gbuffer = None
+        self.ranges = CulledRanges(scene_gl.ranges)
+        #: skip the draw ranges outside the view frustum (``culling.py``; the image is the same)
+        self.cull = True
+        #: (draw ranges drawn, draw ranges) of the last ``render``
+        self.last_draws = (0, len(self.ranges.ranges))
 
     def _variant(self, textured: bool, masked: bool, normal_map: bool) -> tuple:
         key = (textured or masked, masked, normal_map)
@@ -98,7 +104,7 @@ class GBufferPass:
             cam = tuple(float(x) for x in camera_pos)
             sgl = self.scene_gl
             ready = set()  # programs whose per-frame uniforms are set
-            for r in sgl.ranges:
+            for r in self.ranges.visible(view_proj if self.cull else None):
                 m = sgl.materials[r.material]
                 tex = sgl.textures.get(r.material)
                 ntex = sgl.normal_textures.get(r.material)
@@ -127,5 +133,6 @@ class GBufferPass:
                 p["u_material"].value = (float(m.shininess), float(m.reflectivity), float(m.transparency),
                                          float(m.ior))
                 vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
+            self.last_draws = (self.ranges.drawn, len(self.ranges.ranges))
             ctx.disable(moderngl.DEPTH_TEST)
         return self.gbuffer

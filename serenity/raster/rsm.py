@@ -20,6 +20,7 @@ import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program
+from serenity.raster.culling import CulledRanges
 from serenity.raster.interop import read_texture
 from serenity.raster.shadow import look_at, ortho
 
@@ -63,6 +64,11 @@ class RSMPass:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth = ctx.depth_texture((size, size))
         self.fbo = ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
+        self.ranges = CulledRanges(scene_gl.ranges)
+        #: skip the draw ranges outside the sun's view (``culling.py``; the map is the same)
+        self.cull = True
+        #: (draw ranges drawn, draw ranges) of the last ``render``
+        self.last_draws = (0, len(self.ranges.ranges))
 
     def render(self, sun_direction, sun_irradiance, bounds) -> None:
         ctx, p = self.ctx, self.program
@@ -79,7 +85,7 @@ class RSMPass:
                     q["u_sun_dir"].value = tuple(float(x) for x in sun_direction)
                     q["u_sun_irradiance"].value = tuple(float(x) for x in sun_irradiance)
                     q["u_texel_area"].value = float(self.texel_area)
-            for r in self.scene_gl.ranges:
+            for r in self.ranges.visible(vp if self.cull else None):
                 m = self.scene_gl.materials[r.material]
                 albedo = np.asarray(m.albedo, np.float64) * self.scene_gl.mean_texture_albedo.get(r.material, 1.0)
                 q, vao = (self.program_masked, self.vao_masked) if m.alpha_tested else (p, self.vao)
@@ -87,6 +93,7 @@ class RSMPass:
                     self.scene_gl.bind_alpha_test(q, r.material)
                 q["u_albedo"].value = tuple(float(x) for x in albedo)
                 vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
+            self.last_draws = (self.ranges.drawn, len(self.ranges.ranges))
             ctx.disable(moderngl.DEPTH_TEST)
 
     def read(self) -> VPLs:

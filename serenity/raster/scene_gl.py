@@ -1,13 +1,16 @@
 """The scene's geometry and textures on the GL side, uploaded once (static scenes).
 
-Faces are sorted by material so that each material is one indexed draw range; vertex buffer
+Faces are sorted by material; each mesh's triangles of one material are one indexed draw range
+with the world box of its triangles (``DrawRange.lo``/``hi``, for frustum culling: ``culling.py``);
+vertex buffer
 layout: position (3 f4), normal (3 f4), uv (2 f4); a scene with normal maps has a second buffer of
 tangents (4 f4: xyz and the handedness w, ``Scene.merged_tangents``).
 
 Index buffer order: the shadow casters' opaque triangles, then the casters of alpha-tested
 materials (cut-outs: ``Material.alpha_tested``), then the bottom plane's triangles, each group by
-material — so the shadow pass draws every opaque caster in one call and the cut-outs, which need
-their texture's alpha, range by range.
+material and within it by mesh — so the shadow pass draws the opaque casters it does not cull in
+one call per run of adjacent ranges and the cut-outs, which need their texture's alpha, range by
+range.
 """
 
 from __future__ import annotations
@@ -25,6 +28,8 @@ class DrawRange:
     material: int
     first: int   # first index in the index buffer
     count: int   # number of indices
+    lo: np.ndarray | None = None  # (3,) world box of its triangles (float32 values)
+    hi: np.ndarray | None = None
 
 
 def bottom_plane_triangles(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -50,24 +55,30 @@ class SceneGL:
         for the courtyard's, which the frame asked for up to four times)."""
         pos, nrm, uv, faces, fmat = scene.merged()
         floor = bottom_plane_triangles(pos, faces)
-        # casters first, then the bottom plane's triangles, each grouped by material
+        mesh = np.repeat(np.arange(len(scene.meshes)), [len(m.faces) for m in scene.meshes])
+        # casters first, then the bottom plane's triangles, each grouped by material (a stable sort:
+        # within a material the meshes stay in their order)
         cut = np.array([m.alpha_tested for m in scene.materials], bool)
         masked = cut[fmat] if len(fmat) else np.zeros(0, bool)
         order = np.lexsort((fmat, masked, floor))
-        faces, fmat, floor, masked = faces[order], fmat[order], floor[order], masked[order]
+        faces, fmat, floor, masked, mesh = faces[order], fmat[order], floor[order], masked[order], mesh[order]
         self.ranges: list[DrawRange] = []
         if len(fmat):
-            group = fmat.astype(np.int64) * 2 + floor
-            bounds = np.flatnonzero(np.diff(group)) + 1
-            starts = np.concatenate([[0], bounds])
-            ends = np.concatenate([bounds, [len(fmat)]])
-            for s, e in zip(starts, ends, strict=True):
-                self.ranges.append(DrawRange(int(fmat[s]), int(s) * 3, int(e - s) * 3))
+            group = np.stack([fmat, floor, mesh], axis=1)
+            starts = np.concatenate([[0], np.flatnonzero(np.any(np.diff(group, axis=0), axis=1)) + 1])
+            ends = np.concatenate([starts[1:], [len(fmat)]])
+            corners = pos[faces]  # (F, 3, 3)
+            lo = np.minimum.reduceat(corners.min(axis=1), starts).astype(np.float64)
+            hi = np.maximum.reduceat(corners.max(axis=1), starts).astype(np.float64)
+            for k, (s, e) in enumerate(zip(starts, ends, strict=True)):
+                self.ranges.append(DrawRange(int(fmat[s]), int(s) * 3, int(e - s) * 3, lo[k], hi[k]))
         self.caster_index_count = int(np.count_nonzero(~floor)) * 3
         """Indices of the triangles that can cast a sun shadow: all but the bottom plane's, which
         come last in the index buffer (``bottom_plane_triangles``)."""
         self.opaque_caster_index_count = int(np.count_nonzero(~floor & ~masked)) * 3
         """The casters that need no alpha test: the first indices of the buffer."""
+        self.opaque_caster_ranges = [r for r in self.ranges if r.first < self.opaque_caster_index_count]
+        """Draw ranges of those casters (together the first ``opaque_caster_index_count`` indices)."""
         self.masked_caster_ranges = [r for r in self.ranges if scene.materials[r.material].alpha_tested
                                      and r.first < self.caster_index_count]
         """Draw ranges of the alpha-tested casters (drawn with the alpha test by the shadow pass)."""

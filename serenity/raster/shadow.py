@@ -45,6 +45,7 @@ import moderngl
 import numpy as np
 
 from serenity.raster.context import clear_depth_rect, load_program
+from serenity.raster.culling import CulledRanges
 
 MAX_CASCADES = 4
 #: how much larger than its sphere a tile is fitted when tiles are staggered (fraction of the radius)
@@ -260,6 +261,12 @@ class ShadowPass:
         self._previous: list[Cascade | None] = [None] * cascades  # each tile before its last redraw
         #: tiles drawn by the last ``render`` (the others were still valid)
         self.redrawn = 0
+        self.opaque_ranges = CulledRanges(scene_gl.opaque_caster_ranges)
+        self.masked_ranges = CulledRanges(scene_gl.masked_caster_ranges)
+        #: skip the casters' draw ranges outside each tile's light box (``culling.py``; the maps are the same)
+        self.cull = True
+        #: (caster draw ranges drawn, caster draw ranges × tiles drawn) of the last ``render``
+        self.last_draws = (0, 0)
 
     def _atlas(self, tiles: int) -> None:
         """A depth atlas of ``tiles`` × ``tiles`` slots of ``size``² texels (nothing drawn)."""
@@ -296,6 +303,7 @@ class ShadowPass:
         this frame's split depths."""
         ctx = self.ctx
         self.redrawn = 0
+        self.last_draws = (0, 0)
         blend = stagger and self.count > 2
         if blend and self.tiles < 3:  # a second slot per cascade after the first
             self._atlas(3)
@@ -329,16 +337,19 @@ class ShadowPass:
                 clear_depth_rect(ctx, self.fbo, self.depth, tile)
                 self.fbo.viewport = tile
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
-                opaque = self.scene_gl.opaque_caster_index_count
-                if opaque:  # the casters: the bottom plane shadows nothing
-                    self.vao.render(moderngl.TRIANGLES, vertices=opaque)
+                cull = c.view_proj if self.cull else None
+                # the casters (the bottom plane shadows nothing): runs of adjacent ranges, one call each
+                for r in self.opaque_ranges.visible(cull, merge_materials=True):
+                    self.vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
                 if self.program_masked is not None:
                     self.program_masked["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
-                    for r in self.scene_gl.masked_caster_ranges:
+                    for r in self.masked_ranges.visible(cull):
                         self.scene_gl.bind_alpha_test(self.program_masked, r.material)
                         self.vao_masked.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
                 self._kept[i] = c
                 self.redrawn += 1
+                self.last_draws = (self.last_draws[0] + self.opaque_ranges.drawn + self.masked_ranges.drawn,
+                                   self.last_draws[1] + len(self.opaque_ranges.ranges) + len(self.masked_ranges.ranges))
             self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)
             ctx.disable(moderngl.DEPTH_TEST)
         used = []
