@@ -11,10 +11,12 @@ from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.interop import read_depth, read_texture
 from serenity.raster.rsm import RSMPass
 from serenity.raster.scene_gl import SceneGL
-from serenity.raster.shadow import ShadowPass, fit_shadow_cascades
+from serenity.raster.shadow import Cascade, ShadowPass, fit_shadow_cascades, look_at, ortho
 from serenity.scene.loaders import load
+from serenity.scene.mesh_io import load_mesh_file, scene_from_meshes
 from serenity.scene.model import Camera, Sun
 from serenity.scene.procedural import courtyard_scene
+from tests.data.materials_gltf import write_materials_gltf
 
 from .scenes import box, plane_scene
 
@@ -114,5 +116,35 @@ def test_camera_facing_away_skips_the_draw_and_a_caster_behind_it_still_shadows(
         p = c.view_proj @ np.append(ground, 1.0)
         col, row = ((p[:2] * 0.5 + 0.5) * 256).astype(int)
         assert on[255 - row, col] < p[2] * 0.5 + 0.5 - 0.01
+    finally:
+        sgl.release()
+
+
+def test_cutouts_are_culled_like_the_rest(gl_ctx, tmp_path):
+    meshes, mats = load_mesh_file(write_materials_gltf(tmp_path))
+    scene = scene_from_meshes("m", [m for m in meshes if m.name in {"wall", "fence"}], mats)  # fence at z = 0
+    sgl = SceneGL(gl_ctx, scene)
+    assert len(sgl.ranges) == 2 and len(sgl.masked_caster_ranges) == 1
+    gpass, spass = GBufferPass(gl_ctx, sgl), ShadowPass(gl_ctx, sgl, 128, 1)
+    gpass.resize(W, H)
+    front = look_at(np.array([0.0, 0.0, 10.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    try:
+        # from z = 3 the camera sees both; from between the fence and the wall, only the wall
+        for z, drawn in ((3.0, 2), (-0.5, 1)):
+            cam = Camera(position=(0.0, 0.0, z), target=(0.0, 0.0, -1.0), fov_y_deg=60.0, near=0.1, far=20.0)
+            on = _gbuffer(gpass, cam, True)
+            assert gpass.last_draws == (drawn, 2)
+            for a, b in zip(on, _gbuffer(gpass, cam, False), strict=True):
+                np.testing.assert_array_equal(a, b)
+        # a light box around the whole fence, and one beside it that holds only the wall's edge
+        for left, drawn in ((-3.0, 2), (1.2, 1)):
+            vp = ortho(left, 3.0, -3.0, 3.0, 1.0, 20.0) @ front
+            maps = []
+            for cull in (True, False):
+                spass.cull = cull
+                spass.invalidate()
+                maps.append(read_depth(spass.render([Cascade(vp, 100.0, 6.0 / 128, 19.0)]).depth))
+                assert spass.last_draws == ((drawn if cull else 2), 2)
+            np.testing.assert_array_equal(*maps)
     finally:
         sgl.release()
