@@ -1,5 +1,5 @@
-"""Where each method fails: every stability case beside its exact answer, mitigation off and on
-(issue #15). Writes one PNG grid and one JSON; the README's "Where each method fails" table is
+"""Where each method fails: every stability case beside its exact answer, mitigation off and on.
+Writes one PNG grid and one JSON; the README's "Where each method fails" table is
 printed at the end (``--markdown``) from the same JSON.
 
     python benchmarks/bench_stability.py [--json FILE] [--png FILE] [--quick] [--only NAME ...]
@@ -12,6 +12,20 @@ geometry in a mirror; sunset pops; frame to frame with the sun moving 0.05°/fra
 the committed results are from the full run). Milliseconds are wall clock on the CPU of the
 machine that ran it (the committed ones: a 2-core machine shared with other jobs — compare within a
 row, not across machines).
+
+``--temporal`` instead measures every preset frame to frame (``serenity/eval/stability.py``,
+"temporal stability"): the courtyard at 160×90, the camera still and the sun's elevation sinking
+0.05° per frame, then the sun still and the camera moved 5 cm per frame, 40 steps each; per step the
+mean-luminance step and the 99th-percentile pixel step of the tone-mapped luminance, and which part
+of the light (direct sun, the rest) and which amortisation switch each pixel step comes from. It
+writes ``results/temporal_stability.json`` and, with ``results/temporal_stability_baseline.json``
+(the same measurement of the renderer without its temporal mitigations, ``--baseline``) beside it,
+the chart
+``results/temporal_stability.png``:
+
+    python benchmarks/bench_stability.py --temporal [--frames N] [--no-breakdown]
+    python benchmarks/bench_stability.py --temporal --baseline COMMIT   # run against an older tree
+    python benchmarks/bench_stability.py --temporal-markdown            # the docs' table from the JSON
 """
 
 from __future__ import annotations
@@ -27,9 +41,13 @@ import numpy as np
 
 from serenity.device import cpu_threads
 from serenity.eval import stability as S
+from serenity.io.results import write_results
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS = os.path.join(HERE, "results")
+TEMPORAL_JSON = os.path.join(RESULTS, "temporal_stability.json")
+BASELINE_JSON = os.path.join(RESULTS, "temporal_stability_baseline.json")
+TEMPORAL_PNG = os.path.join(RESULTS, "temporal_stability.png")
 
 
 def cases(quick: bool):
@@ -117,6 +135,72 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def temporal(frames: int, breakdown: bool, size=(160, 90), presets=S.TEMPORAL_PRESETS) -> dict:
+    """Every preset's sun sweep and camera pan (and with ``breakdown`` the sun sweep with each of
+    ``S.TEMPORAL_SWITCHES`` that applies), as the JSON's fields."""
+    out = {"definition": {
+        "display luminance": "L = luminance of Reinhard(exposure * HDR), before the sRGB encoding, in [0, 1)",
+        "mean step": "|mean(L_k) - mean(L_k-1)| / mean(L_k-1)",
+        "p99 pixel step": f"99th percentile over pixels of |L_k - L_k-1| / max(L_k-1, {S.DISPLAY_FLOOR})",
+        "sun sweep": f"camera still, sun elevation sinking {S.SUN_STEP_DEG} deg per frame from the scene's",
+        "camera pan": f"sun still, camera and target moved {S.CAMERA_STEP_M} m per frame along the camera's right "
+                      "vector; frame k-1 reprojected (bilinear), pixels whose reprojected surface disagrees "
+                      "(disocclusions, edges), sharp edges and ray-traced pixels left out",
+        "parts": "99th percentile of the step of the direct sun light / of the rest, over the pixel's HDR luminance"},
+        "bounds": {"mean_step": S.MEAN_STEP_BOUND, "p99_step": S.P99_STEP_BOUND},
+        "scene": "courtyard", "size": list(size), "frames": frames, "presets": {}, "breakdown": {}}
+    for q in presets:
+        t0 = time.perf_counter()
+        sun = S.sun_sweep(q, frames, size)
+        cam = S.camera_pan(q, frames, size)
+        out["presets"][q] = {"sun": sun, "camera": cam}
+        print(f"{q:<14} sun: mean {sun['worst_mean_step']:.4f} p99 {sun['worst_p99_step']:.4f}   camera: mean "
+              f"{cam['worst_mean_step']:.4f} p99 {cam['worst_p99_step']:.4f}   ({time.perf_counter() - t0:.0f} s)",
+              flush=True)
+        if not breakdown:
+            continue
+        rows = []
+        for name, overrides in S.TEMPORAL_SWITCHES:
+            if not S.switch_applies(q, overrides):
+                continue
+            r = S.sun_sweep(q, frames, size, overrides=overrides)
+            rows.append({"switch": name, "overrides": overrides, "worst_mean_step": r["worst_mean_step"],
+                         "worst_p99_step": r["worst_p99_step"], "worst_parts_p99": r["worst_parts_p99"],
+                         "p99_step": r["p99_step"]})
+            print(f"    {name:<42} p99 {r['worst_p99_step']:.4f}", flush=True)
+        out["breakdown"][q] = rows
+    return out
+
+
+def temporal_chart(now: dict, baseline: dict | None, path: str) -> None:
+    """Per preset, the per-step 99th-percentile pixel step of the sun sweep (without the temporal
+    mitigations, where the baseline JSON has it, and with them) and of the camera pan, with the goal."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(now["presets"])
+    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.2), sharey=True)
+    for ax, q in zip(np.atleast_1d(axes), names, strict=True):
+        r = now["presets"][q]
+        if baseline and q in baseline.get("presets", {}):
+            b = baseline["presets"][q]["sun"]["p99_step"]
+            ax.plot(np.arange(1, len(b) + 1), 100 * np.array(b), color="tab:red", lw=1.2,
+                    label="sun sweep, without the mitigations")
+        for case, colour, label in (("sun", "tab:blue", "sun sweep"), ("camera", "tab:green", "camera pan")):
+            v = r[case]["p99_step"]
+            ax.plot(np.arange(1, len(v) + 1), 100 * np.array(v), color=colour, lw=1.2, label=label)
+        ax.axhline(100 * now["bounds"]["p99_step"], color="k", ls="--", lw=0.8, label="goal")
+        ax.set_title(q)
+        ax.set_xlabel("frame-to-frame step")
+    np.atleast_1d(axes)[0].set_ylabel("99th-percentile pixel step (%)")
+    np.atleast_1d(axes)[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--json", default=os.path.join(RESULTS, "stability.json"))
@@ -124,7 +208,32 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="small sizes and 20 frames (smoke run)")
     ap.add_argument("--only", nargs="*", help="run only these case keys")
     ap.add_argument("--markdown", action="store_true", help="print the README table from --json and exit")
+    ap.add_argument("--temporal", action="store_true", help="every preset frame to frame (temporal_stability.json)")
+    ap.add_argument("--frames", type=int, default=40, help="--temporal: frame-to-frame steps per case")
+    ap.add_argument("--no-breakdown", action="store_true", help="--temporal: no per-switch breakdown")
+    ap.add_argument("--baseline", metavar="COMMIT", help="--temporal: record the renderer of this older commit "
+                    "(serenity on PYTHONPATH from that commit, this script's measurement) as the baseline JSON")
+    ap.add_argument("--temporal-markdown", action="store_true", help="print the docs' temporal table and exit")
     args = ap.parse_args(argv)
+    if args.temporal_markdown:
+        baseline = json.load(open(BASELINE_JSON)) if os.path.exists(BASELINE_JSON) else None
+        with open(TEMPORAL_JSON) as fh:
+            print(S.temporal_stability_markdown(json.load(fh), baseline))
+        return 0
+    if args.temporal:
+        data = temporal(args.frames, not args.no_breakdown)
+        if args.baseline:  # the renderer measured is another tree's: its commit, not this checkout's
+            data["commit"] = args.baseline
+            frames = "" if args.frames == 40 else f" --frames {args.frames}"
+            data["command"] = (f"git archive {args.baseline} serenity | tar -x -C DIR && cp serenity/eval/stability.py "
+                               f"DIR/serenity/eval/ && PYTHONPATH=DIR python benchmarks/bench_stability.py --temporal "
+                               f"--baseline {args.baseline}{frames}")
+        write_results(BASELINE_JSON if args.baseline else TEMPORAL_JSON, data)
+        if os.path.exists(TEMPORAL_JSON):
+            baseline = json.load(open(BASELINE_JSON)) if os.path.exists(BASELINE_JSON) else None
+            temporal_chart(json.load(open(TEMPORAL_JSON)), baseline, TEMPORAL_PNG)
+            print(f"wrote {TEMPORAL_PNG}")
+        return 0
     if args.markdown:
         with open(args.json) as fh:
             print(markdown(json.load(fh)["cases"]))
