@@ -89,20 +89,3 @@ def test_repository_paths_exist(page):
             if not (ROOT / word).exists():
                 bad.append(word)
     assert not bad, f"{page.relative_to(ROOT)} names paths that do not exist: {', '.join(sorted(set(bad)))}"
-
-
-def test_readme_frame_cost_reads_the_frame_bench():
-    """The README's one frame-cost line is the default preset's overlapped frame in the frame benches'
-    JSON (``serenity bench`` with a moving sun): after a re-run of the benches, this names the line to
-    write."""
-    import json
-
-    ms, cores = {}, set()
-    for size in ("640x360", "320x180"):
-        data = json.loads((ROOT / "benchmarks" / "results" / f"frame_bench_traced-probes_{size}.json").read_text())
-        ms[size] = data["overlapped"]["frame_ms"]
-        cores.add(data["machine"]["cores"])
-    assert len(cores) == 1, "the two frame benches ran on different machines"
-    line = (f"costs {ms['640x360']:.1f} ms at 640×360 and {ms['320x180']:.1f} ms at\n"
-            f"320×180 on {cores.pop()} CPU cores without a GPU")
-    assert line in (ROOT / "README.md").read_text(encoding="utf-8"), f"README's frame-cost line should read: {line!r}"
