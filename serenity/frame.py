@@ -592,8 +592,8 @@ class Renderer:
         self._indirect_passes(lo, gbuf, ao, sky_gl, full_res=False)
         with self._stage("direct lighting"):  # the upsampling included (and the indirect light's history)
             if self.indirect_history is not None:
-                lo, guide = self.indirect_history.render(lo, guide, gbuf, light.view_proj, self.scene.camera,
-                                                         self.config.indirect_history)
+                lo = self.indirect_history.render(lo, guide, gbuf, light.view_proj, self.scene.camera,
+                                                  self.config.indirect_history)
             return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide), visibility=vis)
 
     def _indirect_passes(self, target, gbuf, ao, sky_gl, full_res: bool) -> None:

@@ -9,13 +9,14 @@ frame in blocks of pixels (``lpv-fast``'s 99th-percentile pixel step 3.6 % under
 5 cm a frame, ``docs/stability.md``). Here, in one full-resolution pass before the deferred pass,
 each pixel's upsampled light is blended with what the last frame showed at the same surface point
 (reprojected; where that point was hidden or on another surface, this frame's light alone), and
-the deferred pass reads the result as a light of scale 1. A moving light lags by (1 − a)/a frames.
-Its cost: the upsampling, which the deferred pass did, plus a reprojection and 4 taps of the last
-frame's light per pixel, in a pass of its own.
+the deferred pass reads the result per pixel (one tap instead of its upsampling). A moving light lags by
+(1 − a)/a frames. Its cost: a full-resolution pass of its own, holding the upsampling the deferred
+pass did, plus per pixel a reprojection and 4 taps of the last frame's light.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,8 @@ from serenity.raster.context import LowResLayout, fullscreen_vao, load_program
 
 @dataclass
 class BlendedIndirect:
-    """What the deferred pass upsamples (as it would a ``LowResIndirect``): the blended light, at scale 1."""
+    """What the deferred pass upsamples (as it would a ``LowResIndirect``): here the blended light
+    albedo · E + G per pixel in ``irr`` (``scale`` 0: ``glsl/upsample.glsl`` reads it as it is)."""
 
     irr: object
     gloss: object
@@ -34,13 +36,11 @@ class BlendedIndirect:
 
 
 class IndirectHistory:
-    """Two sets of full-resolution targets (this frame's output, the last frame's) and the last
-    frame's camera."""
+    """Two full-resolution targets (this frame's output, the last frame's) and the last frame's camera."""
 
-    def __init__(self, ctx, scale: int, tolerance_m: float = 0.05):
+    def __init__(self, ctx, scale: int):
         self.ctx = ctx
         self.scale = max(1, int(scale))
-        self.tolerance_m = float(tolerance_m)
         self.program = load_program(ctx, "indirect_history.glsl")
         self.vao = fullscreen_vao(ctx, self.program)
         self.size = None
@@ -57,10 +57,8 @@ class IndirectHistory:
         self.layout = LowResLayout((width, height))
         self._sets = []
         for _ in range(2):
-            irr = self.ctx.texture((width, height), 4, dtype="f4")
-            gloss = self.ctx.texture((width, height), 4, dtype="f2")
-            guide = self.ctx.texture((width, height), 4, dtype="f4")
-            self._sets.append((irr, gloss, guide, self.ctx.framebuffer(color_attachments=[irr, gloss, guide])))
+            light = self.ctx.texture((width, height), 4, dtype="f4")  # rgb = the light, a = view depth
+            self._sets.append((light, self.ctx.framebuffer(color_attachments=[light])))
         self.size = (width, height)
         self._prev = None
 
@@ -68,17 +66,17 @@ class IndirectHistory:
         """Forget the last frame (the next one shows its own light only)."""
         self._prev = None
 
-    def render(self, lowres, guide, gbuffer, view_proj: np.ndarray, camera, alpha: float):
+    def render(self, lowres, guide, gbuffer, view_proj: np.ndarray, camera, alpha: float) -> BlendedIndirect:
         """Upsample ``lowres`` (the frame's :class:`~serenity.raster.indirect.LowResIndirect`, drawn, with
         its ``guide``) and blend it with the last frame's output at weight ``alpha`` for this frame's
-        light; returns (the blended light, its guide) for the deferred pass's ``upsample``."""
+        light; returns the blended light for the deferred pass's ``upsample`` (with the same guide)."""
         ctx, p = self.ctx, self.program
-        irr, gloss, full_guide, fbo = self._sets[self._turn]
-        prev_irr, prev_gloss, _, _ = self._sets[1 - self._turn]
+        light, fbo = self._sets[self._turn]
+        prev = self._sets[1 - self._turn][0]
         with ctx.debug_scope("indirect history"):
             fbo.use()
-            textures = (lowres.irr, lowres.gloss, guide, gbuffer.position, gbuffer.normal, prev_irr, prev_gloss)
-            names = ("u_irr", "u_gloss", "u_guide", "g_position", "g_normal", "u_prev_irr", "u_prev_gloss")
+            textures = (lowres.irr, lowres.gloss, guide, gbuffer.position, gbuffer.normal, gbuffer.albedo, prev)
+            names = ("u_irr", "u_gloss", "u_guide", "g_position", "g_normal", "g_albedo", "u_prev_irr")
             for loc, (tex, name) in enumerate(zip(textures, names, strict=True)):
                 tex.use(location=loc)
                 p[name].value = loc
@@ -87,16 +85,15 @@ class IndirectHistory:
             p["u_camera_pos"].value = tuple(float(v) for v in camera.position)
             p["u_camera_forward"].value = tuple(float(v) for v in camera.forward)
             p["u_alpha"].value = float(alpha)
-            p["u_tolerance"].value = self.tolerance_m
+            p["u_pixel_angle"].value = math.radians(camera.fov_y_deg) / self.size[1]
             p["u_has_prev"].value = self._prev is not None
             if self._prev is not None:
                 vp, pos, fwd = self._prev
                 p["u_prev_view_proj"].write(vp.T.astype(np.float32).tobytes())
-                p["u_prev_inv_view_proj"].write(np.linalg.inv(vp).T.astype(np.float32).tobytes())
                 p["u_prev_camera_pos"].value = tuple(float(v) for v in pos)
                 p["u_prev_camera_forward"].value = tuple(float(v) for v in fwd)
             self.vao.render(vertices=3)
         self._prev = (np.asarray(view_proj, np.float64).copy(), np.asarray(camera.position, np.float64).copy(),
                       np.asarray(camera.forward, np.float64).copy())
         self._turn = 1 - self._turn
-        return BlendedIndirect(irr, gloss, 1, self.layout), full_guide
+        return BlendedIndirect(light, light, 0, self.layout)
