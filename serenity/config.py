@@ -562,7 +562,7 @@ class RenderConfig:
     indirect_scale: int = 2
     """The main view's SSAO and indirect light (sky volume, LPV) are computed at 1/scale of the
     view per axis and joint-bilaterally upsampled (1 = full resolution, the paper's)."""
-    indirect_history: float = 0.3
+    indirect_history: float = 0.2
     """With ``indirect_scale`` > 1: the weight of this frame's upsampled indirect light against the
     last frame's at the same surface point (reprojected per pixel; disocclusions take this frame's
     alone), 1 = none of the last frame's. Against the light that slid over the surfaces with the
