@@ -248,11 +248,9 @@ def main(argv=None) -> int:
         results.append(case)
         rows.append({"key": key, **case.row(), "seconds": dt})
         print(f"{key:<22} {_fmt(case.error_without):>10} -> {_fmt(case.error_with):>10}   ({dt:.0f} s)", flush=True)
-    os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
-    with open(args.json, "w") as fh:
-        json.dump({"machine": {"platform": platform.platform(), "python": sys.version.split()[0],
-                               "cpu_threads": cpu_threads()}, "quick": bool(args.quick), "cases": rows},
-                  fh, indent=1, default=float)
+    write_results(args.json, json.loads(json.dumps(
+        {"machine": {"platform": platform.platform(), "python": sys.version.split()[0], "cpu_threads": cpu_threads()},
+         "quick": bool(args.quick), "cases": rows}, default=float)))
     gallery(results, args.png)
     print(markdown(rows))
     print(f"wrote {args.json} and {args.png}")

@@ -12,6 +12,7 @@ Units: irradiance W·m⁻², radiance W·m⁻²·sr⁻¹, lengths m, angles degr
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -750,18 +751,18 @@ def horizon_scene(elevation: float):
 
 def horizon_sweep(elevations, size=(48, 27), device=None, rebuild_angle_deg: float = 0.5,
                   probes: tuple[int, int, int] | None = None, rays: int = 256) -> dict:
-    """Render ``horizon_scene`` at each elevation (one renderer, the sky volume rebuilt every step so
-    the image is converged for that sun; no LPV/SSAO) and compare the mean radiance (red) of the
-    west wall's pixels with the exact ρ/π·(E_sun·max(0, n·s) + E_sky(n)) — E_sun the model's sun
-    (:func:`~serenity.kernels.atmosphere.scene_sun_irradiance`), E_sky(n) the brute-force cosine
-    integral of a sky map baked for this step's sun (the renderer's cached map is rebaked only when
-    the sun moved more than ``rebuild_angle_deg``) and the volume's ground model. Returns per-step rows, whether every
-    image was finite, the smallest radiance, and the largest step excess (|Δours| − |Δexact|) over
-    the larger exact value of the two steps. ``probes`` / ``rays``: the sky volume's resolution
-    (None: its default) and rays per probe."""
+    """Render ``horizon_scene`` at each elevation (one renderer, the sky volume rebuilt every step so the image is
+    converged for that sun; no LPV/SSAO, no history of the indirect light) and compare the mean radiance (red)
+    of the west wall's pixels with the exact ρ/π·(E_sun·max(0, n·s) + E_sky(n)) — E_sun the model's sun
+    (:func:`~serenity.kernels.atmosphere.scene_sun_irradiance`), E_sky(n) the brute-force cosine integral of a
+    sky map baked for this step's sun (the renderer's cached map is rebaked only when the sun moved more than
+    ``rebuild_angle_deg``) and the volume's ground model. Returns per-step rows, whether every image was finite,
+    the smallest radiance, and the largest step excess (|Δours| − |Δexact|) over the larger exact value of the
+    two steps. ``probes`` / ``rays``: the sky volume's resolution (None: its default) and rays per probe."""
     scene = horizon_scene(float(elevations[0]))
     cfg = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False), sky_layers_per_frame=1 << 10,
-                       sky=SkyConfig(rebuild_angle_deg=rebuild_angle_deg, resolution=probes, rays_per_probe=rays))
+                       sky=SkyConfig(rebuild_angle_deg=rebuild_angle_deg, resolution=probes, rays_per_probe=rays),
+                       indirect_history=1.0)  # each step converged: no light carried over from the last
     r = Renderer(scene, *size, device=device, config=cfg)
     n_wall = np.array([-1.0, 0.0, 0.0])
     rows, finite, lo, ours, exact, images = [], True, np.inf, [], [], []
@@ -852,6 +853,8 @@ def sun_motion_sequence(frames: int = 60, step_deg: float = 0.05, size=(64, 36),
         cfg = RenderConfig(sky_layers_per_frame=layers, **(gi or {}),
                            sky=SkyConfig(rebuild_angle_deg=angle, resolution=probes, rays_per_probe=rays,
                                          sky_map_size=sky_map_size))
+        if label == "converged":  # nothing carried over from the last frame either
+            cfg = dataclasses.replace(cfg, indirect_history=1.0, lpv=dataclasses.replace(cfg.lpv, temporal_blend=1.0))
         r = Renderer(scene, *size, device=device, config=cfg)
         imgs, ms = [], []
         for k in range(frames + 1):
@@ -1042,8 +1045,6 @@ def frame_step(prev: np.ndarray, cur: np.ndarray, mask: np.ndarray | None = None
 def preset_config(quality: str, overrides: dict | None = None) -> RenderConfig:
     """``RenderConfig.preset(quality)`` with ``overrides``: RenderConfig fields by name, or a
     sub-config's field as "sub.field" (e.g. ``{"lpv.temporal_blend": 1.0, "shadow.stagger": False}``)."""
-    import dataclasses
-
     cfg = RenderConfig.preset(quality)
     for key, value in (overrides or {}).items():
         if "." in key:
