@@ -37,6 +37,7 @@ STEPS=(
   "lpv-room|6|$PY benchmarks/bench_lpv_room.py"
   "lpv|4|$PY benchmarks/bench_lpv.py --json $R/lpv.json"
   "stability|2|$PY benchmarks/bench_stability.py"
+  "temporal-stability|20|$PY benchmarks/bench_stability.py --temporal"
   "amortise|2|$PY benchmarks/bench_amortise.py"
   "aa|2|$PY benchmarks/bench_aa.py"
   "sky|2|$PY benchmarks/bench_sky.py --json $R/sky.json --chart $R/sky.png"

@@ -598,6 +598,22 @@ def stability(data: dict) -> str:
                "mitigation", "ms without", "ms with"], rows)
 
 
+@table("temporal-stability", "results/temporal_stability.json", "results/temporal_stability_baseline.json")
+def temporal_stability(now: dict, baseline: dict) -> str:
+    """Every preset frame to frame under a slowly moving sun and camera, without and with the mitigations."""
+    from serenity.eval.stability import temporal_stability_markdown
+
+    return temporal_stability_markdown(now, baseline)
+
+
+@table("temporal-stability-breakdown", "results/temporal_stability.json", "results/temporal_stability_baseline.json")
+def temporal_stability_breakdown(now: dict, baseline: dict) -> str:
+    """Where the sun sweep's pixel steps come from: the parts of the light and the amortisation switches."""
+    from serenity.eval.stability import temporal_breakdown_markdown
+
+    return temporal_breakdown_markdown(now, baseline)
+
+
 # ---------------------------------------------------------------------------- CUDA and the viewer
 
 
