@@ -43,6 +43,8 @@ from serenity.device import cpu_threads
 from serenity.eval import stability as S
 from serenity.io.results import write_results
 
+_fmt = S.format_error
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS = os.path.join(HERE, "results")
 TEMPORAL_JSON = os.path.join(RESULTS, "temporal_stability.json")
@@ -115,15 +117,6 @@ def gallery(results: list, path: str) -> None:
     fig.tight_layout(rect=(0.12, 0, 1, 0.985))
     fig.savefig(path, dpi=90)
     plt.close(fig)
-
-
-def _fmt(x) -> str:
-    if x is None:
-        return "-"
-    x = float(x)
-    if x == 0:
-        return "0"
-    return f"{x:.2e}" if abs(x) < 1e-3 or abs(x) >= 1e3 else f"{x:.3g}"
 
 
 def markdown(rows: list[dict]) -> str:

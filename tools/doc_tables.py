@@ -584,13 +584,7 @@ def texture_taps(data: dict) -> str:
 def stability(data: dict) -> str:
     """Every failure case beside its exact answer, its mitigation off and on."""
 
-    def fmt(x) -> str:
-        if x is None:
-            return "-"
-        x = float(x)
-        if x == 0:
-            return "0"
-        return f"{x:.2e}" if abs(x) < 1e-3 or abs(x) >= 1e3 else f"{x:.3g}"
+    from serenity.eval.stability import format_error as fmt
 
     rows = [[r["technique"], r["case"], r["metric"], fmt(r["error_without"]), fmt(r["error_with"]), r["mitigation"],
              f"{r['ms_without']:.0f}", f"{r['ms_with']:.0f}"] for r in data["cases"]]

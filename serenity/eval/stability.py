@@ -37,6 +37,18 @@ from serenity.scene import load
 from serenity.scene.model import Camera, Sky, Sun, direction_from_angles
 from serenity.scene.procedural import _Builder, plane_scene
 
+
+def format_error(x) -> str:
+    """A stability case's error as its tables print it: "-" for none, 3 significant digits, or
+    scientific notation below 1e-3 and from 1e3."""
+    if x is None:
+        return "-"
+    x = float(x)
+    if x == 0:
+        return "0"
+    return f"{x:.2e}" if abs(x) < 1e-3 or abs(x) >= 1e3 else f"{x:.3g}"
+
+
 UP = np.array([0.0, 1.0, 0.0])
 
 

@@ -21,20 +21,13 @@ uniform vec3 u_albedo;   // material albedo x its texture's mean (rsm.py)
 uniform vec3 u_sun_dir;
 uniform vec3 u_sun_irradiance;
 uniform float u_texel_area;
-#if ALPHA_MASK
-in vec2 v_uv;
-uniform sampler2D u_albedo_tex;
-uniform vec3 u_albedo_uv0, u_albedo_uv1;
-uniform float u_alpha;
-uniform float u_alpha_cutoff;
-#endif
+#include "alpha_mask.glsl"
 layout(location = 0) out vec4 o_flux;
 layout(location = 1) out vec4 o_normal;
 layout(location = 2) out vec4 o_position;
 void main() {
 #if ALPHA_MASK
-    vec2 uv = vec2(dot(u_albedo_uv0, vec3(v_uv, 1.0)), dot(u_albedo_uv1, vec3(v_uv, 1.0)));
-    if (u_alpha * texture(u_albedo_tex, uv).a < u_alpha_cutoff) discard;
+    discard_cut_out();
 #endif
     vec3 albedo = u_albedo;
     vec3 n = normalize(v_normal);

@@ -21,17 +21,10 @@ void main() {
 #endif
 
 #if defined FRAGMENT_SHADER
-#if ALPHA_MASK
-in vec2 v_uv;
-uniform sampler2D u_albedo_tex;
-uniform vec3 u_albedo_uv0, u_albedo_uv1;
-uniform float u_alpha;
-uniform float u_alpha_cutoff;
+#include "alpha_mask.glsl"
 void main() {
-    vec2 uv = vec2(dot(u_albedo_uv0, vec3(v_uv, 1.0)), dot(u_albedo_uv1, vec3(v_uv, 1.0)));
-    if (u_alpha * texture(u_albedo_tex, uv).a < u_alpha_cutoff) discard;
-}
-#else
-void main() {}
+#if ALPHA_MASK
+    discard_cut_out();
 #endif
+}
 #endif
