@@ -737,10 +737,10 @@ speed-vs-error frontier (``benchmarks/bench_frontier.py``)."""
 QUALITY_PRESETS = tuple(PRESETS)
 DEFAULT_QUALITY = "traced-probes"
 """The preset ``Renderer`` renders without a config, and ``serenity render``, ``view``, ``sweep``
-and ``bench`` use unless ``--quality`` says otherwise. On the speed-vs-error frontier it is both the
-cheapest preset and the closest to the path-traced reference in both test scenes (FLIP 0.043–0.056
-against 0.108–0.117 for the LPV presets at 320×180 and 640×360, at the same or a lower frame time;
-``benchmarks/bench_frontier.py``). The presets that keep the paper's LPV are a ``--quality`` away."""
+and ``bench`` use unless ``--quality`` says otherwise. On the speed-vs-error frontier it costs about
+what ``lpv-fast`` costs (within about 10 %) and is the closest to the path-traced reference in both
+test scenes (FLIP 0.047–0.057 against 0.104–0.114 for the LPV presets at 320×180 and 640×360;
+``benchmarks/bench_frontier.py``, ``frontier.json``). The presets that keep the paper's LPV are a ``--quality`` away."""
 
 PRESET_ALIASES = {"low": "traced-probes", "medium": "lpv-fast", "high": "lpv"}
 """Former preset names, still accepted everywhere a preset name is, with a ``PresetRenamedWarning``."""
