@@ -308,7 +308,7 @@ class Renderer:
             self.lowres = LowResIndirect(ctx, cfg.indirect_scale, cfg.lowres_tile_balance)
             self.lowres.resize(self.width, self.height)
             if cfg.indirect_history < 1.0:  # the upsampled light blended with the last frame's (raster/temporal.py)
-                self.indirect_history = IndirectHistory(ctx, cfg.indirect_scale)
+                self.indirect_history = IndirectHistory(ctx)
                 self.indirect_history.resize(self.width, self.height)
         self.sky_volume = None
         self._sky_map_version = -1
@@ -591,10 +591,11 @@ class Renderer:
         lo.use_depth(self.lowres_guide.depth)  # the texels' classes: the passes shade only theirs
         self._indirect_passes(lo, gbuf, ao, sky_gl, full_res=False)
         with self._stage("direct lighting"):  # the upsampling included (and the indirect light's history)
+            history = None
             if self.indirect_history is not None:
-                lo = self.indirect_history.render(lo, guide, gbuf, light.view_proj, self.scene.camera,
-                                                  self.config.indirect_history)
-            return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide), visibility=vis)
+                history = (self.indirect_history, self.scene.camera, self.config.indirect_history)
+            return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide), visibility=vis,
+                                             history=history)
 
     def _indirect_passes(self, target, gbuf, ao, sky_gl, full_res: bool) -> None:
         """The sky volume's and the LPV's light of the main view, added onto ``target``."""

@@ -24,6 +24,7 @@ from serenity.raster.shadow import disc_defines
 UPSAMPLE_UNIT = 16
 """First of the 3 texture units of the upsampled indirect light (units 0..15: G-buffer, shadows, sky)."""
 VISIBILITY_UNIT = UPSAMPLE_UNIT + 3
+HISTORY_UNIT = VISIBILITY_UNIT + 1  # the last frame's indirect light (raster/temporal.py)
 """Texture unit of the sparsely sampled sun visibility (``DeferredPass.render_visibility``)."""
 VISIBILITY_MODES = {"checkerboard": 1, "half": 2}
 """ShadowConfig.visibility → glsl/visibility_upsample.glsl's VIS_CHECKERBOARD / VIS_HALF ("pixel": none)."""
@@ -67,14 +68,14 @@ class DeferredPass(FullscreenPass):
         self.ctx = ctx
         self.size = None
         self._variants: dict[tuple, tuple] = {}
-        self._split = None  # (G-buffer depth texture, framebuffer of our targets + that depth)
+        self._split: dict[tuple, object] = {}  # (G-buffer depth, history target) -> our targets + those
         self._vis = None    # (mode, target texture, framebuffer, depth texture) of render_visibility
 
     def resize(self, width: int, height: int) -> None:
-        if self.size != (width, height) and self._split is not None:
-            self._split[1].release()
-            self._split = None
         if self.size != (width, height):
+            for fbo in self._split.values():
+                fbo.release()
+            self._split.clear()
             self._release_visibility()
         super().resize(width, height)
 
@@ -85,9 +86,10 @@ class DeferredPass(FullscreenPass):
                 obj.release()
             self._vis = None
 
-    def _variant(self, rt_view: bool, traced_sun: bool, contact_steps: int, upsample: bool, shadow_cfg=None,
+    def _variant(self, rt_view: bool, traced_sun: bool, contact_steps: int, upsample: int, shadow_cfg=None,
                  split: int = 0, vis_pass: int = 0, vis_upsample: int = 0, vis_step: int = 0):
-        """(program, vao) of one variant; ``split`` 1 = surfaces only, 2 = sky only; ``vis_pass``: the
+        """(program, vao) of one variant; ``upsample`` 1 = the low-res indirect light upsampled, 2 = and
+        blended with the last frame's; ``split`` 1 = surfaces only, 2 = sky only; ``vis_pass``: the
         sparsely sampled sun visibility (a ``VISIBILITY_MODES`` value) instead of the lighting;
         ``vis_upsample``: the lighting with that visibility; ``vis_step``: the visibility pass's step
         (1: guide and class, 2: the visibility) (glsl/deferred.glsl)."""
@@ -107,14 +109,18 @@ class DeferredPass(FullscreenPass):
             self._variants[key] = (program, fullscreen_vao(self.ctx, program))
         return self._variants[key]
 
-    def _split_fbo(self, depth):
-        """Our targets with the G-buffer's depth attached (read, not written), for the split draw."""
-        if self._split is None or self._split[0] is not depth:
-            if self._split is not None:
-                self._split[1].release()
-            self._split = (depth, self.ctx.framebuffer(color_attachments=[self.hdr, self.direct],
-                                                        depth_attachment=depth))
-        return self._split[1]
+    def _split_fbo(self, depth, history=None):
+        """Our targets with the G-buffer's depth attached (read, not written), for the split draw; with
+        ``history`` (a texture), that as a third target."""
+        key = (depth, history)
+        if key not in self._split:
+            if len(self._split) > 4:  # (the history alternates between two textures)
+                for fbo in self._split.values():
+                    fbo.release()
+                self._split.clear()
+            targets = [self.hdr, self.direct] + ([history] if history is not None else [])
+            self._split[key] = self.ctx.framebuffer(color_attachments=targets, depth_attachment=depth)
+        return self._split[key]
 
     def render_visibility(self, gbuffer, shadow, light: LightingInputs, mode: str):
         """The main view's sun visibility — the shadow maps' filter and the contact march, as
@@ -160,7 +166,7 @@ class DeferredPass(FullscreenPass):
         return tex
 
     def render(self, gbuffer, shadow, light: LightingInputs, ao=None, rt_view=None, sky=None,
-               upsample=None, visibility=None) -> LitImage:
+               upsample=None, visibility=None, history=None) -> LitImage:
         """Light ``gbuffer``. ``rt_view`` (an object with ``eye`` and ``ray_dir`` textures) marks a
         ray-traced G-buffer: each pixel's viewer is its ray origin, misses show the sky along the
         ray, untraced pixels are black, and SSAO is not applied. ``shadow`` None (rt views only):
@@ -168,7 +174,9 @@ class DeferredPass(FullscreenPass):
         (the frame's :class:`~serenity.raster.indirect.LowResIndirect`, already drawn, and the
         low-res guide texture): its light is upsampled and added in this pass (``glsl/upsample.glsl``).
         ``visibility`` (main view only): the texture of :meth:`render_visibility`, just drawn: the
-        sun's visibility is upsampled from it instead of computed per pixel.
+        sun's visibility is upsampled from it instead of computed per pixel. ``history`` (main view, with
+        ``upsample``): (the :class:`~serenity.raster.temporal.IndirectHistory`, the camera, its weight a):
+        the upsampled light is blended with the last frame's and written to the history's target.
         The main view is drawn in two halves over the G-buffer's depth: the sky's pixels, then the
         surfaces' (``SPLIT`` in the shader: llvmpipe shades neither half's pixels with the other's code)."""
         if shadow is None and rt_view is None:
@@ -178,11 +186,12 @@ class DeferredPass(FullscreenPass):
         shadow_cfg = None if shadow is None else light.shadow
         if main:
             vis_up = 0 if visibility is None else self._vis[0]
-            draws = [self._variant(False, False, 0, False, None, split=2),
-                     self._variant(False, False, 0 if vis_up else contact, upsample is not None,
+            up = 0 if upsample is None else (2 if history is not None else 1)
+            draws = [self._variant(False, False, 0, 0, None, split=2),
+                     self._variant(False, False, 0 if vis_up else contact, up,
                                    None if vis_up else shadow_cfg, split=1, vis_upsample=vis_up)]
         else:
-            draws = [self._variant(True, shadow is None, 0, False, shadow_cfg)]
+            draws = [self._variant(True, shadow is None, 0, 0, shadow_cfg)]
         ctx = self.ctx
         with ctx.debug_scope("deferred"):
             for i, t in enumerate((gbuffer.albedo, gbuffer.normal, gbuffer.position, gbuffer.material)):
@@ -208,19 +217,28 @@ class DeferredPass(FullscreenPass):
                 self.fbo.use()
                 draw_fullscreen(ctx, draws[0][1], rt_view.rects)
                 return LitImage(self.hdr, self.direct)
-            fbo = self._split_fbo(gbuffer.depth)
-            fbo.use()
-            fbo.depth_mask = False
+            if history is not None:
+                hist, camera, alpha = history
+                hist.begin()
+                hist.set_uniforms(draws[1][0], HISTORY_UNIT, camera, alpha)
+            # the sky's half draws into ours only; the surfaces' into the history's target too
+            fbos = (self._split_fbo(gbuffer.depth),
+                    self._split_fbo(gbuffer.depth, None if history is None else history[0].target))
             ctx.enable(moderngl.DEPTH_TEST)
             try:
-                for (_, vao), test in zip(draws, ("<=", ">"), strict=True):  # sky: depth 1; surfaces: < 1
+                for (_, vao), test, fbo in zip(draws, ("<=", ">"), fbos, strict=True):  # sky: depth 1; surfaces: < 1
+                    fbo.use()
+                    fbo.depth_mask = False
                     ctx.depth_func = test
                     finish(ctx)  # the inputs drawn before: wait with the GIL released (context.finish)
                     vao.render(vertices=3)
             finally:
                 ctx.disable(moderngl.DEPTH_TEST)
                 ctx.depth_func = "<"
-                fbo.depth_mask = True
+                for fbo in fbos:
+                    fbo.depth_mask = True
+            if history is not None:
+                history[0].end(light.view_proj, history[1])
         return LitImage(self.hdr, self.direct)
 
     def _set_uniforms(self, p, shadow, light: LightingInputs, ao, main: bool, upsample, sky, contact: int) -> None:

@@ -22,7 +22,8 @@
 //   RT_VIEW 1: a ray-traced G-buffer (else the main view);  TRACED_SUN 1 (rt views): the sun's
 //   visibility is the tracer's shadow ray, g_eye.w (else the shadow maps);  CONTACT_STEPS N > 0 (main
 //   view): the screen-space contact shadow, N march steps;  UPSAMPLE 1 (main view): add the low-res
-//   indirect light. (The shadow filter and its taps are compiled in too: shadow_sampling.glsl.)
+//   indirect light; UPSAMPLE 2: that light blended with the last frame's (indirect_history.glsl),
+//   written to o_history too. (The shadow filter and its taps are compiled in too: shadow_sampling.glsl.)
 //   VIS_PASS m > 0 (main view): not the lighting but the sun's visibility at the pixels that
 //   sampling m keeps (visibility_upsample.glsl), in two steps: VIS_STEP 1 writes each sample's guide
 //   and visibility 0, and its class as its depth; VIS_STEP 2, drawn over that depth, computes the
@@ -61,6 +62,9 @@
 #if UPSAMPLE
 #include "upsample.glsl"
 #endif
+#if UPSAMPLE == 2
+#include "indirect_history.glsl"
+#endif
 #if VIS_PASS || VIS_UPSAMPLE
 #include "visibility_upsample.glsl"
 #endif
@@ -91,6 +95,9 @@ layout(location = 0) out vec4 o_vis;  // visibility_upsample.glsl
 #else
 layout(location = 0) out vec4 o_hdr;
 layout(location = 1) out vec4 o_direct;
+#if UPSAMPLE == 2
+layout(location = 2) out vec4 o_history;  // this frame's indirect light and view depth, for the next
+#endif
 #endif
 
 vec3 sky(vec3 dir) {
@@ -223,7 +230,13 @@ void main() {
 #if !RT_VIEW
     if (u_use_ao) indirect *= texture(u_ao, v_uv).r;
 #if UPSAMPLE
-    indirect += upsampled_indirect(ivec2(gl_FragCoord.xy), dot(p - u_camera_pos, u_camera_forward), nrm.xyz, albedo);
+    float view_z = dot(p - u_camera_pos, u_camera_forward);
+    vec3 up = upsampled_indirect(ivec2(gl_FragCoord.xy), view_z, nrm.xyz, albedo);
+#if UPSAMPLE == 2
+    up = history_blend(p, n, up);
+    o_history = vec4(up, view_z);
+#endif
+    indirect += up;
 #endif
 #endif
     o_hdr = vec4(direct + indirect, 1.0);

@@ -88,13 +88,20 @@ float plane_depth(AtlasTile t, vec2 a) { return min(t.z + dot(t.grad, a - t.base
 
 // The sun's visibility from one tile (light matrix vp, plane transform, atlas slot, texel_w m per
 // texel, range m of depth); -1 where p lies outside it.
+// The receiver p (normal n) in a tile's [0,1]^3 map coordinates (light matrix vp, texel_w m per texel),
+// offset along its normal by the slope-scaled normal offset; outside_tile says whether it lies outside.
+vec3 tile_coords(mat4 vp, float texel_w, vec3 p, vec3 n, float ndl) {
+    float slope = clamp(sqrt(max(0.0, 1.0 - ndl * ndl)) / max(ndl, 0.05), 1.0, 4.0);
+    vec4 lp = vp * vec4(p + n * texel_w * u_normal_offset * slope, 1.0);
+    return lp.xyz / lp.w * 0.5 + 0.5;
+}
+
+bool outside_tile(vec3 s) { return any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0))) || s.z > 1.0; }
+
 float tile_visibility(mat4 vp, mat3 plane, int slot, float texel_w, float range, vec3 p, vec3 n, float ndl,
                       float size) {
-    float slope = clamp(sqrt(max(0.0, 1.0 - ndl * ndl)) / max(ndl, 0.05), 1.0, 4.0);
-    vec3 q = p + n * texel_w * u_normal_offset * slope;
-    vec4 lp = vp * vec4(q, 1.0);
-    vec3 s = lp.xyz / lp.w * 0.5 + 0.5;
-    if (any(lessThan(s.xy, vec2(0.0))) || any(greaterThan(s.xy, vec2(1.0))) || s.z > 1.0) return -1.0;
+    vec3 s = tile_coords(vp, texel_w, p, n, ndl);
+    if (outside_tile(s)) return -1.0;
     vec2 texel = vec2(1.0 / size);
     float phi = 6.2831853 * interleaved_gradient_noise(gl_FragCoord.xy);
     vec2 rot = vec2(cos(phi), sin(phi));
@@ -138,17 +145,16 @@ float tile_visibility(mat4 vp, mat3 plane, int slot, float texel_w, float range,
 // weight w (a staggered cascade, ShadowPass.render), that version's at a fraction w of the pixels
 // (those whose noise is below w: the expected value is the cross-fade, each pixel switches once, and
 // the parameters are chosen per pixel so that a block of pixels runs one filter, not two); 1 outside
-// the tile (and the new version where p lies outside the old one).
+// the tile (and the new version where p lies outside the old one). One filter per pixel: llvmpipe runs
+// both sides of a branch, so the old version's coverage is tested first and the filter runs once.
 float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
-    bool before = interleaved_gradient_noise(gl_FragCoord.xy + vec2(13.0, 29.0)) < u_cascade_prev_weight[c];
+    bool before = interleaved_gradient_noise(gl_FragCoord.xy + vec2(13.0, 29.0)) < u_cascade_prev_weight[c]
+                  && !outside_tile(tile_coords(u_cascade_prev_vp[c], u_cascade_prev_texel[c], p, n, ndl));
     float v = tile_visibility(before ? u_cascade_prev_vp[c] : u_cascade_vp[c],
                               before ? u_cascade_prev_plane[c] : u_cascade_plane[c],
                               int(before ? u_cascade_prev_slot[c] : u_cascade_slot[c]),
                               before ? u_cascade_prev_texel[c] : u_cascade_texel[c],
                               before ? u_cascade_prev_depth_range[c] : u_cascade_depth_range[c], p, n, ndl, size);
-    if (v < 0.0 && before)
-        v = tile_visibility(u_cascade_vp[c], u_cascade_plane[c], int(u_cascade_slot[c]), u_cascade_texel[c],
-                            u_cascade_depth_range[c], p, n, ndl, size);
     return v < 0.0 ? 1.0 : v;
 }
 

@@ -38,11 +38,8 @@ void upsampled_terms(ivec2 px, float z, vec3 n, out vec3 irr, out vec3 gloss) {
     if (wsum > 1e-6) { irr /= wsum; gloss /= wsum; } else { irr = best_irr; gloss = best_gloss; }
 }
 
-// albedo * E + G at full-resolution pixel px (view depth z, G-buffer normal n); u_scale = 0: u_irr holds
-// that already, per pixel (the indirect light's history, raster/temporal.py; the branch is uniform:
-// every pixel takes the same side)
+// albedo * E + G at full-resolution pixel px (view depth z, G-buffer normal n)
 vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
-    if (u_scale == 0) return texelFetch(u_irr, px, 0).rgb;
     vec3 irr, gloss;
     upsampled_terms(px, z, n, irr, gloss);
     return albedo * irr + gloss;
