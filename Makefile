@@ -7,7 +7,7 @@ EXTRAS ?= test,eval,view
 comma  := ,
 STAMP   = $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
 
-.PHONY: setup sysdeps render test test-all bench lint clean figures figures-quick
+.PHONY: setup sysdeps render test test-all bench lint clean figures figures-quick cycles
 
 $(BIN)/python:
 	@$(PYTHON) -m venv $(VENV) 2>/dev/null || { \
@@ -46,6 +46,17 @@ figures: setup
 
 figures-quick: setup
 	bash benchmarks/figures.sh quick
+
+# Blender Cycles, the frontier's second path tracer (serenity/eval/cycles.py): bpy pins numpy 1.x, so it
+# gets a Python of its own, .venv-cycles (bpy 5.0 needs Python 3.11); SERENITY_CYCLES_PYTHON names another.
+CYCLES_PYTHON ?= python3.11
+CYCLES_VENV   ?= .venv-cycles
+
+cycles:
+	@test -x $(CYCLES_VENV)/bin/python || $(CYCLES_PYTHON) -m venv $(CYCLES_VENV)
+	$(CYCLES_VENV)/bin/python -m pip install -q --upgrade pip
+	$(CYCLES_VENV)/bin/python -m pip install -q 'bpy==5.0.1'
+	$(CYCLES_VENV)/bin/python -c "import bpy; print('Blender', bpy.app.version_string, 'in $(CYCLES_VENV)')"
 
 clean:
 	rm -rf $(VENV) serenity_out tests/_artifacts .serenity_cache
