@@ -27,7 +27,6 @@ import argparse
 import copy
 import dataclasses
 import os
-import platform
 import sys
 import time
 
@@ -181,8 +180,7 @@ def main(argv=None) -> int:
     base = load(args.scene)
     t_start = time.perf_counter()
     out = {"benchmark": "amortise", "scene": args.scene, "quality": args.quality, "frames": args.frames,
-           "sun_deg_per_frame": 20.0 / max(1, args.frames - 1), "machine": platform.platform(),
-           "cpus": os.cpu_count(), "sizes": {}}
+           "sun_deg_per_frame": 20.0 / max(1, args.frames - 1), "sizes": {}}
     ref_frames = tuple(int(v) for v in args.reference_frames.split(",") if v.strip())
     out["ref_spp"] = args.ref_spp
     for k, size in enumerate(args.sizes.split(",")):

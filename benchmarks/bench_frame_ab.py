@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -94,7 +93,7 @@ def main(argv=None) -> int:
         for path in trees:
             subprocess.run(["git", "worktree", "remove", "--force", str(path)], cwd=ROOT, capture_output=True)
         shutil.rmtree(tmp, ignore_errors=True)
-    result = {"benchmark": "frame_ab", "machine": platform.platform(), "cpus": os.cpu_count(),
+    result = {"benchmark": "frame_ab", "cpus": os.cpu_count(),
               "quality": args.quality, "pairs": args.pairs, "revisions": held, "seconds": time.perf_counter() - t0,
               "runs": runs, "medians": {}}
     for rev in args.revs:

@@ -16,8 +16,11 @@ def write_results(path: str, results: dict) -> None:
     a script's own ``machine`` facts (a GPU's GL renderer, say) are added to the provenance's."""
     prov = provenance()
     out = {**prov, **results}
-    if isinstance(results.get("machine"), dict):  # a script's own machine facts add to the provenance's
-        out["machine"] = {**prov["machine"], **results["machine"]}
+    own = results.get("machine")
+    if isinstance(own, dict):  # a script's own machine facts add to the provenance's
+        out["machine"] = {**prov["machine"], **own}
+    elif own is not None:  # a bare description (a platform string) never replaces the provenance's facts
+        out["machine"] = {**prov["machine"], "platform": str(own)}
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w") as f:
         json.dump(out, f, indent=2)
