@@ -29,7 +29,9 @@ north, -z, is Blender's +y and east stays +x):
   roughness input into the Beckmann α, so the input is √α with α = :func:`~serenity.eval.reference.phong_alpha`.
   The diffuse colour is exported unclamped, as the reference's raw bitmap is (the built-in glass).
 - **Mirrors** ``Mix(R, surface, Glossy(roughness 0))``; **glass** ``Mix(T, surface, Glass(ior,
-  roughness 0))``; the opaque part of glass shades both sides here, the reference's one side.
+  roughness 0))`` whose surface is black on the back of a face (Cycles' Backfacing, the faces of
+  glass wound as their vertex normals point), as the reference's one-sided opaque part of glass:
+  light inside a pane is not reflected back out by it.
   **Normal maps**: a tangent-space Normal Map node reading the reference's baked bitmap (scale and
   uv frame in it) feeding every BSDF of the surface. **Cut-outs**: ``Mix(opacity, Transparent,
   surface)`` with the reference's opacity bitmap (1 where coverage reaches the cutoff).
@@ -55,7 +57,7 @@ north, -z, is Blender's +y and east stays +x):
   long before; the reference has no limit).
 
 **The runs** (``cycles_worker.py``): the scene is built once with persistent data on; per curve, one
-warm-up render at the first sample count is reported apart (``warmup_seconds``), then each count is
+warm-up render at 1 spp is reported apart (``warmup_seconds``), then each count is
 a fresh render timed by the wall clock around ``bpy.ops.render.render`` (scene sync excluded by the
 warm-up; the median of 3 renders below ``repeat_below_s``), denoised inside Cycles with its own
 albedo and normal passes for the ``+oidn`` curves. Unlike the Mitsuba peer's progressive chunks,
@@ -90,6 +92,8 @@ Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 INSTALL_HINT = f"run `make cycles` or set {ENV_VAR} to a Python that has bpy"
 SEED_BASE = 2**20
 """Cycles seed of the render at n spp: SEED_BASE + n (the warm-up: SEED_BASE - 1)."""
+
+_AUTO = object()
 
 
 class CyclesUnavailableError(SerenityError):
@@ -248,17 +252,27 @@ def _material(k: int, m, arrays: dict) -> dict:
     return spec
 
 
-def export_scene(scene, width: int, height: int, sky=None) -> tuple[dict, dict]:
+def _wound_as_normals(pos, nrm, faces) -> np.ndarray:
+    """``faces`` with the corners of each triangle whose winding opposes its vertex normals swapped."""
+    p = np.asarray(pos, np.float64)[faces]
+    flip = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), nrm[faces].sum(axis=1)) < 0
+    out = np.array(faces, copy=True)
+    out[flip] = out[flip][:, [0, 2, 1]]
+    return out
+
+
+def export_scene(scene, width: int, height: int, sky=_AUTO) -> tuple[dict, dict]:
     """(description, arrays) of ``scene`` for the worker (module doc): the description is JSON-able,
-    the arrays go into an ``.npz``. ``sky``: the reference's map (default: :func:`sky_map` of the
-    scene with the renderer's sun, as the Mitsuba peer uses). The sun is the renderer's
+    the arrays go into an ``.npz``. ``sky``: an equirect map in the reference's layout, or None for
+    a black sky (default: :func:`~serenity.eval.reference.sky_map` of the scene with the renderer's
+    sun, as the Mitsuba peer uses). The sun is the renderer's
     (:func:`~serenity.eval.reference.with_effective_sun`)."""
     from serenity.config import check_image_size
     from serenity.eval.reference import _meshes_by_material, sky_map, with_effective_sun
 
     check_image_size(width, height)
     scene = with_effective_sun(scene)
-    if sky is None:
+    if sky is _AUTO:
         sky = sky_map(scene)
     arrays: dict = {}
     materials, meshes = [], []
@@ -272,6 +286,8 @@ def export_scene(scene, width: int, height: int, sky=None) -> tuple[dict, dict]:
         prefix = f"mesh{len(meshes)}_"
         arrays[prefix + "positions"] = to_blender(pos).astype(np.float32)
         arrays[prefix + "normals"] = to_blender(nrm).astype(np.float32)
+        if m.transparency > 0.0:  # Cycles tells the back of a face by its winding, the reference by its normals
+            faces = _wound_as_normals(pos, nrm, faces)
         arrays[prefix + "faces"] = np.asarray(faces, np.int32)
         arrays[prefix + "uv"] = np.asarray(uv, np.float32)
         layers = ["uv"]
@@ -306,12 +322,13 @@ class CyclesPeer:
     """Blender Cycles on a Scene, timed: :meth:`curves` renders every sample count for each curve of
     :data:`CURVES` in one worker run (the scene is built and synced once).
 
-    The scene is exported on construction (not timed, like the Mitsuba peer's load);
-    ``python``: the interpreter with bpy (default :func:`interpreter`, checked: a missing one raises
+    The scene is exported on construction (not timed, like the Mitsuba peer's load; ``sky`` as
+    :func:`export_scene`'s); ``max_bounces``: of every kind (0: direct light only); ``python``: the
+    interpreter with bpy (default :func:`interpreter`, checked: a missing one raises
     :class:`CyclesUnavailableError`). ``last_run`` holds the worker's report of the latest run
     (Blender version, threads, build and warm-up seconds, the denoiser's quality)."""
 
-    def __init__(self, scene, width: int, height: int, *, python: str | None = None, sky=None,
+    def __init__(self, scene, width: int, height: int, *, python: str | None = None, sky=_AUTO,
                  max_bounces: int = MAX_BOUNCES, timeout_s: float = 3600.0):
         if python is None:
             python = require()

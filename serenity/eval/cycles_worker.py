@@ -14,8 +14,8 @@ standard library, never ``serenity``. ``JOB_DIR`` holds what the host wrote:
 
 The scene is built once, with persistent data on, so that only the first render of a mode pays
 Cycles' scene sync. Per mode (no denoiser, or Cycles' own Open Image Denoise with the FAST or the
-ACCURATE prefilter, albedo and normal guides from Cycles' own passes), one warm-up render at the
-first sample count is timed and reported on its own, then each sample count is a fresh render timed
+ACCURATE prefilter, albedo and normal guides from Cycles' own passes), one warm-up render at
+1 spp is timed and reported on its own, then each sample count is a fresh render timed
 by the wall clock around ``bpy.ops.render.render`` (the median of 3 when one takes less than the
 repeat threshold; the image is the first's). Written back to ``JOB_DIR``: ``result.json`` (times,
 versions, threads) and ``images.npz`` (``"<mode>_<spp>"``: (H, W, 3) float32 linear radiance, row
@@ -135,6 +135,10 @@ def build_material(spec: dict, images: dict):
     else:
         surface = mix(ks, diffuse(), glossy(spec["roughness"]))
     if spec["glass"] > 0.0:
+        # the reference's opaque part of glass is one-sided: black seen from behind (from inside a pane)
+        black = nodes.new("ShaderNodeBsdfDiffuse")
+        black.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        surface = mix(nodes.new("ShaderNodeNewGeometry").outputs["Backfacing"], surface, black)
         glass = bsdf("ShaderNodeBsdfGlass", distribution="GGX")
         glass.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         glass.inputs["Roughness"].default_value = 0.0
@@ -283,7 +287,12 @@ def read_result(scene, path: str) -> np.ndarray:
 
 
 def render(scene) -> float:
+    """Wall seconds of one render. With persistent data, a render whose scene nothing has tagged as
+    changed hands back the last result (the sample count and the seed set from Python do not tag
+    it), so the scene is tagged first: its settings are synced again, not its objects."""
     t0 = time.perf_counter()
+    scene.update_tag()
+    bpy.context.view_layer.update()
     bpy.ops.render.render(write_still=False)
     return time.perf_counter() - t0
 
@@ -304,7 +313,7 @@ def main(job_dir: str) -> int:
         c.use_denoising = prefilter is not None
         if prefilter is not None:
             c.denoising_prefilter = prefilter
-        c.samples = int(job["spp"][0])
+        c.samples = 1
         c.seed = int(job["seed"]) - 1
         warmup[mode] = render(scene)
         seconds[mode] = []
