@@ -4,6 +4,7 @@
     python benchmarks/bench_frontier.py --quick              # smoke run: courtyard 160x90, few spp
     python benchmarks/bench_frontier.py --scenes cornell --sizes 320x180
     python benchmarks/bench_frontier.py --references-only    # render and cache the references first
+    python benchmarks/bench_frontier.py --peers mitsuba      # without the Cycles peer
 
 For each scene and size, all in one process on one machine:
 
@@ -24,7 +25,13 @@ For each scene and size, all in one process on one machine:
   time, or "dominated" when its 1-spp image is already at least as good as ours; the same at equal
   relMSE. ``serenity.eval.frontier.combine`` takes the fastest of the curves: the denoised ones
   and the raw one (which at times reaches a noisy scene's error sooner: the Cornell box's 1-spp
-  image can be as good as ours by FLIP); "denoised_only" in the JSON leaves the raw curve out.
+  image can be as good as ours by FLIP); "denoised_only" in the JSON leaves the raw curves out;
+- the second peer, Blender Cycles (``serenity.eval.cycles``, ``--peers``; by default wherever its
+  interpreter exists, ``make cycles``): each spp a fresh render of a scene built and synced once
+  (persistent data, one warm-up render per curve reported apart), raw ("cycles") and denoised by
+  Cycles' own OIDN with its albedo and normal passes, FAST and ACCURATE prefilter
+  ("cycles+oidn-fast", "cycles+oidn-accurate"; the time includes the denoiser). Its curves sit
+  beside Mitsuba's in each case's "peer", and the speed-ups take the fastest curve of both peers.
 
 Metrics as in ``serenity.eval.metrics``: FLIP on the tone-mapped images (our exposure, Reinhard,
 sRGB), relMSE (ε = 1e-2) on linear HDR, all pixels ("rel_mse") and without the worst 0.1% of the
@@ -49,6 +56,9 @@ SIZES = ("320x180", "640x360")
 SPP = (1, 2, 4, 8, 16, 32, 64)
 REF_SPP = 1024
 OIDN_QUALITIES = ("balanced", "high")
+PEERS = ("mitsuba", "cycles")
+RAW_CURVES = ("raw", "cycles")
+"""The peers' curves without a denoiser (left out of "denoised_only")."""
 QUICK = dict(scenes=("courtyard",), sizes=("160x90",), spp=(1, 4, 16), ref_spp=64, frames=3, warmup=2)
 GUIDE_SUPERSAMPLE = 2
 TRIM = 1e-3
@@ -112,8 +122,7 @@ def guides(scene, width, height, config):
 
 def run_case(scene, width, height, args, bar) -> dict:
     """Everything measured for one scene and size (one entry of the JSON's "cases")."""
-    from serenity.eval.denoise import denoise
-    from serenity.eval.frontier import PathTracerPeer, combine, equal_error_speedup, timed
+    from serenity.eval.frontier import combine, equal_error_speedup
     from serenity.eval.metrics import compare, rel_mse
     from serenity.eval.reference import render_reference
     from serenity.frame import Renderer
@@ -147,6 +156,52 @@ def run_case(scene, width, height, args, bar) -> dict:
         ours.append({"name": cname, "wall_ms_before": walls, **metrics(r.render(read_back=("hdr",)).hdr)})
         bar.update(1)
 
+    curves: dict[str, list[dict]] = {}
+    if "mitsuba" in args.peers:
+        curves.update(mitsuba_curves(scene, width, height, args, bar, metrics, configs, tag))
+    cycles_run = None
+    if "cycles" in args.peers:
+        from serenity.eval.cycles import CyclesPeer
+
+        bar.set_description(f"{tag}: Cycles {args.spp[0]}-{args.spp[-1]} spp")
+        cpeer = CyclesPeer(scene, width, height)
+        for curve, pts in cpeer.curves(args.spp, repeat_below_s=TIMING_REPEATS_BELOW_S).items():
+            curves[curve] = [{"spp": spp, "ms": s * 1e3, **metrics(img)} for spp, img, s in pts]
+        cycles_run = cpeer.last_run
+        bar.update(1)
+
+    bar.set_description(f"{tag}: ours again")
+    for o in ours:
+        o["wall_ms_after"] = timed_frames(renderers[o["name"]], args.frames)
+        renderers.pop(o["name"]).close()
+        o["ms"] = float(np.median(o["wall_ms_before"] + o["wall_ms_after"]))
+
+    speedups = {}
+    denoised = [q for q in curves if q not in RAW_CURVES]
+    for metric in SPEEDUP_METRICS:
+        per_config = {}
+        for o in ours:
+            per_curve = {q: equal_error_speedup([(p["ms"], p[metric]) for p in pts], o["ms"], o[metric])
+                         for q, pts in curves.items()}
+            # the headline: the peers' fastest way to our error, raw or denoised (raw only ever makes it
+            # faster); "denoised_only" keeps the denoised curves alone
+            per_config[o["name"]] = {**combine(per_curve),
+                                     "denoised_only": combine({q: per_curve[q] for q in denoised}),
+                                     "per_curve": per_curve}
+        speedups[metric] = per_config
+    case = {"scene": name, "size": [width, height], "reference": {"spp": args.ref_spp, "seconds": ref_s,
+                                                                  "cached": bool(info.get("cached"))},
+            "ours": ours, "peer": curves, "equal_error": speedups}
+    if cycles_run is not None:
+        case["cycles"] = cycles_run
+    return case
+
+
+def mitsuba_curves(scene, width, height, args, bar, metrics, configs, tag) -> dict[str, list[dict]]:
+    """Mitsuba's curves, raw and + OIDN at each quality, for one case (points: spp, ms, errors)."""
+    from serenity.eval.denoise import denoise
+    from serenity.eval.frontier import PathTracerPeer, timed
+
     bar.set_description(f"{tag}: guides")
     albedo, normal = guides(scene, width, height, next(iter(configs.values())))
     for q in args.oidn:  # OIDN's first call per size and quality builds its filter: not timed
@@ -164,28 +219,20 @@ def run_case(scene, width, height, args, bar) -> dict:
         bar.update(1)
         if k + 1 < len(args.spp):
             bar.set_description(f"{tag}: Mitsuba {args.spp[k + 1]} spp")
+    return curves
 
-    bar.set_description(f"{tag}: ours again")
-    for o in ours:
-        o["wall_ms_after"] = timed_frames(renderers[o["name"]], args.frames)
-        renderers.pop(o["name"]).close()
-        o["ms"] = float(np.median(o["wall_ms_before"] + o["wall_ms_after"]))
 
-    speedups = {}
-    for metric in SPEEDUP_METRICS:
-        per_config = {}
-        for o in ours:
-            per_curve = {q: equal_error_speedup([(p["ms"], p[metric]) for p in pts], o["ms"], o[metric])
-                         for q, pts in curves.items()}
-            # the headline: the peer's fastest way to our error, raw or denoised (raw only ever makes it
-            # faster); "denoised_only" keeps the denoised curves alone
-            per_config[o["name"]] = {**combine(per_curve),
-                                     "denoised_only": combine({q: per_curve[q] for q in args.oidn}),
-                                     "per_curve": per_curve}
-        speedups[metric] = per_config
-    return {"scene": name, "size": [width, height], "reference": {"spp": args.ref_spp, "seconds": ref_s,
-                                                                   "cached": bool(info.get("cached"))},
-            "ours": ours, "peer": curves, "equal_error": speedups}
+def cycles_info(args) -> dict:
+    """The Cycles peer's settings, for the JSON (each case's "cycles" adds its run: version, threads, warm-ups)."""
+    from serenity.eval.cycles import CURVES, MAX_BOUNCES, interpreter
+
+    return {"renderer": "Blender Cycles (bpy), CPU, all threads, persistent data, box filter, no adaptive sampling, "
+                        f"no clamping, {MAX_BOUNCES} bounces",
+            "interpreter": str(interpreter()), "curves": dict(CURVES), "spp": args.spp,
+            "denoiser": "Cycles' own Open Image Denoise, albedo + normal passes of Cycles, prefilter FAST or ACCURATE",
+            "time": "each spp a fresh render of the synced scene (one warm-up render per curve first, reported in "
+                    "each case's cycles.warmup_seconds): the wall time around bpy.ops.render.render, denoiser "
+                    f"included; renders under {TIMING_REPEATS_BELOW_S:g} s timed 3 times, median"}
 
 
 def headline(case: dict, metric: str = "flip") -> tuple[str, dict]:
@@ -204,7 +251,8 @@ def summarise(cases: list[dict], goal: float) -> list[dict]:
         for metric in SPEEDUP_METRICS:
             name, r = headline(c, metric)
             row[metric] = {"config": name, "status": r["status"], "speedup": r["speedup"], "bound": r["bound"],
-                           "peer_ms": r["peer_ms"], "curve": r["curve"], "reads": describe(r),
+                           "peer_ms": r["peer_ms"], "curve": r["curve"],
+                           "peer": "cycles" if r["curve"].startswith("cycles") else "mitsuba", "reads": describe(r),
                            "goal_met": goal_met(r, goal)}
         out.append(row)
     return out
@@ -218,6 +266,9 @@ def main(argv=None) -> int:
     p.add_argument("--sizes", type=csv, help=f"comma-separated WxH (default: {','.join(SIZES)})")
     p.add_argument("--spp", type=lambda t: [int(x) for x in csv(t)], help="peer spp list (default 1,2,4,...,64)")
     p.add_argument("--ref-spp", type=int, help=f"reference spp (default {REF_SPP})")
+    p.add_argument("--peers", type=csv,
+                   help=f"comma-separated among {','.join(PEERS)} (default: both where Cycles' interpreter exists, "
+                        "else mitsuba)")
     p.add_argument("--oidn", type=csv, default=list(OIDN_QUALITIES),
                    help=f"OIDN qualities of the denoised curves (default {','.join(OIDN_QUALITIES)})")
     p.add_argument("--frames", type=int, help="our timed frames (default 5)")
@@ -254,6 +305,16 @@ def main(argv=None) -> int:
             raise SerenityError(f"--oidn: qualities must be among {', '.join(QUALITIES)}, got {args.oidn}")
         if args.frames < 1 or args.warmup < 0 or args.ref_spp < 1:
             raise SerenityError("--frames must be >= 1, --warmup >= 0 and --ref-spp >= 1")
+        from serenity.eval import cycles
+
+        if args.peers is None:
+            args.peers = list(PEERS) if cycles.available() else ["mitsuba"]
+            if "cycles" not in args.peers and not args.references_only:
+                print(f"{cycles.unavailable_reason()}; measuring Mitsuba alone", file=sys.stderr)
+        elif not args.peers or any(x not in PEERS for x in args.peers):
+            raise SerenityError(f"--peers: must be among {', '.join(PEERS)}, got {args.peers}")
+        elif "cycles" in args.peers and not args.references_only:
+            cycles.require()
 
         from serenity.scene import load
 
@@ -272,7 +333,9 @@ def main(argv=None) -> int:
                           f"{'cached' if info.get('cached') else 'rendered'} in {time.perf_counter() - t0:.0f} s")
             return 0
         n_cfg = len(our_configs())
-        total = len(args.scenes) * len(sizes) * (1 + n_cfg + len(args.spp))  # reference, ours, each spp
+        # reference, ours, each Mitsuba spp, the Cycles run
+        steps = 1 + n_cfg + ("mitsuba" in args.peers) * len(args.spp) + ("cycles" in args.peers)
+        total = len(args.scenes) * len(sizes) * steps
         cases = []
         with tqdm(total=total, unit="step", disable=args.no_progress) as bar:
             for name in args.scenes:
@@ -306,6 +369,8 @@ def main(argv=None) -> int:
                          f"calls under {TIMING_REPEATS_BELOW_S:g} s timed 3 times, median",
                  "guides": f"albedo + normal from our G-buffer at {GUIDE_SUPERSAMPLE}x the size, box-filtered down; "
                            "albedo 1 on the sky and where we trace rays; cleanAux"},
+        "peers": args.peers,
+        **({"cycles": cycles_info(args)} if "cycles" in args.peers else {}),
         "ours": {"configs": list(our_configs()), "presets": {k: PRESETS[k] for k in our_configs()},
                  "sync_stages": "cpu", "frames": args.frames, "warmup": args.warmup,
                  "time": "median wall time of Renderer.render(read_back=False) + GL finish, static camera and "
@@ -334,7 +399,8 @@ def main(argv=None) -> int:
     save_frontier_chart(panels, args.png, GOAL_SPEEDUP,
                         metrics=(("flip", "FLIP"), ("rel_mse_trimmed", "relMSE, worst 0.1% of pixels left out")))
     for s in summary:
-        print(f"{s['scene']} {s['size']}: equal-FLIP {describe(s['flip'])} ({s['flip']['config']}), "
+        print(f"{s['scene']} {s['size']}: equal-FLIP {describe(s['flip'])} ({s['flip']['config']}; the "
+              f"peers' fastest curve: {s['flip']['curve']}), "
               f"equal-relMSE (trimmed) {describe(s['rel_mse_trimmed'])}; goal >= {GOAL_SPEEDUP:g}x "
               f"{'met' if s['flip']['goal_met'] else 'not met'}")
     print(f"{elapsed:.0f} s; wrote {args.json} and {args.png}")

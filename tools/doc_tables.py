@@ -139,8 +139,9 @@ def _frontier_goal_met(r: dict, goal: float) -> bool:
 
 
 def _curve(name: str) -> str:
-    """A peer curve's name: "raw" (Mitsuba alone) or an OIDN quality (Mitsuba + the denoiser)."""
-    return name if name == "raw" else f"+ OIDN {name}"
+    """A peer curve's name: "raw" (Mitsuba alone), an OIDN quality (Mitsuba + the denoiser) or a Cycles curve
+    ("cycles", "cycles+oidn-fast", "cycles+oidn-accurate": serenity.eval.cycles.CURVES), as it is."""
+    return name if name == "raw" or name.startswith("cycles") else f"+ OIDN {name}"
 
 
 @table("frontier-summary", "results/frontier.json")

@@ -214,12 +214,17 @@ _PEER_STYLE = {
     "fast": dict(color="tab:green", marker="v", ls="-"),
     "balanced": dict(color="tab:blue", marker="s", ls="-"),
     "high": dict(color="tab:purple", marker="D", ls="-"),
+    "cycles": dict(color="0.2", marker="o", ls=":"),
+    "cycles+oidn-fast": dict(color="tab:orange", marker="v", ls="-."),
+    "cycles+oidn-accurate": dict(color="tab:olive", marker="s", ls="-."),
 }
 _OUR_MARKERS = ("*", "P", "X", "h", "p", "d")
 REACH_LABEL = "fastest peer point at our error or better (dotted: from ours)"
 
 
 def _peer_label(curve: str) -> str:
+    if curve.startswith("cycles"):  # serenity.eval.cycles.CURVES
+        return "Cycles raw" if curve == "cycles" else f"Cycles + its OIDN ({curve.rsplit('-', 1)[-1]} prefilter)"
     return "Mitsuba raw" if curve == "raw" else f"Mitsuba + OIDN ({curve})"
 
 

@@ -281,3 +281,24 @@ def test_cornell_matches_mitsuba_and_oidn_lowers_the_error(tmp_path, monkeypatch
     for curve in ("cycles+oidn-fast", "cycles+oidn-accurate"):
         (spp, den4, _), _ = curves[curve]
         assert spp == 4 and flip(den4, good) < raw_err
+
+
+def _bench_frontier():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_frontier.py"
+    spec = importlib.util.spec_from_file_location("bench_frontier", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_bench_frontier_peers_are_checked_before_any_work(tmp_path, monkeypatch, capsys):
+    bench = _bench_frontier()
+    assert bench.main(["--quick", "--peers", "mitsuba,luxcore"]) == 2
+    assert "--peers" in capsys.readouterr().err
+    monkeypatch.setenv(cycles.ENV_VAR, str(tmp_path / "no-python"))
+    assert bench.main(["--quick", "--peers", "cycles"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "make cycles" in err
