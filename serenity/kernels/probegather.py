@@ -28,9 +28,11 @@ stopping on the glass as if it were an opaque diffuse wall.
 Surfels: the rays' hit points quantised to cubes of ``gather_surfel_size`` metres and the dominant
 axis of their normal (so the two faces of a thin wall are two surfels), each with the mean position,
 normal and albedo (the tracer's ray-cone-filtered texture × material albedo) of its hits. V_s is one
-shadow ray towards the sun's centre through the kd-tree, from a point of the surfel's square fixed
-per surfel (``shadow_ray_offsets``: from the centres, which lie on a grid, a straight shadow edge
-flipped a whole row at once), re-traced when the sky map is rebaked (the sun moved). Rays that hit a
+shadow ray towards the sun's centre through the kd-tree, from one of the surfel's own hits, the one
+nearest a point of its square fixed per surfel (``shadow_origins``: from the centres, which lie
+on a grid, a straight shadow edge flipped a whole row at once; from the square's point itself, a
+surfel at a corner or an edge started its ray inside the wall beside it or beyond the edge), re-traced
+when the sky map is rebaked (the sun moved). Rays that hit a
 back face (the probe sits inside or under geometry) mark the probe: a probe with more than
 ``BACKFACE_LIMIT`` of its rays on back faces is moved by up to half a cell to a free spot (DDGI's
 probe relocation, Majercik et al. 2019); its texel stays on the grid. Directions: ``DIRECTION_SETS``
@@ -75,7 +77,13 @@ _INV_PI = wp.constant(1.0 / math.pi)
 
 
 #: bump when the traced data or its cached layout changes
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
+SURFEL_SHADOW_SPREAD = 0.5
+"""Where in its square a surfel's shadow ray may start (``shadow_origins``), as a fraction of the
+square's side around its mean position: far enough apart that a straight shadow edge crosses a row of
+surfels one at a time, near enough the mean that the one ray stands for the surfel (FLIP of
+``traced-probes`` at 320×180: the full square 0.0571 courtyard / 0.0433 Cornell box, half 0.0565 /
+0.0430, the mean itself 0.0560 / 0.0426)."""
 #: traces of at least this many rays are cached on disk (``cache_dir()/probegather-<key>.npz``)
 CACHE_MIN_RAYS = 1_000_000
 #: rays the probes' trace hands the tracer per call (its G-buffer for those rays is the memory peak)
@@ -368,6 +376,24 @@ def shadow_ray_offsets(normals: np.ndarray, size: float) -> np.ndarray:
     return uv[:, :1] * t1 + uv[:, 1:] * t2
 
 
+def shadow_origins(positions: np.ndarray, surfel: np.ndarray, means: np.ndarray, normals: np.ndarray,
+                   size: float) -> np.ndarray:
+    """(S, 3) float64: where each surfel's shadow ray starts: of the hits ``positions`` (N, 3) that
+    make surfel ``surfel`` (N,), the one nearest the surfel's point (``means`` + ``SURFEL_SHADOW_SPREAD``
+    × :func:`shadow_ray_offsets`). A hit lies on the surface, where a point of the square may not: at
+    a corner or an edge it lies inside the wall beside the surfel or beyond the edge."""
+    pos = np.asarray(positions, np.float64).reshape(-1, 3)
+    inv = np.asarray(surfel, np.int64).reshape(-1)
+    means = np.asarray(means, np.float64)
+    target = means + SURFEL_SHADOW_SPREAD * shadow_ray_offsets(normals, size)
+    d2 = np.einsum("ij,ij->i", pos - target[inv], pos - target[inv])
+    order = np.lexsort((d2, inv))  # by surfel, nearest first
+    first = order[np.r_[True, inv[order][1:] != inv[order][:-1]]] if len(order) else order
+    out = means.copy()
+    out[inv[first]] = pos[first]
+    return out
+
+
 def visibility_atlas(moments: np.ndarray, resolution) -> np.ndarray:
     """The probes' depth moments ((P, VIS_OCT², 2), storage order z, y, x) as one (Z·T, Y, X·T, 2)
     float32 array (T = VIS_TILE): probe (x, y, z)'s tile at [z·T : z·T + T, y, x·T : x·T + T], its map
@@ -555,7 +581,8 @@ class ProbeGather:
 
     # -- the disk cache
 
-    _CACHED = ("surfel", "surfel_positions", "surfel_normals", "surfel_albedo", "moments", "offsets")
+    _CACHED = ("surfel", "surfel_positions", "surfel_normals", "surfel_albedo", "surfel_shadow_origins", "moments",
+               "offsets")
 
     def _key(self, scene_key: str, positions, cell, surfel_size) -> str:
         h = hashlib.blake2b(digest_size=20)
@@ -572,7 +599,8 @@ class ProbeGather:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
             np.savez(tmp, surfel=self._surfel.numpy(), surfel_positions=self.surfel_positions,
-                     surfel_normals=self.surfel_normals, surfel_albedo=self.surfel_albedo, moments=self.moments,
+                     surfel_normals=self.surfel_normals, surfel_albedo=self.surfel_albedo,
+                     surfel_shadow_origins=self.surfel_shadow_origins, moments=self.moments,
                      offsets=self.offsets,
                      meta=np.array([FORMAT_VERSION, self.relocated, self.inside], np.int64))
             os.replace(tmp, path)
@@ -592,11 +620,13 @@ class ProbeGather:
         m = len(a["surfel_positions"])
         if (len(meta) != 3 or meta[0] != FORMAT_VERSION or a["surfel"].shape != (n_probes, self.rays)
                 or a["surfel"].max(initial=-1) >= m or a["moments"].shape != (n_probes, VIS_OCT * VIS_OCT, 2)
-                or a["offsets"].shape != (n_probes, 3)):
+                or a["offsets"].shape != (n_probes, 3)
+                or a["surfel_shadow_origins"].shape != (m, 3)):
             return False
         self.relocated, self.inside = int(meta[1]), int(meta[2])
         self.moments, self.offsets = a["moments"], a["offsets"]
-        self._set_surfels(a["surfel"], a["surfel_positions"], a["surfel_normals"], a["surfel_albedo"])
+        self._set_surfels(a["surfel"], a["surfel_positions"], a["surfel_normals"], a["surfel_albedo"],
+                          a["surfel_shadow_origins"])
         return True
 
     def _backface_fraction(self, origins: np.ndarray, sets: np.ndarray) -> np.ndarray:
@@ -632,23 +662,23 @@ class ProbeGather:
         surfel = np.full(len(hit), -1, np.int32)
         surfel[idx] = inv.astype(np.int32)
         surfel[hits["back"]] = -2  # a back face: no light (a probe kept inside geometry)
-        self._set_surfels(surfel.reshape(-1, self.rays), sp, sn, sa)
+        self._set_surfels(surfel.reshape(-1, self.rays), sp, sn, sa, shadow_origins(pos, inv, sp, sn, size))
 
-    def _set_surfels(self, surfel, sp, sn, sa) -> None:
+    def _set_surfels(self, surfel, sp, sn, sa, sv) -> None:
         """The surfel each ray hit ((P, R) int32: ≥ 0, −1 a miss, −2 a back face) and the surfels'
-        mean positions, normals and albedo ((S, 3) each)."""
+        mean positions, normals and albedo and their shadow rays' origins ((S, 3) each)."""
         self.surfel_count = len(sp)
         self.surfel_positions, self.surfel_normals, self.surfel_albedo = sp, sn, sa
+        self.surfel_shadow_origins = np.asarray(sv, np.float64)
         dev = self.device
         self._surfel = wp.array(np.ascontiguousarray(surfel, np.int32), dtype=wp.int32, device=dev)
         self._sp = wp.array(sp.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sn = wp.array(sn.astype(np.float32), dtype=wp.vec3, device=dev)
         self._sa = wp.array(sa.astype(np.float32), dtype=wp.vec3, device=dev)
-        self._vis_offsets = shadow_ray_offsets(sn, self.surfel_size)
 
     def update_visibility(self, sun_direction, parts: int = 1) -> None:
-        """V_s towards a new sun: one shadow ray per surfel (from just off the surfel, at its own point
-        of the surfel's square: ``shadow_ray_offsets``), all of them
+        """V_s towards a new sun: one shadow ray per surfel (from just off the surfel, at its own hit
+        nearest its point of the surfel's square: ``shadow_origins``), all of them
         now (``parts`` = 1) or in ``parts`` slices, the first now and one per :meth:`refresh_visibility`
         (the slices continue the cycle where it stood: under a sun that moves every frame each surfel
         is re-traced once every ``parts`` frames, against the newest sun)."""
@@ -670,8 +700,7 @@ class ProbeGather:
         b = min(m, a + n)
         sun = self._vis_sun
         eps = self.tracer.ray_epsilon
-        o = (self.surfel_positions[a:b] + self._vis_offsets[a:b] + self.surfel_normals[a:b] * (4 * eps))
-        o = o.astype(np.float32)
+        o = (self.surfel_shadow_origins[a:b] + self.surfel_normals[a:b] * (4 * eps)).astype(np.float32)
         d = np.broadcast_to(sun.astype(np.float32), o.shape)
         occ = self.tracer.tree.occluded(o, d, tmin=eps)
         self._visible_host[a:b] = (~occ).astype(np.float32) * (self.surfel_normals[a:b] @ sun > 0)
