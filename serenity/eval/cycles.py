@@ -59,7 +59,8 @@ north, -z, is Blender's +y and east stays +x):
 **The runs** (``cycles_worker.py``): the scene is built once with persistent data on; per curve, one
 warm-up render at 1 spp is reported apart (``warmup_seconds``), then each count is
 a fresh render timed by the wall clock around ``bpy.ops.render.render`` (scene sync excluded by the
-warm-up; the median of 3 renders below ``repeat_below_s``), denoised inside Cycles with its own
+warm-up; the median of 3 renders below ``repeat_below_s``; the scene is tagged as changed before
+each, as persistent data hands back the last result otherwise), denoised inside Cycles with its own
 albedo and normal passes for the ``+oidn`` curves. Unlike the Mitsuba peer's progressive chunks,
 each count is rendered from scratch: 1…64 spp costs the sum of all counts' renders to measure, but
 each point's time is what one frame at that count costs.
@@ -78,7 +79,9 @@ from pathlib import Path
 
 import numpy as np
 
+from serenity.config import check_image_size
 from serenity.errors import SerenityError
+from serenity.eval.reference import _meshes_by_material, phong_alpha, sky_map, with_effective_sun
 from serenity.scene.model import IDENTITY_UV, apply_uv_transform, normal_map_frame
 
 ENV_VAR = "SERENITY_CYCLES_PYTHON"
@@ -220,8 +223,6 @@ def _rgba(img) -> np.ndarray:
 
 def _material(k: int, m, arrays: dict) -> dict:
     """A material's description for the worker (module doc); its images go into ``arrays``."""
-    from serenity.eval.reference import phong_alpha
-
     ks = float(m.specular)
     spec: dict = {"name": f"m{k}_{m.name}", "ks": ks, "roughness": math.sqrt(phong_alpha(m.shininess)),
                   "mirror": float(m.reflectivity), "glass": float(m.transparency), "ior": float(m.ior),
@@ -267,9 +268,6 @@ def export_scene(scene, width: int, height: int, sky=_AUTO) -> tuple[dict, dict]
     a black sky (default: :func:`~serenity.eval.reference.sky_map` of the scene with the renderer's
     sun, as the Mitsuba peer uses). The sun is the renderer's
     (:func:`~serenity.eval.reference.with_effective_sun`)."""
-    from serenity.config import check_image_size
-    from serenity.eval.reference import _meshes_by_material, sky_map, with_effective_sun
-
     check_image_size(width, height)
     scene = with_effective_sun(scene)
     if sky is _AUTO:
