@@ -39,12 +39,13 @@ lint: setup
 
 # Every headline result JSON in benchmarks/results, its charts, then every table in README.md and
 # docs/*.md, one job after another (timings must not share the cores): about an hour on 2 cores from a
-# fresh clone. figures-quick re-measures the timings only (frame, kd-tree, frontier, quick start).
+# fresh clone, the frontier's two peers (Mitsuba and Cycles) included. figures-quick re-measures the
+# timings only (frame, kd-tree, frontier, quick start).
 # See benchmarks/README.md; `bash benchmarks/figures.sh list` names the steps.
-figures: setup
+figures: setup cycles
 	bash benchmarks/figures.sh all
 
-figures-quick: setup
+figures-quick: setup cycles
 	bash benchmarks/figures.sh quick
 
 # Blender Cycles, the frontier's second path tracer (serenity/eval/cycles.py): bpy pins numpy 1.x, so it

@@ -5,7 +5,7 @@
 # Run from the repository's root after `make setup` (`make figures` / `make figures-quick` do both),
 # on a quiet machine: every figure that a machine moves is a timing.
 #
-#   bash benchmarks/figures.sh            # everything (about an hour from a fresh clone on 2 cores)
+#   bash benchmarks/figures.sh            # everything (about 50 minutes on 2 cores, references cached)
 #   bash benchmarks/figures.sh quick      # the timings only: frame, kd-tree, frontier, quick start
 #   bash benchmarks/figures.sh STEP ...   # the named steps (bash benchmarks/figures.sh list)
 #
@@ -19,7 +19,7 @@ R=benchmarks/results
 
 # step name | minutes on the 2-core machine from a fresh clone (references not cached) | command
 STEPS=(
-  "frontier|12|$PY benchmarks/bench_frontier.py --no-progress"
+  "frontier|22|$PY benchmarks/bench_frontier.py --no-progress"
   "frame-traced-probes-320|1|$SER bench courtyard --frames 24 --size 320x180 --quality traced-probes --json $R/frame_bench_traced-probes_320x180.json --chart $R/frame_bench_traced-probes_320x180.png"
   "frame-traced-probes-640|1|$SER bench courtyard --frames 24 --size 640x360 --quality traced-probes --json $R/frame_bench_traced-probes_640x360.json --chart $R/frame_bench_traced-probes_640x360.png"
   "frame-lpv-fast-320|1|$SER bench courtyard --frames 24 --size 320x180 --quality lpv-fast --json $R/frame_bench_lpv-fast_320x180.json --chart $R/frame_bench_lpv-fast_320x180.png"
