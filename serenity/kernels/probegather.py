@@ -382,13 +382,15 @@ def shadow_origins(positions: np.ndarray, surfel: np.ndarray, means: np.ndarray,
     make surfel ``surfel`` (N,), the one nearest the surfel's point (``means`` + ``SURFEL_SHADOW_SPREAD``
     × :func:`shadow_ray_offsets`). A hit lies on the surface, where a point of the square may not: at
     a corner or an edge it lies inside the wall beside the surfel or beyond the edge."""
-    pos = np.asarray(positions, np.float64).reshape(-1, 3)
-    inv = np.asarray(surfel, np.int64).reshape(-1)
+    pos = np.asarray(positions).reshape(-1, 3)
+    inv = np.asarray(surfel).reshape(-1)
     means = np.asarray(means, np.float64)
-    target = means + SURFEL_SHADOW_SPREAD * shadow_ray_offsets(normals, size)
-    diff = pos - target[inv]
-    d2 = np.einsum("ij,ij->i", diff, diff)
-    nearest = np.full(len(means), np.inf)
+    target = (means + SURFEL_SHADOW_SPREAD * shadow_ray_offsets(normals, size)).astype(np.float32)
+    d2 = np.empty(len(pos), np.float32)
+    for a in range(0, len(pos), 1 << 20):  # in slices: millions of hits as float64 (N, 3) cost a GB
+        diff = pos[a:a + (1 << 20)].astype(np.float32) - target[inv[a:a + (1 << 20)]]
+        d2[a:a + len(diff)] = np.einsum("ij,ij->i", diff, diff)
+    nearest = np.full(len(means), np.inf, np.float32)
     np.minimum.at(nearest, inv, d2)  # O(N): a sort of millions of hits cost seconds
     idx = np.flatnonzero(d2 == nearest[inv])  # (a tie keeps the last of its hits)
     out = means.copy()
