@@ -62,7 +62,7 @@ a fresh render timed by the wall clock around ``bpy.ops.render.render`` (scene s
 warm-up; the median of 3 renders below ``repeat_below_s``; the scene is tagged as changed before
 each, as persistent data hands back the last result otherwise), denoised inside Cycles with its own
 albedo and normal passes for the ``+oidn`` curves. Unlike the Mitsuba peer's progressive chunks,
-each count is rendered from scratch: 1…64 spp costs the sum of all counts' renders to measure, but
+each count is a render of its own: 1…64 spp costs the sum of all counts' renders to measure, but
 each point's time is what one frame at that count costs.
 """
 

@@ -479,7 +479,6 @@ class ProbeGather:
         self.tracer = tracer
         self.glossy_energy = None if glossy_energy is None else np.asarray(glossy_energy, np.float32)
         self.transmissions = int(transmissions)
-        self.surfel_size = float(surfel_size)
         self.dirs = direction_sets(self.rays)
         self.from_cache = False
         path = None

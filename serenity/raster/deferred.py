@@ -24,8 +24,9 @@ from serenity.raster.shadow import disc_defines
 UPSAMPLE_UNIT = 16
 """First of the 3 texture units of the upsampled indirect light (units 0..15: G-buffer, shadows, sky)."""
 VISIBILITY_UNIT = UPSAMPLE_UNIT + 3
-HISTORY_UNIT = VISIBILITY_UNIT + 1  # the last frame's indirect light (raster/temporal.py)
 """Texture unit of the sparsely sampled sun visibility (``DeferredPass.render_visibility``)."""
+HISTORY_UNIT = VISIBILITY_UNIT + 1
+"""Texture unit of the last frame's indirect light (``raster/temporal.py``)."""
 VISIBILITY_MODES = {"checkerboard": 1, "half": 2}
 """ShadowConfig.visibility → glsl/visibility_upsample.glsl's VIS_CHECKERBOARD / VIS_HALF ("pixel": none)."""
 SHADOW_FILTERS = {"hard": 0, "pcf": 1, "pcss": 2}

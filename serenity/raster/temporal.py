@@ -48,10 +48,6 @@ class IndirectHistory:
                 o.release()
         self._sets = []
 
-    def reset(self) -> None:
-        """Forget the last frame (the next one shows its own light only)."""
-        self._prev = None
-
     @property
     def target(self):
         """This frame's output texture (the deferred pass's third target), cleared by :meth:`begin`."""

@@ -15,13 +15,12 @@ uniform sampler2D u_irr;     // E/pi * AO (W m^-2 sr^-1 per unit albedo)
 uniform sampler2D u_gloss;   // k_s * glossy * AO (W m^-2 sr^-1)
 uniform sampler2D u_guide;   // per low-res texel: xyz = normal, w = view depth (-1: background)
 
-// E_lo (irr) and G_lo (gloss) at full-resolution pixel px (view depth z, G-buffer normal n)
-void upsampled_terms(ivec2 px, float z, vec3 n, out vec3 irr, out vec3 gloss) {
+// albedo * E + G at full-resolution pixel px (view depth z, G-buffer normal n)
+vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
     ivec2 i0;
     vec2 f;
     lowres_footprint(px, u_scale, i0, f);
-    irr = vec3(0.0);
-    gloss = vec3(0.0);
+    vec3 irr = vec3(0.0), gloss = vec3(0.0);
     float wsum = 0.0, best = -1.0;
     vec3 best_irr = vec3(0.0), best_gloss = vec3(0.0);
     for (int k = 0; k < 4; ++k) {
@@ -36,12 +35,6 @@ void upsampled_terms(ivec2 px, float z, vec3 n, out vec3 irr, out vec3 gloss) {
         if (sim > best) { best = sim; best_irr = xi; best_gloss = xg; }
     }
     if (wsum > 1e-6) { irr /= wsum; gloss /= wsum; } else { irr = best_irr; gloss = best_gloss; }
-}
-
-// albedo * E + G at full-resolution pixel px (view depth z, G-buffer normal n)
-vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
-    vec3 irr, gloss;
-    upsampled_terms(px, z, n, irr, gloss);
     return albedo * irr + gloss;
 }
 #endif
