@@ -567,6 +567,12 @@ class RenderConfig:
     last frame's at the same surface point (reprojected per pixel; disocclusions take this frame's
     alone), 1 = none of the last frame's. Against the light that slid over the surfaces with the
     low-res points as the camera moved (``raster/temporal.py``; ``docs/stability.md``)."""
+    indirect_refine_below: float = 0.2
+    """With ``indirect_scale`` > 1: pixels whose most alike low-res texel (the upsampling's guide
+    similarity: depth and normal, ``glsl/lowres.glsl``) is below this have their indirect light
+    computed at full resolution instead of upsampled (``raster/lowres.IndirectRefinement``): surfaces
+    narrower than the low-res grid and the far sides of silhouettes, which otherwise take a
+    neighbouring surface's light. 0 = none."""
     lowres_tile_balance: bool = True
     """Lay those reduced-resolution images out centred on the GL rasteriser's 64-pixel tiles
     (``raster/context.LowResLayout``): llvmpipe shades each tile on one thread, and at 320×180 a
@@ -602,6 +608,9 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.rt_sun_shadows must be traced or osm, got {self.rt_sun_shadows!r}")
         if not (isinstance(self.indirect_scale, int) and 1 <= self.indirect_scale <= 8):
             raise ConfigError(f"RenderConfig.indirect_scale must be an int in 1..8, got {self.indirect_scale!r}")
+        if not (isinstance(self.indirect_refine_below, (int, float)) and 0.0 <= self.indirect_refine_below <= 1.0):
+            raise ConfigError(f"RenderConfig.indirect_refine_below must be in [0, 1], "
+                              f"got {self.indirect_refine_below!r}")
         if not (isinstance(self.indirect_history, (int, float)) and 0.0 < self.indirect_history <= 1.0):
             raise ConfigError(f"RenderConfig.indirect_history must be in (0, 1], got {self.indirect_history!r}")
         if isinstance(self.sync_stages, bool):

@@ -62,7 +62,7 @@ from serenity.raster.fxaa import FXAAPass
 from serenity.raster.gbuffer import GBufferPass
 from serenity.raster.indirect import IndirectPass, LowResIndirect
 from serenity.raster.interop import read_texture
-from serenity.raster.lowres import GBufferSamples, LowResGuide
+from serenity.raster.lowres import GBufferSamples, IndirectRefinement, LowResGuide
 from serenity.raster.lpv_gl import LPVTexturesGL, lookup_defines
 from serenity.raster.raycast import RayCastingBuffer, RayCastPass
 from serenity.raster.rsm import RSMPass
@@ -82,7 +82,7 @@ STAGES = (
     "sky volume build", "sky volume update", "wait for volumes", "sky upload",  # paper §7
     "rsm", "lpv inputs", "lpv inject", "lpv propagate", "lpv blend",   # paper §8
     "shadow maps (CSM)", "low-res guide", "ssao", "lpv upload",        # the main view
-    "sun visibility", "direct lighting", "sky lighting", "lpv lighting",
+    "sun visibility", "indirect refinement", "direct lighting", "sky lighting", "lpv lighting",
     "wait for ray tracing", "rt g-buffer upload", "shadow maps (OSM)",  # sync 2, paper §9
     "rt direct lighting", "rt sky lighting", "rt lpv lighting", "composite",
     "anti-aliasing", "tone map", "readback",
@@ -304,9 +304,13 @@ class Renderer:
         cfg, ctx = self.config, self.ctx
         self.lowres = None
         self.indirect_history = None
+        self.indirect_refinement = None
         if cfg.indirect_scale > 1 and (cfg.sky.enabled or cfg.lpv.enabled):
             self.lowres = LowResIndirect(ctx, cfg.indirect_scale, cfg.lowres_tile_balance)
             self.lowres.resize(self.width, self.height)
+            if cfg.indirect_refine_below > 0.0:  # full resolution where the upsampling has no match
+                self.indirect_refinement = IndirectRefinement(ctx, cfg.indirect_scale, cfg.indirect_refine_below)
+                self.indirect_refinement.resize(self.width, self.height)
             if cfg.indirect_history < 1.0:  # the upsampled light blended with the last frame's (raster/temporal.py)
                 self.indirect_history = IndirectHistory(ctx)
                 self.indirect_history.resize(self.width, self.height)
@@ -590,12 +594,18 @@ class Renderer:
         lo.clear()
         lo.use_depth(self.lowres_guide.depth)  # the texels' classes: the passes shade only theirs
         self._indirect_passes(lo, gbuf, ao, sky_gl, full_res=False)
+        refined = self.indirect_refinement
+        if refined is not None:
+            cam = self.scene.camera
+            with self._stage("indirect refinement"):
+                refined.classify(gbuf, guide, self.lowres_guide, cam.position, cam.forward)
+            self._indirect_passes(refined, gbuf, ao, sky_gl, full_res=False)  # timed as their techniques
         with self._stage("direct lighting"):  # the upsampling included (and the indirect light's history)
             history = None
             if self.indirect_history is not None:
                 history = (self.indirect_history, self.scene.camera, self.config.indirect_history)
-            return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide), visibility=vis,
-                                             history=history)
+            return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide, refined),
+                                             visibility=vis, history=history)
 
     def _indirect_passes(self, target, gbuf, ao, sky_gl, full_res: bool) -> None:
         """The sky volume's and the LPV's light of the main view, added onto ``target``."""

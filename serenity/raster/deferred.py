@@ -27,6 +27,8 @@ VISIBILITY_UNIT = UPSAMPLE_UNIT + 3
 """Texture unit of the sparsely sampled sun visibility (``DeferredPass.render_visibility``)."""
 HISTORY_UNIT = VISIBILITY_UNIT + 1
 """Texture unit of the last frame's indirect light (``raster/temporal.py``)."""
+REFINE_UNIT = HISTORY_UNIT + 1
+"""First of the 2 texture units of the indirect light refined at full resolution (``raster/lowres.py``)."""
 VISIBILITY_MODES = {"checkerboard": 1, "half": 2}
 """ShadowConfig.visibility → glsl/visibility_upsample.glsl's VIS_CHECKERBOARD / VIS_HALF ("pixel": none)."""
 SHADOW_FILTERS = {"hard": 0, "pcf": 1, "pcss": 2}
@@ -88,20 +90,23 @@ class DeferredPass(FullscreenPass):
             self._vis = None
 
     def _variant(self, rt_view: bool, traced_sun: bool, contact_steps: int, upsample: int, shadow_cfg=None,
-                 split: int = 0, vis_pass: int = 0, vis_upsample: int = 0, vis_step: int = 0):
+                 split: int = 0, vis_pass: int = 0, vis_upsample: int = 0, vis_step: int = 0,
+                 refine: bool = False):
         """(program, vao) of one variant; ``upsample`` 1 = the low-res indirect light upsampled, 2 = and
         blended with the last frame's; ``split`` 1 = surfaces only, 2 = sky only; ``vis_pass``: the
         sparsely sampled sun visibility (a ``VISIBILITY_MODES`` value) instead of the lighting;
         ``vis_upsample``: the lighting with that visibility; ``vis_step``: the visibility pass's step
-        (1: guide and class, 2: the visibility) (glsl/deferred.glsl)."""
+        (1: guide and class, 2: the visibility); ``refine``: with ``upsample``, the refined pixels' light
+        read from the :class:`~serenity.raster.lowres.IndirectRefinement` (glsl/deferred.glsl, upsample.glsl)."""
         # the shadow filter and its tap counts are compiled in too (glsl/shadow_sampling.glsl)
         filt = None if shadow_cfg is None else (SHADOW_FILTERS[shadow_cfg.filter], int(shadow_cfg.blocker_samples),
                                                 int(shadow_cfg.filter_samples))
-        key = (rt_view, traced_sun, contact_steps, upsample, filt, split, vis_pass, vis_upsample, vis_step)
+        key = (rt_view, traced_sun, contact_steps, upsample, filt, split, vis_pass, vis_upsample, vis_step, refine)
         if key not in self._variants:
             defines = {"RT_VIEW": int(rt_view), "TRACED_SUN": int(traced_sun), "CONTACT_STEPS": int(contact_steps),
                        "UPSAMPLE": int(upsample), "SPLIT": int(split), "VIS_PASS": int(vis_pass),
-                       "VIS_UPSAMPLE": int(vis_upsample), "VIS_STEP": int(vis_step)}
+                       "VIS_UPSAMPLE": int(vis_upsample), "VIS_STEP": int(vis_step),
+                       "UPSAMPLE_REFINE": int(bool(refine and upsample))}
             if filt is not None:
                 defines["SHADOW_FILTER"] = filt[0]
             taps = filt[1:] if filt is not None else (ShadowConfig.blocker_samples, ShadowConfig.filter_samples)
@@ -173,7 +178,8 @@ class DeferredPass(FullscreenPass):
         ray, untraced pixels are black, and SSAO is not applied. ``shadow`` None (rt views only):
         the sun's visibility is the tracer's shadow ray, ``eye.w``. ``upsample`` (main view only):
         (the frame's :class:`~serenity.raster.indirect.LowResIndirect`, already drawn, and the
-        low-res guide texture): its light is upsampled and added in this pass (``glsl/upsample.glsl``).
+        low-res guide texture, and an :class:`~serenity.raster.lowres.IndirectRefinement` already drawn
+        or None): its light is upsampled and added in this pass (``glsl/upsample.glsl``).
         ``visibility`` (main view only): the texture of :meth:`render_visibility`, just drawn: the
         sun's visibility is upsampled from it instead of computed per pixel. ``history`` (main view, with
         ``upsample``): (the :class:`~serenity.raster.temporal.IndirectHistory`, the camera, its weight a):
@@ -188,9 +194,10 @@ class DeferredPass(FullscreenPass):
         if main:
             vis_up = 0 if visibility is None else self._vis[0]
             up = 0 if upsample is None else (2 if history is not None else 1)
+            refine = upsample is not None and upsample[2] is not None
             draws = [self._variant(False, False, 0, 0, None, split=2),
                      self._variant(False, False, 0 if vis_up else contact, up,
-                                   None if vis_up else shadow_cfg, split=1, vis_upsample=vis_up)]
+                                   None if vis_up else shadow_cfg, split=1, vis_upsample=vis_up, refine=refine)]
         else:
             draws = [self._variant(True, shadow is None, 0, 0, shadow_cfg)]
         ctx = self.ctx
@@ -205,9 +212,12 @@ class DeferredPass(FullscreenPass):
             elif ao is not None:
                 ao.use(location=5)
             if main and upsample is not None:
-                lo, guide = upsample
+                lo, guide, refined = upsample
                 for loc, tex in enumerate((lo.irr, lo.gloss, guide), start=UPSAMPLE_UNIT):
                     tex.use(location=loc)
+                if refined is not None:
+                    refined.irr.use(location=REFINE_UNIT)
+                    refined.gloss.use(location=REFINE_UNIT + 1)
             if main and visibility is not None:
                 visibility.use(location=VISIBILITY_UNIT)
             for p, _ in draws:
@@ -259,6 +269,8 @@ class DeferredPass(FullscreenPass):
             for loc, name in enumerate(("u_irr", "u_gloss", "u_guide"), start=UPSAMPLE_UNIT):
                 self._set(p, name, loc)
             self._set(p, "u_scale", upsample[0].scale)
+            self._set(p, "u_refine_irr", REFINE_UNIT)
+            self._set(p, "u_refine_gloss", REFINE_UNIT + 1)
             upsample[0].layout.set_uniforms(p)
         self._set(p, "u_use_sky_map", sky is not None)
         if sky is not None:

@@ -96,6 +96,8 @@ class IndirectPass:
         if self.lowres:
             p["u_scale"].value = target.scale
             target.layout.set_uniforms(p)
+            if (u := uniform(p, "u_ao_div")) is not None:
+                u.value = getattr(target, "ao_div", 1)
         for loc, name in enumerate(("g_albedo", "g_normal", "g_position", "g_material")):
             if (u := uniform(p, name)) is not None:
                 u.value = loc
@@ -123,6 +125,7 @@ class LowResIndirect:
         self.size = None
         self.layout = None
         self.depth = None  # the guide's class depth attached to fbo (LowResGuide)
+        self.ao_div = 1  # the AO is at this resolution too
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):

@@ -5,6 +5,8 @@ representative G-buffer pixel (``glsl/lowres.glsl``), drawn once per frame for t
 indirect light's joint bilateral upsampling, whose taps each read one guide texel instead of two
 G-buffer texels; and each texel's class (background, surface, glossy surface) as its depth, which
 the low-res indirect passes depth-test against to shade only the texels they need.
+``IndirectRefinement`` (``glsl/upsample_refine.glsl``): the full-resolution pixels that no low-res
+texel stands for, whose indirect light the same passes then compute at full resolution.
 ``GBufferSamples`` (``glsl/gbuffer_samples.glsl``): every n-th G-buffer pixel
 gathered on the GL side, so the LPV's sky VPLs read back 1/n² of the G-buffer."""
 
@@ -69,6 +71,73 @@ class LowResGuide(FullscreenPass):
                 ctx.disable(moderngl.DEPTH_TEST)
                 ctx.depth_func = "<"
         return self.guide
+
+
+class IndirectRefinement(FullscreenPass):
+    """Indirect light at full resolution where the upsampling of the low-res light fails.
+
+    The joint bilateral upsampling (``glsl/upsample.glsl``) fills a pixel from the 2×2 low-res texels
+    around it, weighed by how alike their representative pixels are to it; a surface narrower than
+    the low-res grid (a table's rounded edge, a chair's leg, a window's frame at quarter resolution)
+    may have no representative among them, and then took the light of the surface beside it: the
+    blocky, too bright or too dark steps along silhouettes. :meth:`classify` marks those pixels
+    (best similarity below ``below``) and writes their class as its depth; the low-res indirect
+    passes, drawn into this object as their target at scale 1, then shade those pixels only
+    (llvmpipe rejects the others by depth before shading), and the deferred pass reads their light
+    from here (``UPSAMPLE_REFINE``). A duck-typed target of ``IndirectPass.render`` as
+    :class:`~serenity.raster.indirect.LowResIndirect` is: ``fbo`` (with the class depth), ``scale``
+    1, ``layout`` the whole view, ``ao_div`` the AO's texels per pixel."""
+
+    SHADER = "upsample_refine.glsl"
+    TARGETS = {"irr": (4, "f2"), "gloss": (4, "f2")}
+    scale = 1
+
+    def __init__(self, ctx, lowres_scale: int, below: float):
+        super().__init__(ctx)
+        self.ao_div = max(1, int(lowres_scale))
+        self.below = float(below)
+        self.depth = None
+        self.layout: LowResLayout | None = None
+
+    def resize(self, width: int, height: int) -> None:
+        if self.size == (width, height):
+            return
+        super().resize(width, height)
+        if self.depth is not None:
+            self.depth.release()
+        self.fbo.release()
+        self.layout = LowResLayout((width, height))
+        self.depth = self.ctx.depth_texture((width, height))
+        self.fbo = self.ctx.framebuffer(color_attachments=[self.irr, self.gloss], depth_attachment=self.depth)
+
+    def classify(self, gbuffer, guide, guide_pass, camera_pos, camera_forward) -> None:
+        """Mark this frame's refined pixels (and clear the targets) from the G-buffer and the low-res
+        ``guide`` texture drawn by ``guide_pass`` (a :class:`LowResGuide`: its scale and layout)."""
+        p = self.program
+        ctx = self.ctx
+        with ctx.debug_scope("indirect refinement"):
+            self.fbo.use()
+            for loc, (name, tex) in enumerate((("g_position", gbuffer.position), ("g_normal", gbuffer.normal),
+                                               ("u_guide", guide))):
+                tex.use(location=loc)
+                p[name].value = loc
+            p["u_scale"].value = guide_pass.scale
+            guide_pass.layout.set_uniforms(p)
+            p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
+            p["u_camera_forward"].value = tuple(float(x) for x in camera_forward)
+            p["u_refine_below"].value = self.below
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.depth_func = "1"  # always: every pixel writes its class
+            try:
+                self.vao.render(vertices=3)
+            finally:
+                ctx.disable(moderngl.DEPTH_TEST)
+                ctx.depth_func = "<"
+
+    def refined_mask(self) -> np.ndarray:
+        """(H, W) bool, top row first: the pixels the last :meth:`classify` marked (a read-back: for
+        tests and diagnostics)."""
+        return read_texture(self.irr)[..., 3] > 0.5
 
 
 class GBufferSamples(FullscreenPass):

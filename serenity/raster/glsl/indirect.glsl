@@ -41,6 +41,7 @@ uniform vec3 u_camera_pos;
 uniform bool u_diffuse;         // TECHNIQUE 2: add the LPV's diffuse term
 uniform bool u_glossy;          // TECHNIQUE 2: add the LPV's glossy term
 #if LOWRES
+uniform int u_ao_div;           // AO texels per low-res pixel: 1, or the low-res scale for a scale-1 refinement
 layout(location = 0) out vec4 o_irr;
 layout(location = 1) out vec4 o_gloss;
 #define GBUF(t) texelFetch(t, px, 0)
@@ -57,7 +58,7 @@ void main() {
     vec4 pos = GBUF(g_position);
     if (pos.w == 0.0) return;
     vec3 albedo = vec3(1.0);
-    float ao = u_use_ao ? texelFetch(u_ao, low, 0).r : 1.0;
+    float ao = u_use_ao ? texelFetch(u_ao, low / max(u_ao_div, 1), 0).r : 1.0;
 #else
     vec4 pos = GBUF(g_position);
     if (pos.w == 0.0) { o_hdr = vec4(0.0); return; }     // background, miss, or not traced

@@ -51,4 +51,19 @@ float guide_similarity(vec3 gn, float gz, vec3 n, float z) {
     c *= c; c *= c; c *= c;  // ^8
     return gz < 0.0 ? 0.0 : exp(-abs(gz - z) / (0.05 * z + 1e-3)) * c;
 }
+
+// The highest guide_similarity among the 2x2 low-res texels the upsampling (upsample.glsl) draws
+// full-resolution pixel px (view depth z, normal n) from: ~0 where no texel stands for px's surface
+// (a strip thinner than the low-res grid, the far side of a silhouette or a crease).
+float lowres_best_similarity(sampler2D guide, ivec2 px, float z, vec3 n) {
+    ivec2 i0;
+    vec2 f;
+    lowres_footprint(px, u_scale, i0, f);
+    float best = 0.0;
+    for (int k = 0; k < 4; ++k) {
+        vec4 g = texelFetch(guide, lowres_texel(i0 + ivec2(k & 1, k >> 1)), 0);
+        best = max(best, guide_similarity(g.xyz, g.w, n, z));
+    }
+    return best;
+}
 #endif

@@ -8,15 +8,29 @@
 // G-buffer pixel (lowres.glsl), read from the low-res guide (lowres_guide.glsl). Across a silhouette
 // or a crease the texels of the other surface get ~no weight; when every weight vanishes (a pixel
 // unlike all four) the most similar texel is used.
+// UPSAMPLE_REFINE 1: the pixels that no texel stands for (lowres_best_similarity below
+// RenderConfig.indirect_refine_below, marked by upsample_refine.glsl) have their light computed at
+// full resolution instead (raster/lowres.IndirectRefinement), read here where alpha marks them.
 #ifndef SERENITY_UPSAMPLE_GLSL
 #define SERENITY_UPSAMPLE_GLSL
+#ifndef UPSAMPLE_REFINE
+#define UPSAMPLE_REFINE 0
+#endif
 #include "lowres.glsl"
 uniform sampler2D u_irr;     // E/pi * AO (W m^-2 sr^-1 per unit albedo)
 uniform sampler2D u_gloss;   // k_s * glossy * AO (W m^-2 sr^-1)
 uniform sampler2D u_guide;   // per low-res texel: xyz = normal, w = view depth (-1: background)
+#if UPSAMPLE_REFINE
+uniform sampler2D u_refine_irr;    // full resolution: as u_irr, alpha 1 where refined
+uniform sampler2D u_refine_gloss;  // full resolution: as u_gloss
+#endif
 
 // albedo * E + G at full-resolution pixel px (view depth z, G-buffer normal n)
 vec3 upsampled_indirect(ivec2 px, float z, vec3 n, vec3 albedo) {
+#if UPSAMPLE_REFINE
+    vec4 refined = texelFetch(u_refine_irr, px, 0);
+    if (refined.a > 0.5) return albedo * refined.rgb + texelFetch(u_refine_gloss, px, 0).rgb;
+#endif
     ivec2 i0;
     vec2 f;
     lowres_footprint(px, u_scale, i0, f);
