@@ -584,10 +584,11 @@ class RenderConfig:
     blurs textures seen at grazing angles (courtyard ground FLIP 0.148 -> 0.124 with 4 taps,
     ``benchmarks/bench_aa.py``)."""
     antialiasing: str = "none"
-    """Edge anti-aliasing of the final HDR frame: "none" or "fxaa" (``serenity.raster.fxaa``, one post
-    pass before the tone map). Off by default: against the reference it gains little FLIP and fills
-    1-pixel black gaps (``benchmarks/bench_aa.py``); ``Renderer.render_accumulated`` (jittered
-    temporal accumulation on a static camera) is the measured better option."""
+    """Edge anti-aliasing of the final HDR frame, one pass before the tone map: "none", "fxaa"
+    (``serenity.raster.fxaa``: it gains little FLIP against the reference and fills 1-pixel black
+    gaps) or "taa" (``serenity.raster.taa``: each frame jittered within the pixel and blended with the
+    last frames' resolved image, reprojected; the first frame after a reset is unjittered).
+    ``benchmarks/bench_aa.py`` measures them."""
 
     def __post_init__(self):
         if not (self.exposure > 0):
@@ -621,8 +622,8 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.ambient must be 'none' or 'constant', got {self.ambient!r}")
         if not (isinstance(self.texture_taps, int) and 1 <= self.texture_taps <= 16):
             raise ConfigError(f"RenderConfig.texture_taps must be an int in 1..16, got {self.texture_taps!r}")
-        if self.antialiasing not in ("none", "fxaa"):
-            raise ConfigError(f"RenderConfig.antialiasing must be 'none' or 'fxaa', got {self.antialiasing!r}")
+        if self.antialiasing not in ("none", "fxaa", "taa"):
+            raise ConfigError(f"RenderConfig.antialiasing must be 'none', 'fxaa' or 'taa', got {self.antialiasing!r}")
         for name, kind in (("shadow", ShadowConfig), ("ssao", SSAOConfig), ("sky", SkyConfig), ("lpv", LPVConfig)):
             value = getattr(self, name)
             if not isinstance(value, kind):

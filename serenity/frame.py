@@ -71,6 +71,7 @@ from serenity.raster.scene_gl import SceneGL
 from serenity.raster.shadow import STAGGER_PAD, ShadowPass, fit_overlapped, fit_shadow_cascades
 from serenity.raster.sky import SkyTexturesGL
 from serenity.raster.ssao import SSAOPass
+from serenity.raster.taa import TAAPass, halton
 from serenity.raster.temporal import IndirectHistory
 from serenity.raster.tonemap import TonemapPass
 from serenity.threads import lower_thread_priority, single_threaded_blas
@@ -228,6 +229,9 @@ class Renderer:
             self.fxaa_pass = FXAAPass(self.ctx) if cfg.antialiasing == "fxaa" else None
             if self.fxaa_pass is not None:
                 self.fxaa_pass.resize(self.width, self.height)
+            self.taa_pass = TAAPass(self.ctx) if cfg.antialiasing == "taa" else None
+            if self.taa_pass is not None:
+                self.taa_pass.resize(self.width, self.height)
             # ray tracing only where a material needs it (paper §9); the kd-tree waits for the
             # first frame that actually shows such a pixel
             self.traces = cfg.ray_tracing and any(m.needs_ray_tracing for m in scene.materials)
@@ -349,24 +353,32 @@ class Renderer:
 
     # ------------------------------------------------------------------------------------ frame
 
-    def render(self, read_back: bool | Iterable[str] = True, jitter: tuple[float, float] = (0.0, 0.0)) -> Frame:
+    def render(self, read_back: bool | Iterable[str] = True, jitter: tuple[float, float] | None = None) -> Frame:
         """Render the scene's current camera and sun: the diagram of docs/architecture.md ("The
         frame"), one method per box. ``read_back`` says what comes back to the host: True =
         everything (hdr, ldr and the AOVs), False = nothing (for a caller that draws
         ``self.outputs`` itself, e.g. the viewer's window), or a subset of {"hdr", "ldr", "aovs"}
         (``serenity bench`` and the viewer read nothing: every read stalls the GL pipeline; a NaN or
         infinite pixel still shows in ``Frame.nonfinite_pixels``). ``jitter``:
-        sub-pixel offset (x right, y up; pixels) of the projection, for :meth:`render_accumulated`."""
+        sub-pixel offset (x right, y up; pixels) of the projection, for :meth:`render_accumulated`;
+        None: the temporal anti-aliasing's next offset with ``antialiasing = "taa"`` (``raster/taa.py``),
+        else none. A given offset replaces TAA's (the resolve then takes that one out)."""
         wanted = set(READ_BACK) if read_back is True else set(read_back or ())
         if not wanted <= set(READ_BACK):
             raise SerenityError(f"read_back must be a bool or a subset of {READ_BACK}, got {read_back!r}")
         with single_threaded_blas():  # the frame's own threads (llvmpipe, Warp launches) fill the cores
             return self._render(wanted, jitter)
 
-    def _render(self, wanted: set[str], jitter: tuple[float, float]) -> Frame:
+    def _render(self, wanted: set[str], jitter: tuple[float, float] | None) -> Frame:
         self._begin_frame()
         cam = self.scene.camera
         proj = cam.projection_matrix(self.width / self.height)
+        taa = self.taa_pass
+        if taa is not None:  # its history restarts on a camera cut or a new config
+            own = taa.begin(cam, float(np.linalg.norm(np.subtract(*self.scene_gl.bounds))), self.config)
+            jitter = own if jitter is None else jitter
+            unjittered = proj @ cam.view_matrix()
+        jitter = (0.0, 0.0) if jitter is None else jitter
         if jitter[0] or jitter[1]:  # shift NDC by 2·jitter/size: x_ndc += m[0,2]·z/(−z) = −m[0,2]
             proj[0, 2] -= 2.0 * float(jitter[0]) / self.width
             proj[1, 2] -= 2.0 * float(jitter[1]) / self.height
@@ -415,6 +427,9 @@ class Renderer:
         if self.fxaa_pass is not None:
             with self._stage("anti-aliasing"):
                 out_hdr = self.fxaa_pass.render(out_hdr, self.config.exposure)
+        if taa is not None:
+            with self._stage("anti-aliasing"):
+                out_hdr = taa.render(out_hdr, gbuf, cam, unjittered, jitter, self.config.exposure)
         with self._stage("tone map"):
             self.tonemap_pass.render(out_hdr, self.config.exposure)
         #: this frame's GL textures: hdr (lit + composited, RGBA32F), ldr (tone-mapped sRGB, RGBA8),
@@ -908,16 +923,6 @@ class Renderer:
         proc = getattr(self, "_tracer_proc", None)
         if proc is not None:
             proc.close()
-
-
-def halton(index: int, base: int) -> float:
-    """The ``index``-th (from 0) element of the van der Corput / Halton sequence in ``base``, in [0, 1)."""
-    f, r, i = 1.0, 0.0, index + 1
-    while i > 0:
-        f /= base
-        r += f * (i % base)
-        i //= base
-    return r
 
 
 def format_timings(timings: dict[str, float], wall_ms: float | None = None) -> str:

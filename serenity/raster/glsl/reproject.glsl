@@ -1,0 +1,45 @@
+// Reprojection into the last frame's view, shared by the indirect light's history
+// (indirect_history.glsl) and the temporal anti-aliasing (taa.glsl). A last-frame image stores rgb and
+// the view depth of the surface each pixel showed (a; < 0: no surface, the sky).
+//   q   = surface point p projected with the last frame's world -> clip (integers at pixel centres),
+//         plus ``shift`` pixels (TAA: this frame's jitter, so that q is the pixel centre's, not the
+//         jittered sample's), snapped to the pixel within 1e-3 of one (a still view)
+//   zp  = p's depth in the last frame's camera
+//   tol = how far the surface's depth may move over one pixel there: the pixel's footprint over the
+//         cosine of the angle between the surface (unit normal n) and the view ray, with 2 % of the
+//         depth for the rest
+// The 4 last-frame pixels around q are taken, bilinearly weighted, where their depth lies within tol
+// of zp (elsewhere p was hidden or beside an edge then: a disocclusion), and where they lie in the image.
+#ifndef SERENITY_REPROJECT_GLSL
+#define SERENITY_REPROJECT_GLSL
+#include "lowres.glsl"
+
+// Sum of the taps' weight * rgb (xyz) and of their weights (w); q (the last frame's pixel coordinate)
+// returned, for a caller that filters the last frame otherwise where every tap is taken.
+vec4 reproject_bilinear(sampler2D prev, mat4 prev_view_proj, vec3 prev_camera_pos, vec3 prev_camera_forward,
+                        float pixel_angle, vec3 p, vec3 n, vec2 shift, out vec2 q) {
+    vec2 size = vec2(textureSize(prev, 0));
+    vec4 c = prev_view_proj * vec4(p, 1.0);
+    q = vec2(-1e9);
+    if (c.w <= 1e-6) return vec4(0.0);
+    q = (c.xy / c.w * 0.5 + 0.5) * size - 0.5 + shift;
+    q = mix(q, floor(q + 0.5), lessThan(abs(q - floor(q + 0.5)), vec2(1e-3)));  // a still view: that pixel
+    ivec2 i0 = ivec2(floor(q));
+    vec2 f = q - vec2(i0);
+    vec3 v = p - prev_camera_pos;
+    float zp = dot(v, prev_camera_forward);
+    float cosv = max(abs(dot(n, normalize(v))), 0.05);
+    float tol = zp * (0.02 + 1.5 * pixel_angle * sqrt(max(1.0 - cosv * cosv, 0.0)) / cosv);
+    vec4 sum = vec4(0.0);
+    for (int k = 0; k < 4; ++k) {
+        ivec2 o = ivec2(k & 1, k >> 1);
+        ivec2 t = i0 + o;
+        if (any(lessThan(t, ivec2(0))) || any(greaterThanEqual(t, ivec2(size)))) continue;
+        vec4 a = texelFetch(prev, t, 0);
+        if (a.w < 0.0 || abs(a.w - zp) > tol) continue;  // not this surface then
+        float w = bilinear_weight(o, f);
+        sum += vec4(w * a.rgb, w);
+    }
+    return sum;
+}
+#endif

@@ -1,0 +1,187 @@
+"""Temporal anti-aliasing (``RenderConfig.antialiasing = "taa"``; ``glsl/taa.glsl``).
+
+A deferred renderer shades one point per pixel, so an edge steps from pixel to pixel. With TAA each
+frame's projection is shifted within the pixel by the next point of a short Halton(2, 3) cycle
+(``TAAConfig.cycle``; the first frame after a reset is unjittered, so a single frame is the same as
+without anti-aliasing), and a resolve pass before the tone map blends each pixel's new sample with
+its history — the last resolved image, reprojected through the pixel's surface point into the last
+frame's unjittered view (``glsl/reproject.glsl``, shared with the indirect light's history), clipped
+to the range of this frame's 3×3 neighbourhood and weighted by inverse tone-mapped luminance. A
+still view converges to the mean of the cycle's sub-pixel samples (what
+``Renderer.render_accumulated`` computes), and a moving one keeps most of it: the history follows
+the surfaces; where a surface was hidden in the last frame (a disocclusion) or came in from off the
+image the pixel starts afresh from this frame's sample.
+
+The history restarts (``reset``) on a resize, on a camera cut (``TAAConfig.cut_angle_deg``,
+``cut_distance``) and when the renderer's config changes. Its cost: one fullscreen pass of 9 + 5
+texture taps and a reprojection per pixel, and one RGBA32F target more.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from serenity.errors import SerenityError
+from serenity.raster.context import fullscreen_vao, load_program, uniform
+
+
+def halton(index: int, base: int) -> float:
+    """The ``index``-th (from 0) element of the van der Corput / Halton sequence in ``base``, in [0, 1)."""
+    f, r, i = 1.0, 0.0, index + 1
+    while i > 0:
+        f /= base
+        r += f * (i % base)
+        i //= base
+    return r
+
+
+def jitter_offset(index: int) -> tuple[float, float]:
+    """Sub-pixel offset (x right, y up; pixels, in [−0.5, 0.5)) of sample ``index`` of the Halton(2, 3)
+    sequence ``Renderer.render_accumulated`` uses: sample 0 is the pixel's centre."""
+    return (halton(index, 2) - 0.5, halton(index, 3) - 0.5) if index else (0.0, 0.0)
+
+
+WEIGHTS = ("none", "karis", "excess")
+
+
+@dataclass(frozen=True)
+class TAAConfig:
+    alpha: float = 0.1
+    """Weight of each new frame's sample once the history holds ``1 / alpha`` frames (before that,
+    ``1 / frames``: the first frames after a reset average evenly). 0.1 keeps about 10 frames: more
+    smooths further but lags a changing image (a moving shadow, the indirect light's updates) longer."""
+    gamma: float = 1.25
+    """Half-width of the box the history is clipped to, in standard deviations of this frame's 3×3
+    neighbourhood (variance clipping; smaller rejects more history: less ghosting, more flicker)."""
+    weights: str = "excess"
+    """How the sample and the history are weighed as they are blended (besides ``alpha``): "excess"
+    divides the sample's weight by 1 + exposure × its luminance above its brightest neighbour's (a
+    firefly counts for little, an edge's samples all alike), "karis" each one's by 1 + exposure × its
+    luminance (Karis 2014: the blend of tone-mapped values, which darkens every edge between a bright
+    and a dark surface against a linear box filter), "none" neither."""
+    clip: bool = True
+    """False leaves the history unclipped (to see what the clip does: ghosts where the depth test
+    passes)."""
+    cycle: int = 8
+    """Jitter positions before the sequence repeats (1 = no jitter: the resolve only smooths)."""
+    catmull_rom: bool = True
+    """Sample the history with a Catmull-Rom filter where all 4 bilinear taps show the pixel's surface
+    (bilinear otherwise): bilinear resampling blurs a moving image a little more every frame."""
+    cut_angle_deg: float = 30.0
+    """A camera turn by more than this between frames is a cut: the history restarts."""
+    cut_distance: float = 0.1
+    """... and so is a move by more than this fraction of the scene's bounding-box diagonal."""
+
+    def __post_init__(self):
+        if self.weights not in WEIGHTS:
+            raise SerenityError(f"TAAConfig.weights must be one of {WEIGHTS}, got {self.weights!r}")
+        if not (0.0 < self.alpha <= 1.0 and 0.0 < self.gamma <= 8.0 and isinstance(self.cycle, int)
+                and 1 <= self.cycle <= 256 and 0.0 < self.cut_angle_deg and 0.0 < self.cut_distance):
+            raise SerenityError(f"TAAConfig: need 0 < alpha <= 1, 0 < gamma <= 8, an int cycle in 1..256 and "
+                                f"positive cut thresholds, got {self}")
+
+
+class TAAPass:
+    """The resolve pass and its two history targets (this frame's output, the last frame's)."""
+
+    SHADER = "taa.glsl"
+
+    def __init__(self, ctx, config: TAAConfig | None = None):
+        self.ctx = ctx
+        self.config = config or TAAConfig()
+        self.program = load_program(ctx, self.SHADER)
+        self.vao = fullscreen_vao(ctx, self.program)
+        self.size = None
+        self._sets: list[tuple] = []
+        self._turn = 0
+        self.reset()
+
+    def resize(self, width: int, height: int) -> None:
+        """(Re)allocate the targets for a width×height view; a new size restarts the history."""
+        if self.size == (width, height):
+            return
+        for targets in self._sets:
+            for o in targets:
+                o.release()
+        self._sets = []
+        for _ in range(2):
+            tex = self.ctx.texture((width, height), 4, dtype="f4")  # rgb = the image, a = view depth
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
+            self._sets.append((tex, self.ctx.framebuffer(color_attachments=[tex])))
+        self.size = (width, height)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the history: the next frame is unjittered and shown as rendered."""
+        self._prev = None  # (view_proj unjittered, camera position, forward, fov_y_deg)
+        self.frames = 0    # frames in the history (resolved since the reset)
+        self._seen_camera = None
+        self._key = None
+
+    @property
+    def has_history(self) -> bool:
+        return self._prev is not None
+
+    def begin(self, camera, scene_extent: float, key=None) -> tuple[float, float]:
+        """At a frame's start: restart the history on a camera cut or when ``key`` (the renderer's
+        config) differs from the last frame's; returns this frame's jitter (x right, y up; pixels)."""
+        cfg = self.config
+        if self._key is not None and key != self._key:
+            self.reset()
+        self._key = key
+        if self._prev is not None:
+            _, pos, fwd, fov = self._prev
+            turn = math.degrees(math.acos(float(np.clip(np.dot(fwd, camera.forward), -1.0, 1.0))))
+            move = float(np.linalg.norm(np.asarray(camera.position, np.float64) - pos))
+            if (turn > cfg.cut_angle_deg or move > cfg.cut_distance * max(scene_extent, 1e-9)
+                    or abs(camera.fov_y_deg - fov) > 1e-6 * max(fov, 1.0)):
+                self.reset()
+                self._key = key
+        return jitter_offset(self.frames % cfg.cycle)
+
+    def render(self, hdr_texture, gbuffer, camera, view_proj: np.ndarray, jitter: tuple[float, float],
+               exposure: float):
+        """The resolved image (a texture of this pass's, RGBA32F: rgb, view depth in a) of this
+        frame's ``hdr_texture``, drawn with the projection shifted by ``jitter``; ``view_proj`` is the
+        frame's unjittered world → clip. It becomes the next frame's history."""
+        cfg, p = self.config, self.program
+        out, fbo = self._sets[self._turn]
+        prev_tex = self._sets[1 - self._turn][0]
+        alpha = 1.0 if self._prev is None else max(cfg.alpha, 1.0 / (self.frames + 1))
+        with self.ctx.debug_scope("taa"):
+            fbo.use()
+            hdr_texture.use(location=0)
+            gbuffer.position.use(location=1)
+            gbuffer.normal.use(location=2)
+            prev_tex.use(location=3)
+            values = {"u_hdr": 0, "u_position": 1, "u_normal": 2, "u_history": 3,
+                      "u_jitter": (float(jitter[0]), float(jitter[1])), "u_alpha": float(alpha),
+                      "u_gamma": float(cfg.gamma) if cfg.clip else 0.0, "u_exposure": float(exposure),
+                      "u_weights": WEIGHTS.index(cfg.weights),
+                      "u_has_prev": self._prev is not None, "u_catmull_rom": bool(cfg.catmull_rom),
+                      "u_pixel_angle": math.radians(camera.fov_y_deg) / self.size[1],
+                      "u_camera_pos": tuple(float(v) for v in camera.position),
+                      "u_camera_forward": tuple(float(v) for v in camera.forward)}
+            mats = {"u_inv_view_proj": np.linalg.inv(view_proj)}
+            if self._prev is not None:
+                vp, pos, fwd, _ = self._prev
+                values.update(u_prev_camera_pos=tuple(float(v) for v in pos),
+                              u_prev_camera_forward=tuple(float(v) for v in fwd))
+                mats["u_prev_view_proj"] = vp
+            for name, value in values.items():
+                if (u := uniform(p, name)) is not None:
+                    u.value = value
+            for name, m in mats.items():
+                if (u := uniform(p, name)) is not None:
+                    u.write(np.asarray(m, np.float64).T.astype(np.float32).tobytes())
+            self.vao.render(vertices=3)
+        self._prev = (np.asarray(view_proj, np.float64).copy(), np.asarray(camera.position, np.float64).copy(),
+                      np.asarray(camera.forward, np.float64).copy(), float(camera.fov_y_deg))
+        self.frames += 1
+        self._turn = 1 - self._turn
+        return out
