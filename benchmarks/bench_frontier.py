@@ -1,6 +1,6 @@
 """The frontier: our whole frame against Mitsuba 3 + Intel Open Image Denoise at equal error.
 
-    python benchmarks/bench_frontier.py                      # courtyard + cornell, 320x180 + 640x360
+    python benchmarks/bench_frontier.py                      # courtyard + cornell (320x180 + 640x360), breakfast room
     python benchmarks/bench_frontier.py --quick              # smoke run: courtyard 160x90, few spp
     python benchmarks/bench_frontier.py --scenes cornell --sizes 320x180
     python benchmarks/bench_frontier.py --references-only    # render and cache the references first
@@ -9,7 +9,11 @@
 For each scene and size, all in one process on one machine:
 
 - the reference: Mitsuba 3 ``path`` at ``--ref-spp`` (1024) spp, unlimited depth
-  (``serenity.eval.reference.render_reference``, cached: only the first run pays for it);
+  (``serenity.eval.reference.render_reference``, cached: only the first run pays for it); for a
+  scene in ``REFERENCES`` (the breakfast room, lit almost only by bounced light), a reference that
+  states its noise floor (``reference_for_error``: two halves, doubled up to ``max_spp`` until the
+  floor is at most a quarter of the errors named), and each of our configs records whether its
+  own error is at least four times that floor;
 - ours: for each of our quality configs (:func:`our_configs`), the median wall time of
   ``renderer.render(read_back=False)`` (the interactive frame: nothing read back, GL finished) over
   ``--frames`` frames with the static camera and sun after ``--warmup`` frames, and as many again
@@ -20,6 +24,12 @@ For each scene and size, all in one process on one machine:
   times, the scene loaded beforehand, one warm-up render), raw and denoised by OIDN at each of
   ``--oidn`` qualities (time = render + the OIDN call), with albedo and normal guides from our
   noise-free AOVs (a 2×-supersampled G-buffer box-filtered down: ``guides_from_aovs``);
+- ours with a moving camera (``moving_camera``): after the warm-up, the camera is moved to
+  ``MOTION_FRAMES`` steps to the left of the case's pose and pans back to it, ``MOTION_STEP`` of
+  its distance to its target per frame; the median wall time of the moving frames, and the errors
+  of the last one, taken at the case's pose (so against the same reference, and the peers' curves
+  stand as they are: a path tracer renders each frame afresh). What the temporal parts (the
+  indirect light's history, the shadow tiles, anti-aliasing) give or cost under motion shows here;
 - the equal-FLIP speed-up (``serenity.eval.frontier.equal_error_speedup``): the time the fastest
   peer curve needs to reach our FLIP (log-log interpolation between its spp points) ÷ our frame
   time, or "dominated" when its 1-spp image is already at least as good as ours; the same at equal
@@ -51,15 +61,26 @@ import time
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-SCENES = ("courtyard", "cornell")
+BREAKFAST_ROOM = os.path.join(os.path.dirname(HERE), "scenes", "breakfast_room", "breakfast_room.toml")
+SCENES = ("courtyard", "cornell", BREAKFAST_ROOM)
 SIZES = ("320x180", "640x360")
+SCENE_SIZES = {"breakfast_room": ("320x180",)}
+"""Default sizes of a scene where they are not ``SIZES`` (the breakfast room's reference needs 4096 spp)."""
+REFERENCES = {"breakfast_room": {"spp": 256, "max_spp": 4096, "flip": 0.08, "rel_mse": 0.2}}
+"""Scenes whose reference is a ``reference_for_error`` (first spp, max_spp, and the errors its floor
+must be a quarter of: the goals the scene is held to); other scenes: ``--ref-spp`` spp, no floor."""
+MOTION_FRAMES = 12
+MOTION_STEP = 0.01
+"""The moving camera: frames of the pan, and each frame's step as a fraction of the camera's distance
+to its target (the courtyard 0.25 m, the Cornell box 8 mm, the breakfast room 3 cm)."""
 SPP = (1, 2, 4, 8, 16, 32, 64)
 REF_SPP = 1024
 OIDN_QUALITIES = ("balanced", "high")
 PEERS = ("mitsuba", "cycles")
 RAW_CURVES = ("raw", "cycles")
 """The peers' curves without a denoiser (left out of "denoised_only")."""
-QUICK = dict(scenes=("courtyard",), sizes=("160x90",), spp=(1, 4, 16), ref_spp=64, frames=3, warmup=2)
+QUICK = dict(scenes=("courtyard",), sizes=("160x90",), spp=(1, 4, 16), ref_spp=64, frames=3, warmup=2,
+             motion_frames=4)
 GUIDE_SUPERSAMPLE = 2
 TRIM = 1e-3
 """Fraction of the worst pixels left out of "rel_mse_trimmed" (as in bench_baseline): OIDN spreads a little
@@ -120,11 +141,46 @@ def guides(scene, width, height, config):
     return guides_from_aovs(frame.aovs, supersample=s)
 
 
+def moving_camera(renderer, scene, frames: int = MOTION_FRAMES, step: float = MOTION_STEP):
+    """(wall ms of each moving frame, the last frame's HDR): the camera moved ``frames`` steps to the
+    left of its pose, then panned back to it one step a frame (``step`` × its distance to its
+    target); the pose restored after. The last frame, at the pose, is read back and not timed."""
+    from serenity.eval.stability import pan_camera
+
+    base = scene.camera
+    dist = float(np.linalg.norm(np.asarray(base.target) - np.asarray(base.position)))
+    walls = []
+    try:
+        for k in range(-frames, 0):
+            scene.camera = pan_camera(base, step * dist * k)
+            walls += timed_frames(renderer, 1)
+        scene.camera = base
+        hdr = renderer.render(read_back=("hdr",)).hdr
+    finally:
+        scene.camera = base
+    return walls[1:], hdr  # the first moving frame follows a jump (a cut), not a step
+
+
+def case_reference(scene, width, height, args, info: dict):
+    """(reference image, its description for the JSON) of one case (``REFERENCES``, else ``--ref-spp``)."""
+    from serenity.eval.reference import reference_for_error, render_reference
+
+    spec = REFERENCES.get(scene.name)
+    if spec is None:
+        ref = render_reference(scene, width, height, spp=args.ref_spp, component="full", seed=0,
+                               progress=not args.no_progress, info=info)
+        return ref, {"spp": args.ref_spp, "cached": bool(info.get("cached"))}
+    r = reference_for_error(scene, width, height, flip=spec["flip"], rel_mse=spec["rel_mse"], spp=spec["spp"],
+                            max_spp=spec["max_spp"], seed=0, progress=not args.no_progress)
+    return r.image, {"spp": r.spp, "cached": bool(r.cached), "floor": r.floor, "converged": bool(r.converged),
+                     "floor_for": {"flip": spec["flip"], "rel_mse": spec["rel_mse"]},
+                     **({"message": r.message} if getattr(r, "message", None) else {})}
+
+
 def run_case(scene, width, height, args, bar) -> dict:
     """Everything measured for one scene and size (one entry of the JSON's "cases")."""
     from serenity.eval.frontier import combine, equal_error_speedup
     from serenity.eval.metrics import compare, rel_mse
-    from serenity.eval.reference import render_reference
     from serenity.frame import Renderer
 
     name = scene.name
@@ -132,17 +188,20 @@ def run_case(scene, width, height, args, bar) -> dict:
     exposure = next(iter(configs.values())).exposure
     tag = f"{name} {width}x{height}"
 
-    bar.set_description(f"{tag}: reference {args.ref_spp} spp")
+    bar.set_description(f"{tag}: reference")
     info: dict = {}
     t0 = time.perf_counter()
-    ref = render_reference(scene, width, height, spp=args.ref_spp, component="full", seed=0,
-                           progress=not args.no_progress, info=info)
+    ref, ref_info = case_reference(scene, width, height, args, info)
     ref_s = time.perf_counter() - t0
     bar.update(1)
+    floor = ref_info.get("floor")
 
     def metrics(img):
         m = compare(img, ref, exposure=exposure)
-        return {"flip": m["flip"], "rel_mse": m["rel_mse"], "rel_mse_trimmed": rel_mse(img, ref, trim=TRIM)}
+        out = {"flip": m["flip"], "rel_mse": m["rel_mse"], "rel_mse_trimmed": rel_mse(img, ref, trim=TRIM)}
+        if floor is not None:  # the error is at least four times the reference's own noise
+            out["above_floor"] = {k: bool(out[k] >= 4 * floor[k]) for k in ("flip", "rel_mse")}
+        return out
 
     # ours: timed before and again after the peer's sweep (this machine's load drifts over minutes);
     # the image is one more frame, read back, before it
@@ -153,7 +212,12 @@ def run_case(scene, width, height, args, bar) -> dict:
         for _ in range(args.warmup):
             r.render()
         walls = timed_frames(r, args.frames)
-        ours.append({"name": cname, "wall_ms_before": walls, **metrics(r.render(read_back=("hdr",)).hdr)})
+        entry = {"name": cname, "wall_ms_before": walls, **metrics(r.render(read_back=("hdr",)).hdr)}
+        if args.motion_frames:
+            bar.set_description(f"{tag}: ours ({cname}), moving camera")
+            moving_walls, hdr = moving_camera(r, scene, args.motion_frames)
+            entry["moving"] = {"wall_ms": moving_walls, "ms": float(np.median(moving_walls)), **metrics(hdr)}
+        ours.append(entry)
         bar.update(1)
 
     curves: dict[str, list[dict]] = {}
@@ -176,22 +240,29 @@ def run_case(scene, width, height, args, bar) -> dict:
         renderers.pop(o["name"]).close()
         o["ms"] = float(np.median(o["wall_ms_before"] + o["wall_ms_after"]))
 
-    speedups = {}
     denoised = [q for q in curves if q not in RAW_CURVES]
-    for metric in SPEEDUP_METRICS:
-        per_config = {}
-        for o in ours:
-            per_curve = {q: equal_error_speedup([(p["ms"], p[metric]) for p in pts], o["ms"], o[metric])
-                         for q, pts in curves.items()}
-            # the headline: the peers' fastest way to our error, raw or denoised (raw only ever makes it
-            # faster); "denoised_only" keeps the denoised curves alone
-            per_config[o["name"]] = {**combine(per_curve),
-                                     "denoised_only": combine({q: per_curve[q] for q in denoised}),
-                                     "per_curve": per_curve}
-        speedups[metric] = per_config
-    case = {"scene": name, "size": [width, height], "reference": {"spp": args.ref_spp, "seconds": ref_s,
-                                                                  "cached": bool(info.get("cached"))},
-            "ours": ours, "peer": curves, "equal_error": speedups}
+
+    def speedups_of(point) -> dict:
+        out = {}
+        for metric in SPEEDUP_METRICS:
+            per_config = {}
+            for o in ours:
+                if (p := point(o)) is None:
+                    continue
+                per_curve = {q: equal_error_speedup([(c["ms"], c[metric]) for c in pts], p["ms"], p[metric])
+                             for q, pts in curves.items()}
+                # the headline: the peers' fastest way to our error, raw or denoised (raw only ever makes
+                # it faster); "denoised_only" keeps the denoised curves alone
+                per_config[o["name"]] = {**combine(per_curve),
+                                         "denoised_only": combine({q: per_curve[q] for q in denoised}),
+                                         "per_curve": per_curve}
+            out[metric] = per_config
+        return out
+
+    case = {"scene": name, "size": [width, height], "reference": {**ref_info, "seconds": ref_s},
+            "ours": ours, "peer": curves, "equal_error": speedups_of(lambda o: o)}
+    if args.motion_frames:
+        case["equal_error_moving"] = speedups_of(lambda o: o.get("moving"))
     if cycles_run is not None:
         case["cycles"] = cycles_run
     return case
@@ -243,17 +314,24 @@ def headline(case: dict, metric: str = "flip") -> tuple[str, dict]:
 
 
 def summarise(cases: list[dict], goal: float) -> list[dict]:
+    """Per case, the headline config's standing by each metric; with a moving camera too
+    ("moving": the same config's result with the camera panning)."""
     from serenity.eval.frontier import describe, goal_met
+
+    def entry(name, r):
+        return {"config": name, "status": r["status"], "speedup": r["speedup"], "bound": r["bound"],
+                "peer_ms": r["peer_ms"], "curve": r["curve"],
+                "peer": "cycles" if r["curve"].startswith("cycles") else "mitsuba", "reads": describe(r),
+                "goal_met": goal_met(r, goal)}
 
     out = []
     for c in cases:
         row = {"scene": c["scene"], "size": f"{c['size'][0]}x{c['size'][1]}"}
         for metric in SPEEDUP_METRICS:
             name, r = headline(c, metric)
-            row[metric] = {"config": name, "status": r["status"], "speedup": r["speedup"], "bound": r["bound"],
-                           "peer_ms": r["peer_ms"], "curve": r["curve"],
-                           "peer": "cycles" if r["curve"].startswith("cycles") else "mitsuba", "reads": describe(r),
-                           "goal_met": goal_met(r, goal)}
+            row[metric] = entry(name, r)
+            if "equal_error_moving" in c:
+                row[metric]["moving"] = entry(name, c["equal_error_moving"][metric][name])
         out.append(row)
     return out
 
@@ -262,8 +340,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true",
                    help="smoke run: courtyard at 160x90, 1/4/16 spp, a 64-spp reference, 3 frames")
-    p.add_argument("--scenes", type=csv, help=f"comma-separated (default: {','.join(SCENES)})")
-    p.add_argument("--sizes", type=csv, help=f"comma-separated WxH (default: {','.join(SIZES)})")
+    p.add_argument("--scenes", type=csv, help="comma-separated built-in names or scene files (default: courtyard, "
+                                              "cornell and scenes/breakfast_room/breakfast_room.toml)")
+    p.add_argument("--sizes", type=csv, help=f"comma-separated WxH (default: {','.join(SIZES)}; the breakfast room "
+                                             f"{','.join(SCENE_SIZES['breakfast_room'])})")
     p.add_argument("--spp", type=lambda t: [int(x) for x in csv(t)], help="peer spp list (default 1,2,4,...,64)")
     p.add_argument("--ref-spp", type=int, help=f"reference spp (default {REF_SPP})")
     p.add_argument("--peers", type=csv,
@@ -273,6 +353,8 @@ def main(argv=None) -> int:
                    help=f"OIDN qualities of the denoised curves (default {','.join(OIDN_QUALITIES)})")
     p.add_argument("--frames", type=int, help="our timed frames (default 5)")
     p.add_argument("--warmup", type=int, help="our untimed frames first (default 3)")
+    p.add_argument("--motion-frames", type=int,
+                   help=f"frames of the moving camera's pan, 0 = none (default {MOTION_FRAMES})")
     p.add_argument("--json", help="output JSON (default results/frontier.json; --quick: under serenity_out/)")
     p.add_argument("--png", help="output chart (default results/frontier.png; --quick: under serenity_out/)")
     p.add_argument("--references-only", action="store_true",
@@ -292,12 +374,18 @@ def main(argv=None) -> int:
     args.json = args.json or os.path.join(out_dir, "frontier.json")
     args.png = args.png or os.path.join(out_dir, "frontier.png")
     try:
-        defaults = QUICK if args.quick else dict(scenes=SCENES, sizes=SIZES, spp=SPP, ref_spp=REF_SPP, frames=5,
-                                                 warmup=3)
+        defaults = QUICK if args.quick else dict(scenes=SCENES, sizes=None, spp=SPP, ref_spp=REF_SPP, frames=5,
+                                                 warmup=3, motion_frames=MOTION_FRAMES)
         for key, value in defaults.items():
             if getattr(args, key) is None:
                 setattr(args, key, list(value) if isinstance(value, tuple) else value)
-        sizes = [parse_size(s) for s in args.sizes]
+        if args.motion_frames < 0:
+            raise SerenityError(f"--motion-frames must be >= 0, got {args.motion_frames}")
+
+        def sizes_of(scene_name: str) -> list[tuple[int, int]]:
+            return [parse_size(x) for x in (args.sizes or SCENE_SIZES.get(scene_name, SIZES))]
+
+        sizes_of("")  # a bad --sizes fails here
         if sorted(set(args.spp)) != list(args.spp) or args.spp[0] < 1:
             raise SerenityError(f"--spp must be rising positive counts, got {args.spp}")
         bad = [q for q in args.oidn if q not in QUALITIES]
@@ -318,29 +406,27 @@ def main(argv=None) -> int:
 
         from serenity.scene import load
 
-        scenes = {name: load(name) for name in args.scenes}  # a bad name fails here, before any work
+        scenes = {name: load(name) for name in args.scenes}  # a bad name or file fails here, before any work
         t_start = time.perf_counter()
         if args.references_only:
-            from serenity.eval.reference import render_reference
-
-            for name in args.scenes:
-                for w, h in sizes:
+            for scene in scenes.values():
+                for w, h in sizes_of(scene.name):
                     t0 = time.perf_counter()
                     info: dict = {}
-                    render_reference(scenes[name], w, h, spp=args.ref_spp, component="full", seed=0,
-                                     progress=not args.no_progress, info=info)
-                    print(f"{name} {w}x{h}: reference {args.ref_spp} spp "
-                          f"{'cached' if info.get('cached') else 'rendered'} in {time.perf_counter() - t0:.0f} s")
+                    _, ref_info = case_reference(scene, w, h, args, info)
+                    floor = f", noise floor {ref_info['floor']}" if "floor" in ref_info else ""
+                    print(f"{scene.name} {w}x{h}: reference {ref_info['spp']} spp{floor} "
+                          f"{'cached' if ref_info.get('cached') else 'rendered'} in {time.perf_counter() - t0:.0f} s")
             return 0
         n_cfg = len(our_configs())
         # reference, ours, each Mitsuba spp, the Cycles run
         steps = 1 + n_cfg + ("mitsuba" in args.peers) * len(args.spp) + ("cycles" in args.peers)
-        total = len(args.scenes) * len(sizes) * steps
+        total = sum(len(sizes_of(scene.name)) for scene in scenes.values()) * steps
         cases = []
         with tqdm(total=total, unit="step", disable=args.no_progress) as bar:
-            for name in args.scenes:
-                for w, h in sizes:
-                    cases.append(run_case(copy.deepcopy(scenes[name]), w, h, args, bar))
+            for scene in scenes.values():
+                for w, h in sizes_of(scene.name):
+                    cases.append(run_case(copy.deepcopy(scene), w, h, args, bar))
         elapsed = time.perf_counter() - t_start
     except SerenityError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -374,9 +460,16 @@ def main(argv=None) -> int:
         "ours": {"configs": list(our_configs()), "presets": {k: PRESETS[k] for k in our_configs()},
                  "sync_stages": "cpu", "frames": args.frames, "warmup": args.warmup,
                  "time": "median wall time of Renderer.render(read_back=False) + GL finish, static camera and "
-                         "sun, after the warm-up: frames frames before the peer's sweep and frames after it"},
+                         "sun, after the warm-up: frames frames before the peer's sweep and frames after it",
+                 "moving": {"frames": args.motion_frames, "step": MOTION_STEP,
+                            "what": "the camera panned back to the case's pose, each frame a step of 'step' times "
+                                    "its distance to its target; ms: median wall time of the moving frames after "
+                                    "the first; errors: the last frame, at the case's pose"}},
         "reference": {"renderer": "Mitsuba path, unlimited depth (serenity.eval.reference.render_reference)",
-                      "spp": args.ref_spp},
+                      "spp": args.ref_spp,
+                      "with_floor": {k: v for k, v in REFERENCES.items()},
+                      "floor": "reference_for_error: two half-spp renders; floor = FLIP and relMSE of one "
+                               "against the other (conservative: about 4x the reference's own relMSE)"},
         "metrics": {"flip": "mean FLIP (LDR) after exposure + Reinhard + sRGB, all pixels",
                     "rel_mse": "mean (x-ref)^2/(ref^2+1e-2), linear HDR, all pixels",
                     "rel_mse_trimmed": f"the same without the {TRIM:.1%} of pixels with the largest error (charted: "

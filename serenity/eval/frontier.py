@@ -220,6 +220,7 @@ _PEER_STYLE = {
 }
 _OUR_MARKERS = ("*", "P", "X", "h", "p", "d")
 REACH_LABEL = "fastest peer point at our error or better (dotted: from ours)"
+MOVING_LABEL = "Serenity, camera moving (hollow: same marker as the still frame)"
 
 
 def _peer_label(curve: str) -> str:
@@ -235,7 +236,7 @@ def frontier_figure(panels: list[dict], goal: float = GOAL_SPEEDUP, metrics=CHAR
     """A matplotlib Figure: one row per panel (scene, size), one column per metric (key, axis name).
 
     Each panel: {"title": str, "peer": {curve: [{"spp", "ms", <metric>...}, ...]},
-    "ours": [{"name", "ms", <metric>...}], "speedup": {<metric>: result}
+    "ours": [{"name", "ms", <metric>..., optional "moving": {"ms", <metric>...}}], "speedup": {<metric>: result}
     (optional :func:`combine` / :func:`equal_error_speedup` results of the headline config, in the titles),
     "headline": our config's name the speed-ups are for}. The raw curve's points carry their spp;
     every other mark is identified by the shared legend (no labels that could overlap the data)."""
@@ -275,6 +276,12 @@ def frontier_figure(panels: list[dict], goal: float = GOAL_SPEEDUP, metrics=CHAR
                 handles.setdefault(f"Serenity: {o['name']}", h)
                 xs.append(o["ms"])
                 ys.append(o[metric])
+                if (m := o.get("moving")) is not None:  # the same config with the camera moving: hollow
+                    h = ax.scatter([m["ms"]], [m[metric]], marker=_OUR_MARKERS[k % len(_OUR_MARKERS)], s=120,
+                                   facecolors="none", edgecolors="tab:red", lw=1.2, zorder=5, label=MOVING_LABEL)
+                    handles.setdefault(MOVING_LABEL, h)
+                    xs.append(m["ms"])
+                    ys.append(m[metric])
             r = (panel.get("speedup") or {}).get(metric)
             head = next((o for o in panel["ours"] if o["name"] == panel.get("headline")), None)
             if r is not None and head is not None and r["peer_ms"] is not None:
