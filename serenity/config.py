@@ -567,7 +567,7 @@ class RenderConfig:
     last frame's at the same surface point (reprojected per pixel; disocclusions take this frame's
     alone), 1 = none of the last frame's. Against the light that slid over the surfaces with the
     low-res points as the camera moved (``raster/temporal.py``; ``docs/stability.md``)."""
-    indirect_refine_below: float = 0.2
+    indirect_refine_below: float = 0.05
     """With ``indirect_scale`` > 1: pixels whose most alike low-res texel (the upsampling's guide
     similarity: depth and normal, ``glsl/lowres.glsl``) is below this have their indirect light
     computed at full resolution instead of upsampled (``raster/lowres.IndirectRefinement``): surfaces
