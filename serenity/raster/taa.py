@@ -54,6 +54,11 @@ class TAAConfig:
     """Weight of each new frame's sample once the history holds ``1 / alpha`` frames (before that,
     ``1 / frames``: the first frames after a reset average evenly). 0.1 keeps about 10 frames: more
     smooths further but lags a changing image (a moving shadow, the indirect light's updates) longer."""
+    alpha_still: float = 1.0 / 32.0
+    """... where the image stands still (the reprojection moves it under a pixel: ``alpha`` at a pixel
+    a frame and more, in between by the distance): a still view averages 4 jitter cycles evenly before
+    the blend turns exponential, and an EMA of 0.1 over the cycle leaves an edge's pixels stepping by
+    about a tenth of the edge's contrast each frame."""
     gamma: float = 1.25
     """Half-width of the box the history is clipped to, in standard deviations of this frame's 3×3
     neighbourhood (variance clipping; smaller rejects more history: less ghosting, more flicker)."""
@@ -63,6 +68,10 @@ class TAAConfig:
     firefly counts for little, an edge's samples all alike), "karis" each one's by 1 + exposure × its
     luminance (Karis 2014: the blend of tone-mapped values, which darkens every edge between a bright
     and a dark surface against a linear box filter), "none" neither."""
+    gamma_still: float = 2.0
+    """... where the image stands still (in between by the distance it moves, as ``alpha_still``): each
+    frame's neighbourhood holds other sub-pixel samples, and a tight box clipped the converged
+    history of an edge differently every frame (a still view's edges stepped by 3 % a frame)."""
     clip: bool = True
     """False leaves the history unclipped (to see what the clip does: ghosts where the depth test
     passes)."""
@@ -79,10 +88,11 @@ class TAAConfig:
     def __post_init__(self):
         if self.weights not in WEIGHTS:
             raise SerenityError(f"TAAConfig.weights must be one of {WEIGHTS}, got {self.weights!r}")
-        if not (0.0 < self.alpha <= 1.0 and 0.0 < self.gamma <= 8.0 and isinstance(self.cycle, int)
-                and 1 <= self.cycle <= 256 and 0.0 < self.cut_angle_deg and 0.0 < self.cut_distance):
-            raise SerenityError(f"TAAConfig: need 0 < alpha <= 1, 0 < gamma <= 8, an int cycle in 1..256 and "
-                                f"positive cut thresholds, got {self}")
+        if not (0.0 < self.alpha <= 1.0 and 0.0 < self.alpha_still <= 1.0 and 0.0 < self.gamma <= 8.0
+                and 0.0 < self.gamma_still <= 8.0 and isinstance(self.cycle, int) and 1 <= self.cycle <= 256
+                and 0.0 < self.cut_angle_deg and 0.0 < self.cut_distance):
+            raise SerenityError(f"TAAConfig: need 0 < alpha, alpha_still <= 1, 0 < gamma, gamma_still <= 8, an int "
+                                f"cycle in 1..256 and positive cut thresholds, got {self}")
 
 
 class TAAPass:
@@ -152,7 +162,8 @@ class TAAPass:
         cfg, p = self.config, self.program
         out, fbo = self._sets[self._turn]
         prev_tex = self._sets[1 - self._turn][0]
-        alpha = 1.0 if self._prev is None else max(cfg.alpha, 1.0 / (self.frames + 1))
+        ramp = 1.0 if self._prev is None else 1.0 / (self.frames + 1)
+        alpha, alpha_still = max(cfg.alpha, ramp), max(cfg.alpha_still, ramp)
         with self.ctx.debug_scope("taa"):
             fbo.use()
             hdr_texture.use(location=0)
@@ -161,7 +172,9 @@ class TAAPass:
             prev_tex.use(location=3)
             values = {"u_hdr": 0, "u_position": 1, "u_normal": 2, "u_history": 3,
                       "u_jitter": (float(jitter[0]), float(jitter[1])), "u_alpha": float(alpha),
-                      "u_gamma": float(cfg.gamma) if cfg.clip else 0.0, "u_exposure": float(exposure),
+                      "u_alpha_still": float(alpha_still),
+                      "u_gamma": float(cfg.gamma) if cfg.clip else 0.0,
+                      "u_gamma_still": float(cfg.gamma_still), "u_exposure": float(exposure),
                       "u_weights": WEIGHTS.index(cfg.weights),
                       "u_has_prev": self._prev is not None, "u_catmull_rom": bool(cfg.catmull_rom),
                       "u_pixel_angle": math.radians(camera.fov_y_deg) / self.size[1],

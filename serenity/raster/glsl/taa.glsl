@@ -34,8 +34,10 @@ uniform vec3 u_camera_pos;
 uniform vec3 u_camera_forward;
 uniform vec2 u_jitter;                 // this frame's jitter, pixels (x right, y up)
 uniform float u_pixel_angle;           // radians a pixel spans (vertically) at the view's centre
-uniform float u_alpha;                 // weight of this frame's sample (1: no history)
+uniform float u_alpha;                 // weight of this frame's sample where the image moves a pixel or more
+uniform float u_alpha_still;           // ... where it stands still (1: no history)
 uniform float u_gamma;                 // variance clipping's box, standard deviations (0: no clip)
+uniform float u_gamma_still;           // ... where the image stands still
 uniform float u_exposure;
 uniform int u_weights;                 // 0: plain blend; 1: Karis' 1 / (1 + exposure L); 2: the excess over the neighbours
 uniform bool u_has_prev;
@@ -121,7 +123,7 @@ void main() {
     bool surface = pos.w > 0.0;
     float depth = surface ? dot(pos.xyz - u_camera_pos, u_camera_forward) : -1.0;
     bool finite_cur = all(lessThan(abs(cur), vec3(3.0e38)));  // NaN fails too
-    if (!u_has_prev || u_alpha >= 1.0 || !finite_cur) {
+    if (!u_has_prev || u_alpha_still >= 1.0 || !finite_cur) {
         o_hdr = vec4(cur, depth);
         return;
     }
@@ -186,8 +188,9 @@ void main() {
         o_hdr = vec4(cur, depth);
         return;
     }
+    float motion = clamp(length(q - (gl_FragCoord.xy - 0.5)), 0.0, 1.0);  // pixels, up to one
     if (u_gamma > 0.0) {
-        vec3 h = clip_to_box(rgb_to_ycocg(compress(hist)), m1, u_gamma * sigma);
+        vec3 h = clip_to_box(rgb_to_ycocg(compress(hist)), m1, mix(u_gamma_still, u_gamma, motion) * sigma);
         hist = max(expand(ycocg_to_rgb(h)), vec3(0.0));
     }
     float lc = max(luminance(cur), 0.0), lh = luminance(hist);
@@ -196,8 +199,11 @@ void main() {
         lh = 0.0;
     }
     float k = u_weights == 0 ? 0.0 : u_exposure;
-    float wc = u_alpha / (1.0 + k * lc);
-    float wh = (1.0 - u_alpha) / (1.0 + k * lh);
+    // a still image averages more frames (the jitter's cycle evenly, so an edge does not shimmer); a
+    // moving one fewer (each resampling of the history blurs it, and what it lags shows)
+    float a = mix(u_alpha_still, u_alpha, motion);
+    float wc = a / (1.0 + k * lc);
+    float wh = (1.0 - a) / (1.0 + k * lh);
     o_hdr = vec4((wc * cur + wh * hist) / (wc + wh), depth);
 }
 #endif
