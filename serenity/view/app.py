@@ -13,7 +13,10 @@ view) and the sky volume is current, each frame is rendered with the next sub-pi
 ``Renderer.render_accumulated``'s Halton(2, 3) sequence (the first unjittered) and folded into a
 running mean on the GL side (``present.AccumulatePass``), which the final view shows; after
 ``taa_samples`` frames the view is converged (the panel says so) and frames are rendered unjittered
-again, the mean kept. Any change starts it afresh. The AOV views are never jittered.
+again, the mean kept. Any change starts it afresh. The AOV views are never jittered by it. With
+``RenderConfig.antialiasing = "taa"`` the renderer jitters and resolves the frames the viewer does
+not accumulate (a moving view) itself; the viewer's jitter replaces the renderer's while it
+accumulates, so no frame is jittered twice.
 """
 
 from __future__ import annotations
@@ -354,7 +357,9 @@ class Viewer:
             self._taa_reset = False
         i = self.taa_count
         sample = taa and i < self.taa_samples and (i == 0 or not save)
-        jitter = (halton(i, 2) - 0.5, halton(i, 3) - 0.5) if sample and i else (0.0, 0.0)
+        # while it accumulates (and for F12) its jitter replaces the renderer's own (antialiasing =
+        # "taa"); else the renderer's choice (TAA's jitter, or none)
+        jitter = (halton(i, 2) - 0.5, halton(i, 3) - 0.5) if sample and i else ((0.0, 0.0) if sample or save else None)
         frame = self.renderer.render(read_back=save, jitter=jitter)
         stale = self.sky_stale()
         if stale is not None and stale.any():
