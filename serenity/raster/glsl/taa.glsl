@@ -108,13 +108,6 @@ vec3 clip_to_box(vec3 h, vec3 centre, vec3 extent) {
     return m > 1.0 ? centre + d / m : h;
 }
 
-// The history at q, every tap taken: Catmull-Rom, or bilinear; (0, 0, 0, 0) off the image
-vec4 history_at(vec2 q) {
-    vec2 size = vec2(textureSize(u_history, 0));
-    if (any(lessThan(q, vec2(-0.5))) || any(greaterThan(q, size - 0.5))) return vec4(0.0);
-    return vec4(u_catmull_rom ? catmull_rom(q) : texture(u_history, (q + 0.5) / size).rgb, 1.0);
-}
-
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
     ivec2 size = textureSize(u_hdr, 0);
@@ -155,34 +148,25 @@ void main() {
     m1 /= 9.0;
     vec3 sigma = sqrt(max(m2 / 9.0 - m1 * m1, vec3(0.0)));
     vec3 n = normalize(texelFetch(u_normal, px, 0).xyz);
+    // the jittered samples of an edge's pixels fall on either side: there the history follows the
+    // nearest surface (the silhouette's motion; the sky's direction where there is none) and is taken
+    // whatever depth its taps show, the clip below keeping what this frame's neighbourhood allows
+    // (one reprojection either way: llvmpipe runs both sides of a branch its pixels disagree on)
+    vec3 rp = edge ? near_p : pos.xyz;
+    vec2 shift = u_jitter - (edge ? vec2(near_o) : vec2(0.0));
     vec2 q;
-    vec3 hist;
-    if (edge) {
-        // the jittered samples of an edge's pixels fall on either side: the history follows the
-        // nearest surface (the silhouette's motion; the sky's direction where there is none) and is
-        // taken whatever depth its taps show, the clip below keeping what this frame's
-        // neighbourhood allows
-        if (near_z < 3.0e38) {
-            reproject_bilinear(u_history, u_prev_view_proj, u_prev_camera_pos, u_prev_camera_forward,
-                               u_pixel_angle, near_p, n, u_jitter - vec2(near_o), q);
-        } else {
-            sky_history(vec2(size), q);
-        }
-        vec4 h = history_at(q);
-        if (h.w == 0.0) {  // off the image
-            o_hdr = vec4(cur, depth);
-            return;
-        }
-        hist = h.rgb;
-    } else {
-        vec4 sum = surface ? reproject_bilinear(u_history, u_prev_view_proj, u_prev_camera_pos,
-                                                u_prev_camera_forward, u_pixel_angle, pos.xyz, n, u_jitter, q)
-                           : sky_history(vec2(size), q);
-        if (sum.w < 0.5) {  // off the image, or a disocclusion: this frame's sample alone
-            o_hdr = vec4(cur, depth);
-            return;
-        }
-        hist = (u_catmull_rom && sum.w > 0.999) ? catmull_rom(q) : sum.rgb / sum.w;
+    vec4 sum = (edge ? near_z < 3.0e38 : surface)
+        ? reproject_bilinear(u_history, u_prev_view_proj, u_prev_camera_pos, u_prev_camera_forward, u_pixel_angle,
+                             rp, n, shift, q)
+        : sky_history(vec2(size), q);
+    bool off = any(lessThan(q, vec2(-0.5))) || any(greaterThan(q, vec2(size) - 0.5));
+    if (edge ? off : sum.w < 0.5) {  // off the image, or a disocclusion: this frame's sample alone
+        o_hdr = vec4(cur, depth);
+        return;
+    }
+    vec3 hist = sum.rgb / max(sum.w, 1e-6);
+    if (edge || sum.w > 0.999) {  // every tap taken
+        hist = u_catmull_rom ? catmull_rom(q) : texture(u_history, (q + 0.5) / vec2(size)).rgb;
     }
     if (!all(lessThan(abs(hist), vec3(3.0e38)))) {
         o_hdr = vec4(cur, depth);
