@@ -77,11 +77,7 @@ import warnings
 from urllib.parse import unquote
 
 import numpy as np
-import trimesh
 from PIL import Image
-from trimesh.visual import TextureVisuals
-from trimesh.visual.color import ColorVisuals
-from trimesh.visual.material import PBRMaterial, SimpleMaterial
 
 from serenity.colour import LUMA_REC709, srgb_to_linear
 from serenity.errors import SceneError
@@ -205,6 +201,8 @@ def load_mesh_file(path) -> tuple[list[Mesh], list[Material]]:
     _check_readable_gltf(path)
     js = _gltf_json(path) if ext in (".glb", ".gltf") else {}
     _check_gltf_images(path, js)
+    import trimesh  # here: trimesh (and scipy) take most of a second to import, a tracer process needs neither
+
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -344,6 +342,9 @@ class _MaterialConverter:
         mat = getattr(visual, "material", None)
         if mat is not None and id(mat) in self._by_id:
             return self._by_id[id(mat)]
+        from trimesh.visual.color import ColorVisuals
+        from trimesh.visual.material import PBRMaterial, SimpleMaterial
+
         if isinstance(mat, PBRMaterial):
             m = self._from_pbr(mat)
         elif isinstance(mat, SimpleMaterial):
@@ -552,6 +553,8 @@ def _pbr_from_material(m: Material):
         px = texture_to_srgb8(m.albedo_texture)
         image = Image.fromarray(px if px.shape[2] in (3, 4) else px[:, :, :3])
     alpha = m.alpha if m.alpha_cutoff is not None else 1.0 - m.transparency
+    from trimesh.visual.material import PBRMaterial
+
     return PBRMaterial(
         name=m.name,
         baseColorFactor=[*np.clip(m.albedo, 0, 1).tolist(), alpha],
@@ -571,6 +574,9 @@ def export_glb(scene: Scene, path) -> None:
     mesh keeps its vertex order too), named after the Mesh (``MESH.MATERIAL`` when a Mesh has
     several materials). Identity node transforms.
     """
+    import trimesh
+    from trimesh.visual import TextureVisuals
+
     path = os.fspath(path)
     out = trimesh.Scene()
     pbr = [_pbr_from_material(m) for m in scene.materials]

@@ -34,7 +34,6 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-import trimesh
 
 from serenity.errors import SceneError
 from serenity.scene.model import (
@@ -143,6 +142,8 @@ class _Builder:
         self.add(mat, cap, np.tile(_Y, (len(cap), 1)), cap[:, [0, 2]] * np.array([1.0, -1.0]), cf)
 
     def sphere(self, mat: str, center, radius: float, subdivisions: int = 3) -> None:
+        import trimesh.creation  # here: trimesh (and scipy) take most of a second to import
+
         s = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
         d = np.asarray(s.vertices, np.float64)
         d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -367,6 +368,8 @@ def lumpy_mesh(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (V, 3) float32, faces (F, 3) int32) of a displaced icosphere (radius ~1) standing on
     a wavy terrain grid of about as many triangles: an uneven triangle soup of any size for the
     kd-tree's tests and benchmark (not a scene)."""
+    import trimesh.creation
+
     s = trimesh.creation.icosphere(subdivisions=subdivisions)
     v = s.vertices * (1 + 0.1 * np.sin(5 * s.vertices[:, :1]) * np.cos(7 * s.vertices[:, 1:2]))
     n = int(np.sqrt(len(s.faces) / 2)) + 1
