@@ -25,23 +25,26 @@ the reference reflects it. Rays are bent through up to ``transmissions`` transpa
 (``SkyConfig.gather_transmissions``; the window panes: the tracer's ``transmissions``) instead of
 stopping on the glass as if it were an opaque diffuse wall.
 
-Surfels: the rays' hit points quantised to cubes of ``gather_surfel_size`` metres and the dominant
-axis of their normal (so the two faces of a thin wall are two surfels), each with the mean position,
-normal and albedo (the tracer's ray-cone-filtered texture × material albedo) of its hits. V_s is one
-shadow ray towards the sun's centre through the kd-tree, from one of the surfel's own hits, the one
-nearest a point of its square fixed per surfel (``shadow_origins``: from the centres, which lie
-on a grid, a straight shadow edge flipped a whole row at once; from the square's point itself, a
-surfel at a corner or an edge started its ray inside the wall beside it or beyond the edge), re-traced
-when the sky map is rebaked (the sun moved). Rays that hit a
-back face (the probe sits inside or under geometry) mark the probe: a probe with more than
-``BACKFACE_LIMIT`` of its rays on back faces is moved by up to half a cell to a free spot (DDGI's
-probe relocation, Majercik et al. 2019); its texel stays on the grid. Directions: ``DIRECTION_SETS``
-spherical Fibonacci sets of R directions, each turned by its own random rotation; probe p uses set p
-mod ``DIRECTION_SETS`` (neighbouring probes sample different directions, so the quantisation of one
-set does not line up across the volume).
+Surfels: the rays' hit points quantised to cubes of ``gather_surfel_size`` metres (counted from the
+corner of the scene's bounding box) and the dominant axis of their normal (so the two faces of a
+thin wall are two surfels), each with the mean position, normal and albedo (the tracer's
+ray-cone-filtered texture × material albedo) of its hits. V_s is one shadow ray towards the sun's
+centre through the kd-tree, from one of the surfel's own hits, the one nearest a point of its square
+fixed per surfel (``shadow_origins``: from the centres, which lie on a grid, a straight shadow edge
+flipped a whole row at once; from the square's point itself, a surfel at a corner or an edge started
+its ray inside the wall beside it or beyond the edge), re-traced when the sky map is rebaked (the
+sun moved). Rays that hit a back face (the probe sits inside or under geometry) mark the probe: a
+probe with more than ``BACKFACE_LIMIT`` of its rays on back faces is moved by up to half a cell to a
+free spot (DDGI's probe relocation, Majercik et al. 2019); its texel stays on the grid. Directions:
+``DIRECTION_SETS`` spherical Fibonacci sets of R directions, each turned by its own random rotation;
+probe p uses set p mod ``DIRECTION_SETS`` (neighbouring probes sample different directions, so the
+quantisation of one set does not line up across the volume).
 
-Costs (``benchmarks/``): the rays are traced once per scene (``ProbeGather.build``); a pass is one
-surfel update (a volume lookup per surfel) and one gather of R loads per probe.
+Costs (``benchmarks/``): the rays are traced once per scene (``ProbeGather._build``), in chunks that
+are merged into surfels and depth moments as they come (the hits of every ray never exist at once);
+the result is cached on disk, and so are the coefficients after a first lighting's passes
+(``converged_path``); a pass is one surfel update (a volume lookup per surfel) and one gather of R
+loads per probe.
 """
 
 from __future__ import annotations
@@ -59,7 +62,9 @@ from serenity.kernels.atmosphere_ref import sample_sky_map_np
 from serenity.kernels.kdtree_build import cache_dir
 from serenity.kernels.launch import launch
 from serenity.kernels.sh import eval_sh9, sh_basis, vec9
+from serenity.memory import mapped_large_blocks
 from serenity.scene.model import IDENTITY_UV
+from serenity.threads import single_threaded_blas
 
 wp.set_module_options({"enable_backward": False})
 
@@ -77,7 +82,10 @@ _INV_PI = wp.constant(1.0 / math.pi)
 
 
 #: bump when the traced data or its cached layout changes
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
+#: host work over every probe ray (millions) runs in slices of this many, so that no temporary
+#: spans them all
+_SLICE = 1 << 20
 SURFEL_SHADOW_SPREAD = 0.5
 """Where in its square a surfel's shadow ray may start (``shadow_origins``), as a fraction of the
 square's side around its mean position: far enough apart that a straight shadow edge crosses a row of
@@ -87,7 +95,7 @@ surfels one at a time, near enough the mean that the one ray stands for the surf
 #: traces of at least this many rays are cached on disk (``cache_dir()/probegather-<key>.npz``)
 CACHE_MIN_RAYS = 1_000_000
 #: rays the probes' trace hands the tracer per call (its G-buffer for those rays is the memory peak)
-TRACE_CHUNK_RAYS = 1 << 20
+TRACE_CHUNK_RAYS = 1 << 18
 #: a trace of at least this many rays shows a progress bar
 PROGRESS_RAYS = 4_000_000
 
@@ -213,36 +221,6 @@ def volume_irradiance(coeffs: wp.array2d(dtype=float), open_sky: wp.array(dtype=
         e_open += wp.vec3(open_sky[3 * k], open_sky[3 * k + 1], open_sky[3 * k + 2]) * y[k]
     e = e * (1.0 - w_open) + e_open * w_open
     return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
-
-
-@wp.kernel
-def depth_moments(
-    # inputs
-    dist: wp.array2d(dtype=float),
-    dirs: wp.array2d(dtype=wp.vec3),
-    texel_dirs: wp.array(dtype=wp.vec3),
-    power: float,
-    # outputs
-    moments: wp.array2d(dtype=wp.vec2),
-    offset: int,
-):
-    """Texel t of probe p's octahedral depth map: Σ w·(d, d²) / Σ w over the probe's rays,
-    w = max(0, ω_t·ω_r)^power, d the ray's hit distance (``dist``, misses at the cap)."""
-    i = wp.tid() + offset
-    texels = texel_dirs.shape[0]
-    probe = i // texels
-    t = texel_dirs[i - probe * texels]
-    s = probe % dirs.shape[0]
-    sw = float(0.0)
-    m = wp.vec2()
-    for r in range(dist.shape[1]):
-        c = wp.dot(t, dirs[s, r])
-        if c > 0.0:
-            w = wp.pow(c, power)
-            d = dist[probe, r]
-            sw += w
-            m += wp.vec2(d, d * d) * w
-    moments[probe, i - probe * texels] = m / wp.max(sw, 1.0e-12)
 
 
 @wp.kernel
@@ -386,16 +364,135 @@ def shadow_origins(positions: np.ndarray, surfel: np.ndarray, means: np.ndarray,
     inv = np.asarray(surfel).reshape(-1)
     means = np.asarray(means, np.float64)
     target = (means + SURFEL_SHADOW_SPREAD * shadow_ray_offsets(normals, size)).astype(np.float32)
-    d2 = np.empty(len(pos), np.float32)
-    for a in range(0, len(pos), 1 << 20):  # in slices: millions of hits as float64 (N, 3) cost a GB
-        diff = pos[a:a + (1 << 20)].astype(np.float32) - target[inv[a:a + (1 << 20)]]
-        d2[a:a + len(diff)] = np.einsum("ij,ij->i", diff, diff)
+
+    def d2(a):  # the squared distances of hits a .. a + _SLICE to their surfel's point
+        diff = pos[a:a + _SLICE].astype(np.float32) - target[inv[a:a + _SLICE]]
+        return np.einsum("ij,ij->i", diff, diff)
+
+    # in slices, twice (the nearest, then which hit it is): millions of hits as float64 (N, 3) cost
+    # a GB, and even one float per hit is tens of MB
     nearest = np.full(len(means), np.inf, np.float32)
-    np.minimum.at(nearest, inv, d2)  # O(N): a sort of millions of hits cost seconds
-    idx = np.flatnonzero(d2 == nearest[inv])  # (a tie keeps the last of its hits)
+    for a in range(0, len(pos), _SLICE):
+        np.minimum.at(nearest, inv[a:a + _SLICE], d2(a))  # O(N): a sort of millions of hits cost seconds
+    idx = np.concatenate([np.flatnonzero(d2(a) == nearest[inv[a:a + _SLICE]]) + a
+                          for a in range(0, len(pos), _SLICE)] or [np.zeros(0, np.int64)])
+    # (a tie keeps the last of its hits)
     out = means.copy()
     out[inv[idx]] = pos[idx]
     return out
+
+
+
+def _hit_distances(hits: dict, origins: np.ndarray, rays: int, cap: float) -> np.ndarray:
+    """(P, R) float32 the distance of each ray's hit (front or back face) in ``hits`` (P·R rays,
+    probe-major) from its probe at ``origins`` (P, 3); a miss or a hit beyond ``cap`` at ``cap``."""
+    diff = hits["position"].reshape(-1, rays, 3) - origins[:, None, :].astype(np.float32)
+    d = np.sqrt(np.einsum("prc,prc->pr", diff, diff))
+    any_hit = (hits["hit"] | hits["back"]).reshape(-1, rays)
+    return np.where(any_hit, np.minimum(d, np.float32(cap)), np.float32(cap)).astype(np.float32)
+
+
+class _MomentWeights:
+    """The probes' depth moments (module constants) as a matrix product per direction set: texel t of
+    a probe of set s is Σ_r W[s, t, r]·(d_r, d_r²) / Σ_r W[s, t, r], W = max(0, ω_t·ω_r)^VIS_POWER,
+    the same for every probe of the set."""
+
+    def __init__(self, dirs: np.ndarray):
+        texels = oct_texel_directions(VIS_OCT).astype(np.float32).astype(np.float64)
+        c = np.einsum("tc,src->str", texels, np.asarray(dirs, np.float64))
+        self.weights = np.where(c > 0.0, np.maximum(c, 0.0) ** VIS_POWER, 0.0).astype(np.float32)  # (S, T, R)
+        self.norm = np.maximum(self.weights.sum(axis=2, dtype=np.float64), 1e-12).astype(np.float32)  # (S, T)
+
+    def moments(self, dist: np.ndarray, sets: np.ndarray) -> np.ndarray:
+        """(P, T, 2) float32 the moments of P probes' ray distances ``dist`` (P, R) of sets ``sets`` (P,)."""
+        out = np.empty((len(dist), self.weights.shape[1], 2), np.float32)
+        for k in np.unique(sets):
+            i = np.flatnonzero(sets == k)
+            d = dist[i]
+            w = self.weights[k].T
+            out[i, :, 0] = (d @ w) / self.norm[k]
+            out[i, :, 1] = ((d * d) @ w) / self.norm[k]
+        return out
+
+
+def surfel_keys(positions: np.ndarray, normals: np.ndarray, anchor: np.ndarray, size: float) -> np.ndarray:
+    """(N,) int64 the surfel of each hit: its cube of ``size`` metres counted from ``anchor`` and the
+    dominant axis and sign of its normal (sorted by key: along z, then y, then x)."""
+    axis = np.argmax(np.abs(normals), axis=1)
+    side = normals[np.arange(len(normals)), axis] > 0
+    key = axis.astype(np.int64) * 2 + side
+    for c, prime in ((2, 1), (1, 1_000_033), (0, 1_000_033 * 1_000_003)):
+        key += np.floor((positions[:, c] - anchor[c]) / size).astype(np.int64) * (6 * prime)
+    return key
+
+
+class _SurfelMerge:
+    """Ray hits merged into surfels chunk by chunk (``surfel_keys``): each chunk's hits are summed
+    per surfel as they come, ``finish`` merges the chunks' sums; only the hits' positions (for the
+    shadow rays' origins) and each ray's surfel outlive their chunk."""
+
+    def __init__(self, rays: int, anchor: np.ndarray, size: float):
+        if rays >= 2**31:
+            raise ValueError(f"{rays} probe rays: at most 2**31 - 1")
+        self.anchor, self.size = np.asarray(anchor, np.float64), float(size)
+        self.surfel = np.full(rays, -1, np.int32)  # per ray: a chunk's surfel (``merged``), -2 a back face
+        self.keys, self.sums = np.zeros(0, np.int64), np.zeros((0, 10))  # the surfels so far, sorted by key
+        self.merged = np.zeros(0, np.int32)  # each chunk's surfel (numbered across chunks): its index in keys
+        self.hit_positions = np.empty((rays, 3), np.float32)  # filled from the front (pages as written)
+        self.hit_surfel = np.empty(rays, np.int32)
+        self.hits = 0
+
+    def add(self, rows, hit, back, positions, normals, albedo) -> None:
+        """The rays ``rows`` (a slice or indices, probe-major) with their hit and back-face masks and hits;
+        the rays of neither mask are left as they are."""
+        idx = np.flatnonzero(hit)
+        p, n = positions[idx], normals[idx]
+        keys, inv = np.unique(surfel_keys(p, n, self.anchor, self.size), return_inverse=True)
+        inv = inv.reshape(-1)
+        m = len(keys)
+        sums = np.empty((m, 10))
+        sums[:, 0] = np.bincount(inv, minlength=m)
+        for j, a in enumerate((p, n, albedo[idx])):
+            for c in range(3):
+                sums[:, 1 + 3 * j + c] = np.bincount(inv, a[:, c], m)
+        # merged into the surfels so far (tens of thousands): their sums, and where each moved
+        old = len(self.keys)
+        self.keys, both = np.unique(np.concatenate([self.keys, keys]), return_inverse=True)
+        both = both.reshape(-1).astype(np.int32)
+        every = np.concatenate([self.sums, sums])
+        self.sums = np.stack([np.bincount(both, every[:, c], len(self.keys)) for c in range(10)], axis=1)
+        local = (inv + len(self.merged)).astype(np.int32)
+        self.merged = np.concatenate([both[:old][self.merged], both[old:]])
+        rays = self.surfel[rows]
+        if isinstance(rows, slice):  # a view: written in place
+            rays[idx] = local
+            rays[back] = -2
+        else:
+            rays[idx] = local
+            rays[back] = -2
+            self.surfel[rows] = rays
+        h = self.hits
+        self.hit_positions[h:h + len(idx)] = p
+        self.hit_surfel[h:h + len(idx)] = local
+        self.hits += len(idx)
+
+    def finish(self):
+        """(surfel per ray (N,) int32: ≥ 0, −1 a miss, −2 a back face; the surfels' mean positions,
+        normals and albedo, float64 (S, 3) each; their shadow rays' origins, ``shadow_origins``)."""
+        total, inv = self.sums, self.merged
+        cnt = np.maximum(total[:, :1], 1.0)
+        sp, sn, sa = total[:, 1:4] / cnt, total[:, 4:7] / cnt, total[:, 7:10] / cnt
+        sn /= np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12)
+        surfel, hit_surfel = self.surfel, self.hit_surfel[:self.hits]
+        for a in range(0, len(surfel), _SLICE):  # in place, in slices: no temporaries of every ray
+            s = surfel[a:a + _SLICE]
+            hit = s >= 0
+            s[hit] = inv[s[hit]]
+            h = hit_surfel[a:a + _SLICE]
+            h[:] = inv[h]
+        origins = shadow_origins(self.hit_positions[:self.hits], hit_surfel, sp, sn, self.size)
+        self.surfel = self.hit_positions = self.hit_surfel = None
+        return surfel, sp, sn, sa, origins
 
 
 def visibility_atlas(moments: np.ndarray, resolution) -> np.ndarray:
@@ -480,13 +577,20 @@ class ProbeGather:
         self.glossy_energy = None if glossy_energy is None else np.asarray(glossy_energy, np.float32)
         self.transmissions = int(transmissions)
         self.dirs = direction_sets(self.rays)
+        self.dirs32 = self.dirs.astype(np.float32)
         self.from_cache = False
         path = None
+        #: the trace's cache key (None: not cached), which the converged lighting's key extends
+        self.cache_key = None
         if cache_key is not None and len(positions) * self.rays >= CACHE_MIN_RAYS:
-            path = cache_dir() / f"probegather-{self._key(cache_key, positions, cell, surfel_size)}.npz"
+            self.cache_key = self._key(cache_key, positions, cell, surfel_size)
+            path = cache_dir() / f"probegather-{self.cache_key}.npz"
             self.from_cache = self._load(path, len(positions))
         if not self.from_cache:
-            self._build(positions, cell, surfel_size)
+            # chunk after chunk of rays: freed, not kept on the heap; the moments' small matrix
+            # products on one thread (BLAS's threads only spun beside the tracer's: 5x slower)
+            with mapped_large_blocks(), single_threaded_blas():
+                self._build(positions, cell, surfel_size)
             if path is not None:
                 self._save(path)
         dev = device
@@ -498,48 +602,64 @@ class ProbeGather:
         self._vis_sun = np.array([0.0, 1.0, 0.0])
         self._vis_parts, self._vis_left, self._vis_next = 1, 0, 0
 
-    def _trace(self, origins: np.ndarray, sets: np.ndarray, progress: bool = False) -> dict:
-        """Rays of the given probes (their direction sets): hit mask (front faces), back-face mask,
-        position, shading normal (facing the ray) and albedo (+ the Phong lobe's energy) per ray,
-        flattened (probe-major), float32. Traced in chunks of about ``TRACE_CHUNK_RAYS`` so that the
-        tracer's full G-buffer never exists for all the rays at once (a tqdm bar for big jobs)."""
+    def _trace_chunks(self, origins: np.ndarray, sets: np.ndarray, progress: bool = False):
+        """The rays of the given probes (their direction sets) in chunks of about ``TRACE_CHUNK_RAYS``
+        (the tracer's G-buffer for those rays is the memory peak): yields (first probe, last probe + 1,
+        hits) per chunk, hits a dict of the chunk's rays (probe-major): hit mask (front faces),
+        back-face mask, position, shading normal (facing the ray) and albedo (+ the Phong lobe's
+        energy), float32 (a tqdm bar for big jobs)."""
         n, r = len(origins), self.rays
         total = n * r
-        out = {"hit": np.zeros(total, bool), "back": np.zeros(total, bool),
-               "position": np.empty((total, 3), np.float32), "normal": np.empty((total, 3), np.float32),
-               "albedo": np.empty((total, 3), np.float32)}
         per = max(1, TRACE_CHUNK_RAYS // r)
         bar = tqdm(total=total, desc=f"probe rays ({n:,} probes x {r})", unit="ray", unit_scale=True,
                    leave=False, disable=not (progress and total >= PROGRESS_RAYS))
         for a in range(0, n, per):
             b = min(n, a + per)
-            o = np.repeat(origins[a:b], r, axis=0).astype(np.float32)
-            d = self.dirs[sets[a:b]].reshape(-1, 3).astype(np.float32)
+            o = np.repeat(origins[a:b].astype(np.float32), r, axis=0)
+            d = self.dirs32[sets[a:b]].reshape(-1, 3)
             g = self.tracer.trace(o, d, 0.0, 0.0, backfaces=True, transmissions=self.transmissions)
-            rows = slice(a * r, b * r)
-            back = g["backface"]
-            out["back"][rows] = back
-            out["hit"][rows] = (g["position"][:, 3] > 0) & ~back
-            out["position"][rows] = g["position"][:, :3]
-            out["normal"][rows] = g["normal"][:, :3]
+            del o, d
+            back = g.pop("backface")
             albedo = g["albedo"][:, :3]
             if self.glossy_energy is not None and len(self.glossy_energy):
-                material = np.clip(np.rint(g["albedo"][:, 3]).astype(np.int64), 0, len(self.glossy_energy) - 1)
+                material = np.clip(np.rint(g["albedo"][:, 3]).astype(np.int32), 0, len(self.glossy_energy) - 1)
                 albedo = albedo + self.glossy_energy[material][:, None]
-            out["albedo"][rows] = albedo
-            bar.update(len(o))
+            hits = {"hit": (g["position"][:, 3] > 0) & ~back, "back": back,
+                    "position": np.ascontiguousarray(g["position"][:, :3]),
+                    "normal": np.ascontiguousarray(g["normal"][:, :3]), "albedo": np.ascontiguousarray(albedo)}
+            del g
+            bar.update(len(back))
+            yield a, b, hits
         bar.close()
-        out["backface_fraction"] = out["back"].reshape(n, r).mean(axis=1)
-        return out
 
     def _build(self, positions, cell, surfel_size) -> None:
-        """Trace the probes' rays, move probes out of geometry, merge the hits into surfels."""
-        n_probes = len(positions)
+        """Trace the probes' rays, move probes out of geometry, merge the hits into surfels and the
+        distances into depth moments, chunk by chunk: the hits of every ray at once (14M rays of a
+        262k-triangle room: half a GB, and as much again to merge them) never exist."""
+        n_probes, r = len(positions), self.rays
         s = np.arange(n_probes) % DIRECTION_SETS
         cell = np.asarray(cell, np.float64)
         origins = np.asarray(positions, np.float64).copy()
-        hits = self._trace(origins, s, progress=True)
-        bad = hits["backface_fraction"] > BACKFACE_LIMIT
+        self.moments = np.empty((n_probes, VIS_OCT * VIS_OCT, 2), np.float32)
+        merge = _SurfelMerge(n_probes * r, self._surfel_anchor(), surfel_size)
+        weights = _MomentWeights(self.dirs32)
+        cap = VIS_MAX_CELLS * float(np.linalg.norm(cell))
+        bad = np.zeros(n_probes, bool)  # probes with too many back faces: merged once their place is settled
+
+        def merge_probes(probes, hits, rays):  # the probes' rays (a mask of the chunk's) into the surfels
+            hits = {k: v[rays] for k, v in hits.items()}
+            rows = (probes[:, None] * r + np.arange(r)).reshape(-1)
+            merge.add(rows, *(hits[k] for k in ("hit", "back", "position", "normal", "albedo")))
+            self.moments[probes] = weights.moments(_hit_distances(hits, origins[probes], r, cap), s[probes])
+
+        for a, b, hits in self._trace_chunks(origins, s, progress=True):
+            bad[a:b] = hits["back"].reshape(b - a, r).mean(axis=1) > BACKFACE_LIMIT
+            for i in np.flatnonzero(bad[a:b]):
+                hits["hit"][i * r:(i + 1) * r] = False
+                hits["back"][i * r:(i + 1) * r] = False
+            merge.add(slice(a * r, b * r), *(hits[k] for k in ("hit", "back", "position", "normal", "albedo")))
+            self.moments[a:b] = weights.moments(_hit_distances(hits, origins[a:b], r, cap), s[a:b])
+            del hits
         self.relocated = 0
         for off in RELOCATIONS:  # probes inside geometry: try a free spot nearby
             if not bad.any():
@@ -552,35 +672,29 @@ class ProbeGather:
             if not ok.any():
                 continue
             idx, cand = idx[ok], cand[ok]
-            h2 = self._trace(cand, s[idx])
-            keep = h2["backface_fraction"] <= BACKFACE_LIMIT
-            take = idx[keep]
-            origins[take] = cand[keep]
-            for k in ("hit", "back", "position", "normal", "albedo"):
-                hits[k].reshape(n_probes, self.rays, -1)[take] = h2[k].reshape(len(idx), self.rays, -1)[keep]
-            self.relocated += int(keep.sum())
-            bad[take] = False
+            for a, b, hits in self._trace_chunks(cand, s[idx]):
+                keep = hits["back"].reshape(b - a, r).mean(axis=1) <= BACKFACE_LIMIT
+                take = idx[a:b][keep]
+                origins[take] = cand[a:b][keep]
+                merge_probes(take, hits, np.repeat(keep, r))
+                bad[take] = False
+                self.relocated += len(take)
+                del hits
         self.inside = int(bad.sum())  # no free spot found: kept, their back-face hits count as misses
+        if self.inside:  # traced again where they are (cheaper than keeping every bad probe's first rays)
+            idx = np.flatnonzero(bad)
+            for a, b, hits in self._trace_chunks(origins[idx], s[idx]):
+                merge_probes(idx[a:b], hits, np.ones((b - a) * r, bool))
+                del hits
         self.offsets = (origins - np.asarray(positions, np.float64)).astype(np.float32)
-        self.moments = self._depth_moments(origins, hits, cell)
-        self._make_surfels(hits, surfel_size)
+        surfel, sp, sn, sa, sv = merge.finish()
+        self._set_surfels(surfel.reshape(-1, r), sp, sn, sa, sv)
 
-    def _depth_moments(self, origins, hits, cell) -> np.ndarray:
-        """(P, VIS_OCT², 2) float32 each probe's octahedral depth moments (mean d, mean d²; module
-        constants), texels in row-major (v, u) order of ``oct_texel_directions``."""
-        n, r = len(origins), self.rays
-        cap = VIS_MAX_CELLS * float(np.linalg.norm(cell))
-        any_hit = (hits["hit"] | hits["back"]).reshape(n, r)
-        dist = np.linalg.norm(hits["position"].reshape(n, r, 3) - origins[:, None, :].astype(np.float32), axis=2)
-        dist = np.where(any_hit, np.minimum(dist, cap), cap).astype(np.float32)
-        dev = self.device
-        texels = oct_texel_directions(VIS_OCT)
-        out = wp.empty((n, len(texels)), dtype=wp.vec2, device=dev)
-        launch(depth_moments, n * len(texels),
-               [wp.array(dist, dtype=float, device=dev),
-                wp.array(self.dirs.astype(np.float32), dtype=wp.vec3, device=dev),
-                wp.array(texels.astype(np.float32), dtype=wp.vec3, device=dev), float(VIS_POWER), out], device=dev)
-        return out.numpy()
+    def _surfel_anchor(self) -> np.ndarray:
+        """(3,) float64 the corner the surfels' cubes are counted from: the scene's bounding box's
+        (every hit lies inside it, and it is known before the first ray is traced)."""
+        bounds = getattr(self.tracer, "bounds", None)
+        return np.zeros(3) if bounds is None else np.asarray(bounds[0], np.float64)
 
     # -- the disk cache
 
@@ -632,40 +746,60 @@ class ProbeGather:
                           a["surfel_shadow_origins"])
         return True
 
+    # -- the converged lighting (the passes of a volume lit for the first time)
+
+    def converged_path(self, *inputs) -> Path | None:
+        """Where the coefficients after every pass of a first lighting are cached, keyed by the trace's
+        key and everything else they depend on (``inputs``: arrays and numbers — the sky map, the
+        ground and the sun, the grid, the passes); None where the trace is not cached. A renderer
+        started again on the same scene, sky and sun reads them instead of running the passes
+        (``gather_bounces`` gathers: 1.7 s of the breakfast room's warm start)."""
+        if self.cache_key is None:
+            return None
+        h = hashlib.blake2b(digest_size=20)
+        h.update(f"converged-v{FORMAT_VERSION}|{self.cache_key}|{len(inputs)}".encode())
+        for a in inputs:
+            a = np.ascontiguousarray(a)
+            h.update(f"|{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+        return cache_dir() / f"probegather-lit-{h.hexdigest()}.npy"
+
+    @staticmethod
+    def load_converged(path: Path | None, coeffs) -> bool:
+        """Read the cached coefficients at ``path`` into the Warp array ``coeffs``; False when absent,
+        unreadable or of another shape."""
+        if path is None or not path.is_file():
+            return False
+        try:
+            a = np.load(path, allow_pickle=False)
+        except (OSError, ValueError, EOFError):
+            return False
+        if a.shape != tuple(coeffs.shape) or a.dtype != np.float32 or not np.all(np.isfinite(a)):
+            return False
+        coeffs.assign(a)
+        return True
+
+    @staticmethod
+    def save_converged(path: Path | None, coeffs) -> None:
+        """Cache the coefficients (the Warp array ``coeffs``) at ``path``; an unwritable cache is ignored."""
+        if path is None:
+            return
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npy")
+            np.save(tmp, coeffs.numpy().astype(np.float32))
+            os.replace(tmp, path)
+        except OSError:
+            pass
+
     def _backface_fraction(self, origins: np.ndarray, sets: np.ndarray) -> np.ndarray:
         """(N,) fraction of back-face hits over every ``RELOCATION_STRIDE``-th ray of each probe's set."""
-        sub = self.dirs[:, ::RELOCATION_STRIDE]
+        sub = self.dirs32[:, ::RELOCATION_STRIDE]
         r = sub.shape[1]
-        o = np.repeat(origins, r, axis=0).astype(np.float32)
-        d = sub[sets].reshape(-1, 3).astype(np.float32)
+        o = np.repeat(origins.astype(np.float32), r, axis=0)
+        d = sub[sets].reshape(-1, 3)
         g = self.tracer.trace(o, d, 0.0, 0.0, backfaces=True, transmissions=self.transmissions)
         return g["backface"].reshape(len(origins), r).mean(axis=1)
-
-    def _make_surfels(self, hits: dict, size: float) -> None:
-        hit = hits["hit"]
-        idx = np.flatnonzero(hit)
-        pos, nrm = hits["position"][idx], hits["normal"][idx]
-        axis = np.argmax(np.abs(nrm), axis=1)
-        side = nrm[np.arange(len(idx)), axis] > 0
-        key = axis * 2 + side  # the cube's index and the normal's dominant axis and sign, one int64
-        if len(idx):
-            base = pos.min(axis=0)
-            for c, prime in ((2, 1), (1, 1_000_033), (0, 1_000_033 * 1_000_003)):
-                key = key + np.floor((pos[:, c] - base[c]) / size).astype(np.int64) * (6 * prime)
-        uniq, inv = np.unique(key, return_inverse=True)
-        del key
-        m = len(uniq)
-        cnt = np.maximum(np.bincount(inv, minlength=m), 1).astype(np.float64)[:, None]
-
-        def mean(a):
-            return np.stack([np.bincount(inv, a[:, c], m) for c in range(3)], axis=1) / cnt
-
-        sp, sn, sa = mean(pos), mean(nrm), mean(hits["albedo"][idx])
-        sn /= np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12)
-        surfel = np.full(len(hit), -1, np.int32)
-        surfel[idx] = inv.astype(np.int32)
-        surfel[hits["back"]] = -2  # a back face: no light (a probe kept inside geometry)
-        self._set_surfels(surfel.reshape(-1, self.rays), sp, sn, sa, shadow_origins(pos, inv, sp, sn, size))
 
     def _set_surfels(self, surfel, sp, sn, sa, sv) -> None:
         """The surfel each ray hit ((P, R) int32: ≥ 0, −1 a miss, −2 a back face) and the surfels'
