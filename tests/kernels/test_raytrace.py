@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 import trimesh
 
+from serenity.colour import linear_to_srgb, srgb_to_linear
 from serenity.errors import SerenityError
 from serenity.gbuffer_layout import GBUFFER_TARGETS, RT_GBUFFER_KEYS
 from serenity.kernels.raytrace import RayTracer
-from serenity.scene.model import Camera, Material, Mesh, Scene, Sky, Sun
+from serenity.scene.model import Camera, Material, Mesh, Scene, Sky, Sun, Texture
 from serenity.scene.texture import texture_from_array
 
 
@@ -23,13 +24,27 @@ def _private_cache(tmp_path, monkeypatch):
 SIZE = 4.0  # the textured plane spans x in [0, SIZE], z in [-SIZE, 0], y = 0; uv = (x, -z) / SIZE
 
 
+def stored_8bit(mip, srgb=True):
+    """A linear level as the tracer stores it: each channel rounded to 8 bits, rgb sRGB-encoded (IEC
+    61966-2-1) unless ``srgb`` is False, then decoded back to float32 (a numpy twin)."""
+    a = np.clip(np.asarray(mip, np.float64), 0.0, 1.0)
+
+    def to8(x):  # halves round up
+        return np.floor(x * 255.0 + 0.5) / 255.0
+
+    rgb = srgb_to_linear(to8(linear_to_srgb(a[..., :3]))) if srgb else to8(a[..., :3])
+    return np.concatenate([rgb, to8(a[..., 3:])], axis=-1).astype(np.float32)
+
+
 def textured_plane_scene(img, repeat=1.0):
+    """The plane with ``img`` as its albedo texture, and that texture as the tracer stores it (``stored_8bit``)."""
     tex = texture_from_array(img)
     p = np.array([[0, 0, 0], [SIZE, 0, 0], [SIZE, 0, -SIZE], [0, 0, -SIZE]], np.float32)
     uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32) * repeat
     mesh = Mesh("plane", p, None, uv, np.array([[0, 1, 2], [0, 2, 3]]), np.zeros(2))
     mat = Material("tex", albedo=(1.0, 0.5, 1.0), albedo_texture=tex, specular=0.25, shininess=16.0)
-    return Scene("plane", [mesh], [mat], Camera((2, 5, 2), (2, 0, -2)), Sun((0.3, 1, 0.2))), tex
+    stored = Texture(name=tex.name, mips=[stored_8bit(m) for m in tex.mips])
+    return Scene("plane", [mesh], [mat], Camera((2, 5, 2), (2, 0, -2)), Sun((0.3, 1, 0.2))), stored
 
 
 def bilinear_ref(img, u, v):
@@ -59,13 +74,55 @@ def down_ray_at(u, v, height=1.0):
 
 
 def test_texel_centres_give_the_texel(device):
+    """An 8-bit image's texels come back exactly as the scene decodes them (the tracer stores 8-bit
+    sRGB); a float image's within the 8-bit step of its sRGB encoding."""
+    img8 = np.random.default_rng(0).integers(0, 256, (16, 16, 3), dtype=np.uint8)
     img = np.random.default_rng(0).uniform(0, 1, (16, 16, 3)).astype(np.float32)
-    scene, tex = textured_plane_scene(img)
-    rt = RayTracer(scene, device=device)
-    for r, c in [(0, 0), (3, 5), (15, 15), (8, 1)]:
-        o, d = down_ray_at((c + 0.5) / 16, 1 - (r + 0.5) / 16)
-        g = rt.trace(o, d, 0.0, 0.0)
-        assert np.allclose(g["albedo"][0, :3], img[r, c] * [1.0, 0.5, 1.0], atol=1e-6), (r, c)
+    for image, exact in ((texture_from_array(img8, srgb=True).mips[0], True), (img, False)):
+        scene, tex = textured_plane_scene(image)
+        rt = RayTracer(scene, device=device)
+        for r, c in [(0, 0), (3, 5), (15, 15), (8, 1)]:
+            o, d = down_ray_at((c + 0.5) / 16, 1 - (r + 0.5) / 16)
+            g = rt.trace(o, d, 0.0, 0.0)
+            expected = (image if exact else tex.mips[0])[r, c]
+            assert np.array_equal(tex.mips[0][r, c], image[r, c]) == exact or not exact
+            assert np.allclose(g["albedo"][0, :3], expected * [1.0, 0.5, 1.0], rtol=0, atol=1e-6), (r, c)
+            # half an 8-bit sRGB step: at most 0.0045 in linear
+            assert np.allclose(g["albedo"][0, :3], image[r, c] * [1.0, 0.5, 1.0], atol=0.0045), (r, c)
+
+
+def test_textures_stored_as_8bit_srgb_with_mips():
+    """The packed texels: an 8-bit image's level 0 exactly (sRGB for albedo maps, linear for normal
+    maps), every level within half an 8-bit step, a quarter of float32 RGBA's bytes."""
+    from serenity.kernels.raytrace import lut8, pack_mip_chains
+
+    rng = np.random.default_rng(5)
+    albedo = texture_from_array(rng.integers(0, 256, (37, 20, 4), dtype=np.uint8), srgb=True)
+    normal = texture_from_array(rng.integers(0, 256, (8, 8, 3), dtype=np.uint8), srgb=False)
+    first, levels, offs, sizes, srgb, texels = pack_mip_chains([albedo, normal], [True, False])
+    q = texels.numpy()
+    assert q.dtype == np.uint32 and q.nbytes * 4 == sum(m[..., :1].size * 16 for t in (albedo, normal) for m in t.mips)
+    table = lut8()
+    for t, enc in ((albedo, True), (normal, False)):
+        for k, mip in enumerate(t.mips):
+            level = first[[albedo, normal].index(t)] + k
+            w, h = sizes[level]
+            assert srgb[level] == int(enc) and (h, w) == mip.shape[:2]
+            p = q[offs[level]:offs[level] + w * h]
+            base = 0 if enc else 256
+            got = np.stack([table[base + (p >> s & 255)] for s in (0, 8, 16)] + [table[256 + (p >> 24)]], axis=1)
+            want = mip.reshape(w * h, -1)
+            want = np.concatenate([want, np.ones((w * h, 4 - want.shape[1]), np.float32)], axis=1)
+            if k == 0:
+                assert np.array_equal(got, want)
+            # the twin's rounding, but for values at a half step (a box filter of 8-bit values makes
+            # such ties; float32 and float64 round them apart): one step at most
+            diff = np.abs(got - stored_8bit(want, enc))
+            steps = np.asarray(want, np.float64) * 255.0
+            if enc:
+                steps[:, :3] = linear_to_srgb(want[:, :3]) * 255.0
+            tie = np.abs(steps - np.floor(steps) - 0.5) < 1e-3
+            assert diff[~tie].max(initial=0.0) <= 1e-6 and diff.max() <= 0.0045 + 1e-6
 
 
 @pytest.mark.parametrize("level", [1, 2, 3])
@@ -122,7 +179,8 @@ def test_grazing_hits_use_coarser_mips(device):
 
 def test_hit_attributes_misses_and_untraced_rays(device):
     img = np.full((4, 4, 3), 0.5, np.float32)
-    scene, _ = textured_plane_scene(img)
+    scene, stored = textured_plane_scene(img)
+    grey = float(stored.mips[0][0, 0, 0])  # 0.5 as 8-bit sRGB stores it
     rt = RayTracer(scene, device=device)
     o = np.array([[1.0, 1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, -1.0], [9.0, 1.0, 0.0]],
                  np.float32)
@@ -132,7 +190,7 @@ def test_hit_attributes_misses_and_untraced_rays(device):
     # 0: a hit from above
     assert np.allclose(g["position"][0], [1, 0, -1, 1], atol=1e-6)
     assert np.allclose(g["normal"][0], [0, 1, 0, 0.25], atol=1e-6)
-    assert np.allclose(g["albedo"][0], [0.5, 0.25, 0.5, 0.0], atol=1e-6)
+    assert np.allclose(g["albedo"][0], [grey, grey / 2, grey, 0.0], atol=1e-6) and abs(grey - 0.5) < 0.004
     assert np.allclose(g["material"][0], [16.0, 0.0, 0.0, 1.5])
     assert np.allclose(g["ray_dir"][0], [0, -1, 0, 1.0], atol=1e-6)  # unit direction, distance in m
     # 4: a miss: the sky direction, nothing else
