@@ -441,6 +441,10 @@ class SkyVolume:
         self._gather_sun = None  # ... and the sun direction
         #: "gather": passes over the volume still to run for the current sky (each adds a bounce)
         self.gather_passes_left = 0
+        #: "gather": the relative change of the volume's light in the last complete pass (None: no pass
+        #: since the passes started), and the light at the start of the running pass
+        self._last_pass_change: float | None = None
+        self._pass_before: np.ndarray | None = None
         self.tracer = None
         if cfg.method == "transfer":
             self._transfer = SkyTransfer(self._quads_wp, len(quads), self._base, n, SEQUENCES.index(cfg.sequence),
@@ -593,9 +597,27 @@ class SkyVolume:
 
     def _gather_pass_start(self, sun) -> None:
         """The surfels' radiance from the volume as it is (the start of a pass: one more bounce)."""
+        self._pass_before = self._coeffs.numpy().copy()
         grid = (self.grid_origin, self.cell_size, self.resolution, self.normal_offset_m)
         self._gather.update_surfels(self._coeffs, self._open_sky(), self._vis_wp, grid, sun,
                                     scene_sun_irradiance(self.scene, sun))
+
+    def _pass_converged(self) -> bool:
+        """After a complete pass: whether the passes have converged. Each pass adds the next bounce, so
+        successive passes change the volume's light by Δ_k = r·Δ_(k−1), r the share of the light
+        the scene passes on; the bounces still missing then sum to about Δ_k·r/(1−r) of the light,
+        and the passes stop once that is under ``SkyConfig.gather_tolerance`` (an open courtyard
+        after 5 passes, a closed white room after about 20)."""
+        after = self._coeffs.numpy()
+        change = float(np.abs(after - self._pass_before).sum() / max(float(np.abs(after).sum()), 1e-30))
+        last, self._last_pass_change = self._last_pass_change, change
+        tol = self.config.gather_tolerance
+        if last is None or tol <= 0.0:
+            return False
+        if last <= 0.0:
+            return True
+        r = min(change / last, 0.99)
+        return change * r / (1.0 - r) < tol
 
     def _update_gather(self, sun, full: bool) -> bool:
         """"gather": follow a new sky (miss radiance, surfel shadow rays), then run passes over the
@@ -614,6 +636,7 @@ class SkyVolume:
             self._gather_version = self.sky_version
             self._gather_sun = np.array(sun, np.float64)
             self.gather_passes_left = cfg.gather_bounces
+            self._last_pass_change = None
         elif not whole:
             g.refresh_visibility()  # the slices left after the last move of the sun
         if full or np.any(self.layer_versions < 0):
@@ -623,6 +646,8 @@ class SkyVolume:
                 self._gather_pass_start(sun)
                 g.gather(self._coeffs, self._scale, self.resolution, 0, y)
                 self.gather_passes_left -= 1
+                if self._pass_converged():
+                    self.gather_passes_left = 0
             self._next_layer = 0  # a pass starts at layer 0 (``_next_layer`` is where the current one is)
             self._host = None
             self.layer_versions[:] = self.sky_version
@@ -639,6 +664,8 @@ class SkyVolume:
             self.updated_layers.append((start, n))
         if self._next_layer == 0:  # the pass is complete
             self.gather_passes_left -= 1
+            if self._pass_converged():
+                self.gather_passes_left = 0
         self._host = None
         return True
 
@@ -672,6 +699,7 @@ class SkyVolume:
         if self.config.method == "gather":
             if self.gather_passes_left <= 0:
                 self.gather_passes_left = self.config.gather_bounces
+                self._last_pass_change = None
             self._update_gather(self._sun(sun_direction), full=True)
             return
         if self._transfer is not None:

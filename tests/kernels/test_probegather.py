@@ -184,7 +184,8 @@ def test_sun_moving_every_update_then_stopping_converges_to_the_rebuild(device):
     # (every surfel once per pass of y updates); once the sun stops the passes run out and the
     # volume is what a rebuild at the last sun gives (the first pass's stale slices decay away)
     scene = _plane()
-    cfg = SkyConfig(method="gather", resolution=(3, 4, 3), gather_rays=64, transfer_layers=1)
+    cfg = SkyConfig(method="gather", resolution=(3, 4, 3), gather_rays=64, transfer_layers=1, gather_bounces=12,
+                    gather_tolerance=0.0)  # a fixed count of passes
     vol = SkyVolume(scene, cfg, device=device)
     vol.grid_origin, vol.cell_size = np.array([-4.0, 0.5, -4.0]), np.full(3, 2.0)
     vol.update()
