@@ -216,6 +216,11 @@ class Renderer:
         self._t_frame = time.perf_counter()
         with self._stage("upload"):
             cfg = self.config
+            self.traces = cfg.ray_tracing and any(m.needs_ray_tracing for m in scene.materials)
+            self.tracer = None
+            self._tracer_proc = None
+            if self.traces and self._tracer_in_process():  # first: its start-up runs beside the set-up below
+                self._ensure_tracer()
             self.scene_gl = SceneGL(self.ctx, scene)
             self.shadow_size = cfg.shadow.size_for(self.width, self.height)
             self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, self.shadow_size, cfg.shadow.cascades)
@@ -232,11 +237,8 @@ class Renderer:
             self.taa_pass = TAAPass(self.ctx) if cfg.antialiasing == "taa" else None
             if self.taa_pass is not None:
                 self.taa_pass.resize(self.width, self.height)
-            # ray tracing only where a material needs it (paper §9); the kd-tree waits for the
-            # first frame that actually shows such a pixel
-            self.traces = cfg.ray_tracing and any(m.needs_ray_tracing for m in scene.materials)
-            self.tracer = None
-            self._tracer_proc = None
+            # ray tracing only where a material needs it (paper §9); in this process the kd-tree
+            # waits for the first frame that actually shows such a pixel
             if self.traces:
                 self.raycast_pass = RayCastPass(self.ctx, self.scene_gl)
                 self.raycast_pass.resize(self.width, self.height)
@@ -796,15 +798,23 @@ class Renderer:
             return self._tracer_proc is not None and self._tracer_proc.own_group
         return where == "idle"
 
+    def _tracer_in_process(self) -> bool:
+        """Whether the tracer runs in a process of its own (the overlapped schedule on the CPU)."""
+        return self.config.overlap and str(self.device).startswith("cpu")
+
     def _ensure_tracer(self):
         """The in-process tracer (serial schedule, or CUDA), or for the overlapped schedule on the
         CPU the tracer process (``kernels/tracer_process``: a thread would stall behind the GL
-        calls that hold the GIL); built on the first frame that shows a traced pixel."""
-        if self.config.overlap and str(self.device).startswith("cpu"):
+        calls that hold the GIL). The process starts with the renderer (its imports, scene and tree
+        run beside the GL set-up and the first frame's volumes); the in-process tracer is built on
+        the first frame that shows a traced pixel."""
+        if self._tracer_in_process():
             if self._tracer_proc is None:
                 session = self.config.tracer_session
                 if session is None:  # a group of its own where the main thread will wait for a volume worker
-                    session = self._volume_pool is not None
+                    cfg = self.config
+                    session = (cfg.overlap_volumes and ((cfg.sky.enabled and cfg.sky.method != "gather")
+                                                        or cfg.lpv.enabled))  # as ``_volume_pool``
                 self._tracer_proc = TracerProcess(self.scene, self.device, nice=self.config.tracer_nice,
                                                  session=session)
             return self._tracer_proc

@@ -54,7 +54,11 @@ Real-Time Ray Tracing", Ray Tracing Gems ch. 20). The cone's width at the hit is
 m), and the level of detail is λ = log2(width / |n_g·d| · sqrt(t_a / p_a)), with t_a the
 triangle's area in texels of level 0 (uv area × W × H) and p_a its world area. λ is clamped to the
 mip chain and filtered trilinearly (bilinear in two levels, GL's LINEAR_MIPMAP_LINEAR; repeat
-wrap; uv with v up, texture rows stored top first, as ``scene/texture.py`` defines).
+wrap; uv with v up, texture rows stored top first, as ``scene/texture.py`` defines). The texels of
+every level are stored as 8-bit RGBA (:func:`pack_mip_chains`: rgb sRGB-encoded for albedo maps,
+linear for normal maps, alpha linear) and decoded to linear before they are filtered, as a GPU
+filters an sRGB8 texture: a quarter of float32 RGBA's memory and loads; an 8-bit image's level 0
+decodes to exactly the scene's float values, the box-filtered mips to within half an 8-bit step.
 
 Inputs to :meth:`RayTracer.trace`: origins (N,3) m, directions (N,3) (any length, normalised
 here), cone_width (N,) or scalar m, cone_spread (N,) or scalar rad. Host class

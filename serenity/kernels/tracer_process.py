@@ -13,9 +13,13 @@ then competes with the renderer's process as a whole rather than with each of it
 niceness, alone in its group, orders nothing (``RenderConfig.tracer_session``).
 
 Protocol (private): the child is ``python -m serenity.kernels.tracer_process IN OUT NICE`` with two pipe
-file descriptors and its niceness; messages are length-prefixed pickles. First message in: (scene, device); the child
-builds its :class:`~serenity.kernels.raytrace.RayTracer` (the kd-tree comes from the disk cache when
-the parent built it before) and answers ("ready", build seconds). Then per frame: a list of ray
+file descriptors and its niceness; messages are length-prefixed pickles. First message in: (path, device), path a
+file holding the scene's pickle (``SCENE_DIR``: written at once, where the pipe made the parent wait
+until the child had imported its modules and read 80 MB of a textured scene); the child loads it,
+deletes it, builds its :class:`~serenity.kernels.raytrace.RayTracer` (the kd-tree comes from the disk
+cache when a process built it before, or waits for the one building it: ``RayTracer``), only then
+takes its niceness (its start-up is the renderer's first frame's wait), and answers ("ready", build
+seconds). Then per frame: a list of ray
 batches ``(origins, directions, cone_width, cone_spread, transmissions, sun_direction)`` in, ("ok",
 results, t0, t1, cpu) out, where cpu is the child's CPU seconds (``time.process_time``) for the
 work, results are the tracer's dicts (None for an empty batch) and t0/t1 the child's
@@ -36,6 +40,7 @@ except ImportError:  # pragma: no cover - Windows: the pipes keep their size
 import struct
 import subprocess
 import sys
+import tempfile
 import time
 
 from serenity.errors import SerenityError
@@ -43,6 +48,9 @@ from serenity.kernels.raytrace import RayTracer
 from serenity.threads import single_threaded_blas
 
 _HEADER = struct.Struct("<Q")
+
+#: where the scene's pickle waits for the child: memory (tmpfs) where there is one
+SCENE_DIR = "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os.W_OK) else None
 
 
 #: the child's niceness: the lowest priority, so that the tracer takes a core only where the frame's
@@ -128,7 +136,23 @@ class TracerProcess:
         """Seconds the child took to build its tracer (None until it has said it is ready)."""
         self.cpu_seconds = 0.0
         """CPU seconds the child spent on the last frame's rays (all its threads)."""
-        _write(self._out, (scene, device))
+        self._scene_path = None
+        fd, self._scene_path = tempfile.mkstemp(prefix="serenity-scene-", suffix=".pickle", dir=SCENE_DIR)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                pickle.dump(scene, f, protocol=pickle.HIGHEST_PROTOCOL)
+        except BaseException:
+            self._remove_scene()
+            raise
+        _write(self._out, (self._scene_path, device))
+
+    def _remove_scene(self) -> None:
+        if self._scene_path is not None:
+            try:
+                os.unlink(self._scene_path)
+            except OSError:
+                pass  # the child deleted it
+            self._scene_path = None
 
     @property
     def niceness(self) -> int | None:
@@ -161,7 +185,10 @@ class TracerProcess:
 
     def _wait_ready(self) -> None:
         if self.build_seconds is None:
-            self.build_seconds = self._receive()[1]
+            try:
+                self.build_seconds = self._receive()[1]
+            finally:
+                self._remove_scene()
 
     def _receive(self):
         try:
@@ -197,29 +224,41 @@ class TracerProcess:
                 os.close(fd)
             except OSError:
                 pass
+        self._remove_scene()
 
 
 def _serve(fd_in: int, fd_out: int, nice: int = NICE) -> None:
+    try:
+        with single_threaded_blas():
+            _serve_frames(fd_in, fd_out, nice)
+    except EOFError:  # the parent went away without saying goodbye
+        return
+
+
+def _load_scene(path: str):
+    try:
+        with open(path, "rb") as f:
+            return pickle.load(f)
+    finally:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+
+
+def _serve_frames(fd_in: int, fd_out: int, nice: int = NICE) -> None:
+    path, device = _read(fd_in)
+    t0 = time.perf_counter()
+    try:
+        tracer = RayTracer(_load_scene(path), device=device)
+    except Exception as e:  # reported to the parent, which raises it as a SerenityError
+        _write(fd_out, ("error", f"{type(e).__name__}: {e}"))
+        return
     try:
         if nice:
             os.nice(nice)
     except OSError:  # not allowed (a negative niceness without CAP_SYS_NICE): the parent's priority
         pass
-    try:
-        with single_threaded_blas():
-            _serve_frames(fd_in, fd_out)
-    except EOFError:  # the parent went away without saying goodbye
-        return
-
-
-def _serve_frames(fd_in: int, fd_out: int) -> None:
-    scene, device = _read(fd_in)
-    t0 = time.perf_counter()
-    try:
-        tracer = RayTracer(scene, device=device)
-    except Exception as e:  # reported to the parent, which raises it as a SerenityError
-        _write(fd_out, ("error", f"{type(e).__name__}: {e}"))
-        return
     _write(fd_out, ("ready", time.perf_counter() - t0))
     while True:
         batches = _read(fd_in)
