@@ -13,7 +13,9 @@ For each scene and size, all in one process on one machine:
   scene in ``REFERENCES`` (the breakfast room, lit almost only by bounced light), a reference that
   states its noise floor (``reference_for_error``: two halves, doubled up to ``max_spp`` until the
   floor is at most a quarter of the errors named), and each of our configs records whether its
-  own error is at least four times that floor;
+  own error is at least four times that floor; with each of our images, where its error sits
+  (``serenity.eval.regions``: FLIP, relMSE and the luminance ratio of up- and down-facing, vertical
+  and edge pixels) and the largest ratio ours ÷ reference over the reference's dark regions (leaks);
 - ours: for each of our quality configs (:func:`our_configs`), the median wall time of
   ``renderer.render(read_back=False)`` (the interactive frame: nothing read back, GL finished) over
   ``--frames`` frames with the static camera and sun after ``--warmup`` frames, and as many again
@@ -203,6 +205,16 @@ def run_case(scene, width, height, args, bar) -> dict:
             out["above_floor"] = {k: bool(out[k] >= 4 * floor[k]) for k in ("flip", "rel_mse")}
         return out
 
+    def where(frame) -> dict:
+        """Where the error sits (the region report: up- and down-facing, vertical, edges, sky) and the
+        largest light ratio over the reference's dark regions (leaks)."""
+        from serenity.eval.regions import leak_ratio, region_report
+
+        rep = region_report(frame.hdr, ref, frame.aovs["normal"], frame.aovs["depth"], exposure=exposure)
+        keep = ("fraction", "flip", "rel_mse", "flip_share", "rel_mse_share", "luminance_ratio")
+        return {"regions": {name: {k: v[k] for k in keep} for name, v in rep["regions"].items()},
+                "luminance_ratio": rep["all"]["luminance_ratio"], "leak": leak_ratio(frame.hdr, ref)}
+
     # ours: timed before and again after the peer's sweep (this machine's load drifts over minutes);
     # the image is one more frame, read back, before it
     ours, renderers = [], {}
@@ -212,7 +224,8 @@ def run_case(scene, width, height, args, bar) -> dict:
         for _ in range(args.warmup):
             r.render()
         walls = timed_frames(r, args.frames)
-        entry = {"name": cname, "wall_ms_before": walls, **metrics(r.render(read_back=("hdr",)).hdr)}
+        frame = r.render(read_back=("hdr", "aovs"))
+        entry = {"name": cname, "wall_ms_before": walls, **metrics(frame.hdr), **where(frame)}
         if args.motion_frames:
             bar.set_description(f"{tag}: ours ({cname}), moving camera")
             moving_walls, hdr = moving_camera(r, scene, args.motion_frames)

@@ -187,6 +187,35 @@ def frontier(data: dict) -> str:
                f"≥ {goal:g}×, still and moving"], rows)
 
 
+@table("frontier-regions", "results/frontier.json")
+def frontier_regions(data: dict) -> str:
+    """Where the default preset's error sits in each case (the region report), the leak ratio, and
+    the reference's own noise floor where the case measured it."""
+    rows = []
+    for c in data["cases"]:
+        o = next((o for o in c["ours"] if preset(o["name"]) == DEFAULT_PRESET), None)
+        if o is None or "regions" not in o:
+            continue
+        ref = c["reference"]
+        floor = ref.get("floor")
+        ref_text = f"{ref['spp']} spp" + ("" if floor is None else
+                                          f"; floor {floor['flip']:.3f} / {floor['rel_mse']:.3f}")
+        reg = o["regions"]
+
+        def lum(name, reg=reg):
+            v = reg.get(name, {}).get("luminance_ratio")
+            return "—" if v is None else f"{v:.2f}"
+
+        leak = o["leak"]["max_ratio"]
+        rows.append([c["scene"], size_label(c["size"]), ref_text, f"{o['flip']:.3f}", f"{o['rel_mse']:.3f}",
+                     f"{o['luminance_ratio']:.2f}", lum("up-facing"), lum("down-facing"), lum("vertical"),
+                     f"{reg['edges']['flip']:.3f} ({100 * reg['edges']['flip_share']:.0f} %)",
+                     "—" if leak is None else f"{leak:.1f}"])
+    return md(["scene", "size", "reference (floor: FLIP / relMSE)", "FLIP", "relMSE", "luminance ours ÷ ref",
+               "up-facing", "down-facing", "vertical", "edges' FLIP (share)", "leak: max ratio in dark regions"],
+              rows)
+
+
 # ------------------------------------------------------------------------------------- the frame
 
 

@@ -11,6 +11,7 @@ Regions come from the judged frame's own AOVs (``serenity render``'s EXR layers)
   anti-aliasing is about; they overlap the four regions above, which partition the image.
 
 and, with a ``material`` layer (the G-buffer's material index, −1 = background), one entry per material.
+:func:`leak_ratio` looks for light where the reference is dark, box by box.
 
 Per region: ``pixels``, ``fraction`` of the image, mean ``flip`` and ``rel_mse`` over its pixels,
 ``flip_share`` / ``rel_mse_share`` (the region's part of the all-pixel sum: where the total comes from),
@@ -78,6 +79,32 @@ def region_masks(normal, depth, material=None, material_names=None) -> tuple[dic
 def luminance(img) -> np.ndarray:
     """(H, W) Rec. 709 luminance of linear RGB."""
     return np.asarray(img, np.float64)[..., :3] @ LUMINANCE
+
+
+LEAK_BOX = 5
+"""Side (pixels) of the boxes :func:`leak_ratio` compares: a region, not a single noisy pixel."""
+LEAK_DARK = 0.25
+"""A box is dark where the reference's mean luminance there is under this fraction of its image mean."""
+
+
+def leak_ratio(ours, ref, box: int = LEAK_BOX, dark: float = LEAK_DARK) -> dict:
+    """Light where the reference has little (a leak through a wall, blinds, a curtain): over every
+    ``box``×``box`` box (a box filter, centred at each pixel) whose reference mean luminance is under
+    ``dark`` × the reference image's mean, the largest ratio ours ÷ reference of the box means.
+    {"max_ratio": float or None (no dark box), "dark_fraction": the image's share of dark boxes,
+    "over_4": the share of the dark boxes where ours is more than 4× the reference}."""
+    from scipy.ndimage import uniform_filter
+
+    lo, lr = luminance(ours), luminance(ref)
+    if lo.shape != lr.shape:
+        raise SerenityError(f"images differ in size: {lo.shape} vs reference {lr.shape} (shape mismatch)")
+    mo, mr = uniform_filter(lo, int(box), mode="nearest"), uniform_filter(lr, int(box), mode="nearest")
+    is_dark = mr < dark * float(lr.mean())
+    if not is_dark.any():
+        return {"max_ratio": None, "dark_fraction": 0.0, "over_4": 0.0}
+    ratio = mo[is_dark] / np.maximum(mr[is_dark], 1e-6 * max(float(lr.mean()), 1e-30))
+    return {"max_ratio": float(ratio.max()), "dark_fraction": float(is_dark.mean()),
+            "over_4": float((ratio > 4.0).mean())}
 
 
 def _stats(mask, fmap, rmap, lum_ours, lum_ref, flip_sum, rel_sum) -> dict:

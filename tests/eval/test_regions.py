@@ -98,3 +98,26 @@ def test_compare_regions_cli(tmp_path, capsys):
     assert "needs the layer(s) normal, depth" in capsys.readouterr().err
     assert main(["compare", a, b, "--json", j]) == 2
     assert "go with --regions" in capsys.readouterr().err
+
+
+def test_leak_ratio_finds_light_in_a_dark_region_not_in_noise():
+    """A reference with a dark quarter (1 % of the rest's light): ours with the same image has ratio
+    ~1 there; ours with a 6 × 6 patch at 10× the reference's light inside the dark quarter reads
+    max ratio ~10 and some boxes over 4; one lone bright pixel (a firefly, 5 × 5 boxes) stays under 4."""
+    from serenity.eval.regions import leak_ratio
+
+    ref = np.full((60, 80, 3), 10.0)
+    ref[30:, 40:] = 0.1
+    same = leak_ratio(ref, ref)
+    assert same["max_ratio"] == pytest.approx(1.0) and same["over_4"] == 0.0
+    assert same["dark_fraction"] == pytest.approx(0.25, abs=0.03)
+    leak = ref.copy()
+    leak[40:46, 55:61] = 1.0
+    r = leak_ratio(leak, ref)
+    assert 9.0 <= r["max_ratio"] <= 10.5 and r["over_4"] > 0.0
+    firefly = ref.copy()
+    firefly[45, 60] = 0.1 * 3.0 * 25 / 2  # a box mean of 2.5x the dark level at most
+    assert leak_ratio(firefly, ref)["max_ratio"] < 4.0
+    assert leak_ratio(np.full((8, 8, 3), 1.0), np.full((8, 8, 3), 1.0))["max_ratio"] is None  # nothing dark
+    with pytest.raises(SerenityError, match="shape mismatch"):
+        leak_ratio(ref[:10], ref)
