@@ -124,6 +124,7 @@ void main() {
     // whether it spans an edge (a neighbour of another coverage, or depth 5 % away), and its nearest surface
     vec3 m1 = vec3(0.0), m2 = vec3(0.0);
     float around = 0.0;  // the brightest neighbour's luminance
+    float brightest = 0.0;  // ... and with the pixel itself
     bool edge = false;
     float near_z = 3.0e38;
     ivec2 near_o = ivec2(0);
@@ -133,6 +134,7 @@ void main() {
         ivec2 t = clamp(px + o, ivec2(0), size - 1);
         vec3 ck = max(texelFetch(u_hdr, t, 0).rgb, vec3(0.0));
         if (k != 4) around = max(around, luminance(ck));
+        brightest = max(brightest, luminance(ck));
         vec3 y = rgb_to_ycocg(compress(ck));
         m1 += y;
         m2 += y * y;
@@ -176,6 +178,10 @@ void main() {
     if (u_gamma > 0.0) {
         vec3 h = clip_to_box(rgb_to_ycocg(compress(hist)), m1, mix(u_gamma_still, u_gamma, motion) * sigma);
         hist = max(expand(ycocg_to_rgb(h)), vec3(0.0));
+        // a corner of the box may lie beyond every neighbour's luminance (or near the compression's
+        // pole, where expand() grows without bound): no brighter than the brightest of them
+        float lh = luminance(hist);
+        hist *= lh > brightest ? brightest / lh : 1.0;
     }
     float lc = max(luminance(cur), 0.0), lh = luminance(hist);
     if (u_weights == 2) {  // a sample brighter than all its neighbours counts for less
