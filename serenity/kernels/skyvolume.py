@@ -642,12 +642,22 @@ class SkyVolume:
         if full or np.any(self.layer_versions < 0):
             while g.refresh_visibility():  # a whole pass needs every surfel's visibility current
                 pass
+            # a first lighting's passes: read back where this scene, sky and sun were lit before
+            cached = (g.converged_path(self.sky_map(), self.ground_radiance, sun, scene_sun_irradiance(self.scene, sun),
+                                       self.open_coefficients(), self.grid_origin, self.cell_size, self.resolution,
+                                       self.normal_offset_m, self.gather_passes_left, self.config.gather_tolerance,
+                                       self.visibility is not None, np.asarray(self._scale))
+                      if np.all(self.layer_versions < 0) else None)
+            if g.load_converged(cached, self._coeffs):
+                self.gather_passes_left = 0
             while self.gather_passes_left > 0:
                 self._gather_pass_start(sun)
                 g.gather(self._coeffs, self._scale, self.resolution, 0, y)
                 self.gather_passes_left -= 1
                 if self._pass_converged():
                     self.gather_passes_left = 0
+                if self.gather_passes_left == 0:
+                    g.save_converged(cached, self._coeffs)
             self._next_layer = 0  # a pass starts at layer 0 (``_next_layer`` is where the current one is)
             self._host = None
             self.layer_versions[:] = self.sky_version

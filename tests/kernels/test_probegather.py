@@ -234,6 +234,40 @@ def test_trace_cached_on_disk_reads_back_the_same_volume(device, tmp_path, monke
     assert not other._gather.from_cache and len(list(tmp_path.glob("probegather-*.npz"))) == 2
 
 
+def test_first_lighting_cached_on_disk_skips_the_passes(device, tmp_path, monkeypatch):
+    """A volume lit for the first time caches its coefficients after every pass; the next renderer of
+    the same scene, sky and sun reads them instead of gathering, and gets the same volume; another
+    sun is another entry, lit by the passes."""
+    import serenity.kernels.probegather as PG
+
+    monkeypatch.setenv("SERENITY_CACHE", str(tmp_path))
+    monkeypatch.setattr(PG, "CACHE_MIN_RAYS", 1)
+    cfg = SkyConfig(method="gather", resolution=(3, 2, 3), gather_rays=64, gather_bounces=3, gather_tolerance=0.0)
+    gathers = []
+    monkeypatch.setattr(PG.ProbeGather, "gather", lambda self, *a, _g=PG.ProbeGather.gather: (gathers.append(1),
+                                                                                                _g(self, *a)))
+
+    def build(sun=None):
+        vol = SkyVolume(_plane(), cfg, device=device)
+        vol.rebuild(sun_direction=sun)
+        return vol
+
+    first = build()
+    passes = len(gathers)
+    assert passes >= 2 and len(list(tmp_path.glob("probegather-lit-*.npy"))) == 1
+    second = build()
+    assert len(gathers) == passes  # read back: no pass ran
+    assert np.array_equal(first.coefficients(), second.coefficients()) and np.abs(first.coefficients()).max() > 0
+    third = build(sun=np.array([0.3, 0.8, 0.2]))
+    assert len(gathers) > passes and len(list(tmp_path.glob("probegather-lit-*.npy"))) == 2
+    assert not np.array_equal(first.coefficients(), third.coefficients())
+    for f in tmp_path.glob("probegather-lit-*.npy"):
+        f.write_bytes(b"garbage")  # unreadable: lit by the passes again
+    before = len(gathers)
+    again = build()
+    assert len(gathers) == before + passes and np.array_equal(first.coefficients(), again.coefficients())
+
+
 def test_visibility_lookup_warp_equals_host(device):
     """The Warp lookup with the probes' visibility (the surfels' and the sky-light VPLs') equals the
     numpy twin of sky.glsl's; the octahedral map's encoding inverts its decoding."""
