@@ -102,6 +102,22 @@ def _read(fd: int):
     return pickle.loads(_read_exact(fd, n))
 
 
+def _dump_scene(scene) -> str:
+    """The path of a new file holding ``scene``'s pickle: in ``SCENE_DIR``, or where that is full (a
+    container's /dev/shm is often 64 MB) in the temporary folder."""
+    for folder in dict.fromkeys((SCENE_DIR, None)):
+        fd, path = tempfile.mkstemp(prefix="serenity-scene-", suffix=".pickle", dir=folder)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                pickle.dump(scene, f, protocol=pickle.HIGHEST_PROTOCOL)
+            return path
+        except BaseException as e:
+            os.unlink(path)
+            if not isinstance(e, OSError) or folder is None:
+                raise
+    raise AssertionError("unreachable")
+
+
 def _autogroup(pid) -> str | None:
     """``/proc/PID/autogroup`` (PID a process id or "self"), None where it is absent or empty."""
     try:
@@ -137,14 +153,14 @@ class TracerProcess:
         self.cpu_seconds = 0.0
         """CPU seconds the child spent on the last frame's rays (all its threads)."""
         self._scene_path = None
-        fd, self._scene_path = tempfile.mkstemp(prefix="serenity-scene-", suffix=".pickle", dir=SCENE_DIR)
         try:
-            with os.fdopen(fd, "wb") as f:
-                pickle.dump(scene, f, protocol=pickle.HIGHEST_PROTOCOL)
+            self._scene_path = _dump_scene(scene)
+            _write(self._out, (self._scene_path, device))
         except BaseException:
-            self._remove_scene()
+            self._proc.kill()
+            self.close()
             raise
-        _write(self._out, (self._scene_path, device))
+
 
     def _remove_scene(self) -> None:
         if self._scene_path is not None:
