@@ -98,7 +98,7 @@ from serenity.kernels.kdtree import (
 )
 from serenity.kernels.kdtree_build import CACHE_MIN_TRIANGLES, cache_dir
 from serenity.kernels.launch import launch
-from serenity.scene.model import normal_map_frame
+from serenity.scene.model import normal_map_frame, used_vertices
 
 wp.set_module_options(TRACE_MODULE_OPTIONS)  # no FMA contraction: watertight on CUDA too (kdtree.py)
 
@@ -609,7 +609,7 @@ class RayTracer:
             raise SerenityError(f"scene {getattr(scene, 'name', '?')!r} has no triangles to ray trace")
         with _build_lock(cache is True or (cache is None and len(faces) >= CACHE_MIN_TRIANGLES)):
             self.tree = KdTree.build(pos, faces, config=tree_config, cache=cache, progress=progress)
-        used = pos[np.unique(faces)]
+        used = pos[used_vertices(faces, len(pos))]
         lo, hi = used.min(axis=0), used.max(axis=0)
         del used
         #: (2, 3) float32 the bounding box of the triangles' vertices (lower, upper corner), m

@@ -501,6 +501,13 @@ class Sky:
             raise SceneError(f"sky model must be 'constant' or 'atmosphere', got {self.model!r}")
 
 
+def used_vertices(faces: np.ndarray, count: int) -> np.ndarray:
+    """(count,) bool: the vertices some face uses (a mask, not ``np.unique``'s sort of every index)."""
+    used = np.zeros(count, bool)
+    used[np.asarray(faces).reshape(-1)] = True
+    return used
+
+
 @dataclass
 class Scene:
     """Everything a frame needs: geometry, materials, camera, sun, sky and occlusion quads."""
@@ -535,7 +542,8 @@ class Scene:
     @property
     def bounds(self) -> np.ndarray:
         """(2,3) float64 [min, max] over all vertices used by faces."""
-        pts = np.concatenate([m.positions[np.unique(m.faces)] for m in self.meshes if m.triangle_count])
+        pts = np.concatenate([m.positions[used_vertices(m.faces, len(m.positions))] for m in self.meshes
+                              if m.triangle_count])
         return np.stack([pts.min(axis=0), pts.max(axis=0)]).astype(np.float64)
 
     def content_bounds(self, margin: float = 0.1) -> np.ndarray:
