@@ -70,6 +70,7 @@ reordered order and scattered back into the caller's (``sort``, as :meth:`KdTree
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -597,14 +598,15 @@ class RayTracer:
     """Traces rays into G-buffers (module docstring) for one static scene on one device.
 
     ``RayTracer(scene, device=None)`` builds (or loads from the disk cache) the kd-tree of
-    ``scene.merged()`` and uploads geometry, materials and all texture mips once.
+    ``scene.merged()``; geometry, materials and all texture mips are uploaded once, on the first
+    :meth:`trace` (``data``).
     """
 
     def __init__(self, scene, device: str | None = None, *, tree_config: KdBuildConfig | None = None,
                  cache: bool | None = None, progress: bool | None = None, ray_epsilon: float | None = None):
         self.device = resolve_device(device)
-        wp_ = init_warp()
-        pos, nrm, uv, faces, fmat = scene.merged()
+        init_warp()
+        pos, _, uv, faces, fmat = scene.merged()
         if len(faces) == 0:
             raise SerenityError(f"scene {getattr(scene, 'name', '?')!r} has no triangles to ray trace")
         with _build_lock(cache is True or (cache is None and len(faces) >= CACHE_MIN_TRIANGLES)):
@@ -617,6 +619,28 @@ class RayTracer:
         diag = float(np.linalg.norm(hi.astype(np.float64) - lo))
         self.ray_epsilon = float(ray_epsilon) if ray_epsilon is not None else RAY_EPSILON_REL * max(diag, 1e-6)
 
+        mats = scene.materials
+        cut = np.array([m.alpha_tested for m in mats], bool)
+        if cut.any():  # the tree's own queries (probe visibility, sun rays) run the same alpha test
+            self.tree.set_alpha_test(cut[fmat], _coverage_test(scene.materials, fmat, faces, uv))
+        self._scene = scene
+        self._data: SceneData | None = None
+        self._upload_lock = threading.Lock()
+
+    @property
+    def data(self) -> SceneData:
+        """The scene on the device (geometry, materials, every texture's mips), uploaded on first use:
+        a tracer that answers only its tree's own queries (``tree.occluded``: the probes' shadow rays
+        where the traced probes come from the disk cache) never needs it."""
+        if self._data is None:
+            with self._upload_lock:
+                if self._data is None:
+                    self._data = self._upload(self._scene)
+        return self._data
+
+    def _upload(self, scene) -> SceneData:
+        wp_ = init_warp()
+        _, nrm, uv, faces, fmat = scene.merged()
         textures, tex_index, mat_tex, mat_ntex = [], {}, [], []
 
         def texture_index(t) -> int:
@@ -662,12 +686,9 @@ class RayTracer:
                                            for m in mats], np.float32), dtype=wp.vec4, device=dev)
         tangents = scene.merged_tangents() if scene.has_normal_maps else np.zeros((1, 4), np.float32)
         s.tangents = wp_.array(tangents, dtype=wp.vec4, device=dev)
-        cut = np.array([m.alpha_tested for m in mats], bool)
-        s.cutouts = int(cut.any())
-        if cut.any():  # the tree's own queries (probe visibility, sun rays) run the same alpha test
-            self.tree.set_alpha_test(cut[fmat], _coverage_test(scene.materials, fmat, faces, uv))
-        self.data = s
+        s.cutouts = int(any(m.alpha_tested for m in mats))
         self.textures = textures
+        return s
 
     def trace(self, origins, directions, cone_width=0.0, cone_spread=0.0, *, tmin: float | None = None,
               tmax: float = np.inf, threads: int | None = None, transmissions: int = 0,

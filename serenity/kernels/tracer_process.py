@@ -267,6 +267,7 @@ def _serve_frames(fd_in: int, fd_out: int, nice: int = NICE) -> None:
     t0 = time.perf_counter()
     try:
         tracer = RayTracer(_load_scene(path), device=device)
+        tracer.data  # noqa: B018 - uploaded now, beside the renderer's set-up, not in its first frame
     except Exception as e:  # reported to the parent, which raises it as a SerenityError
         _write(fd_out, ("error", f"{type(e).__name__}: {e}"))
         return
