@@ -60,9 +60,11 @@ class TAAConfig:
     the blend turns exponential. With 0.1 an edge's pixels step by about a tenth of the edge's contrast
     every frame as the jitter cycles; with 1/64 a still view's 99th-percentile step under a sinking sun
     is 1.6 % in the courtyard (``lpv``; 2.6 % with 1/32)."""
-    gamma: float = 1.25
+    gamma: float = 0.75
     """Half-width of the box the history is clipped to, in standard deviations of this frame's 3×3
-    neighbourhood (variance clipping; smaller rejects more history: less ghosting, more flicker)."""
+    neighbourhood (variance clipping; smaller rejects more history: less ghosting and blur, more
+    flicker). With a moving camera 0.75 scores best of 0.5, 0.75, 1 and 1.25 on the edges of both
+    benchmark scenes (``benchmarks/bench_aa.py``), and the camera pan's steps are those of 1.25."""
     weights: str = "excess"
     """How the sample and the history are weighed as they are blended (besides ``alpha``): "excess"
     divides the sample's weight by 1 + exposure × its luminance above its brightest neighbour's (a
