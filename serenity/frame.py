@@ -486,13 +486,13 @@ class Renderer:
                      nonfinite_pixels=nonfinite, tracer_cpu_ms=self._tracer_cpu_ms)
 
     def _start_ray_tracing(self, view_proj, gbuf):
-        """The ray-casting buffer (which pixels reflect or refract, and their rays; drawn against the
-        G-buffer's depth), read back; the tracer starts on them at once. Returns (rcb or None, a
-        callable that joins the tracer)."""
+        """The ray-casting buffer (which pixels reflect or refract, and their rays; read from the
+        G-buffer), read back; the tracer starts on them at once. Returns (rcb or None, a callable
+        that joins the tracer)."""
         if not self.traces:
             return None, None
         with self._stage("ray casting buffer"):
-            self.raycast_pass.render(view_proj, self.scene.camera, gbuf.depth)
+            self.raycast_pass.render(view_proj, self.scene.camera, gbuf)
             rcb = self.raycast_pass.read().select(self.config.reflections, self.config.refractions)
         if not rcb.count:
             return rcb, None

@@ -1,14 +1,16 @@
 """Ray-casting buffer pass (paper §9, Fig. 12–13): which pixels need ray tracing, and their rays.
 
-Drawn after the G-buffer, against its depth buffer: only the reflective/refractive material ranges
-are rasterised, and a fragment survives only where its surface is the visible one (opaque surfaces
-in front already hid it in the G-buffer's depth). Each surviving fragment appends the ray origin,
-reflected and refracted directions, ray cone, flags, normal, material and pixel to a storage buffer
-through an atomic counter (``glsl/raycast.glsl``), so ``read()`` brings back only the pixels that
-need rays (paper: "ray tracing only where pixels need it") — the count and N records, sorted by
-pixel so the order does not depend on the rasteriser's threads. Before, the whole scene was drawn
-into four full-screen RGBA32F targets that were read back whole: at 640×360 that was 14–17 CPU-ms
-of drawing and 15–16 of read-back for ~4k rays on llvmpipe.
+Each pixel whose visible surface reflects or refracts appends the ray origin, reflected and
+refracted directions, ray cone, flags, normal, material and pixel to a storage buffer through an
+atomic counter (``glsl/raycast.glsl``), so ``read()`` brings back only the pixels that need rays
+(paper: "ray tracing only where pixels need it") — the count and N records, sorted by pixel so the
+order does not depend on the rasteriser's threads. The pixels are found one of two ways, whichever
+costs less this frame: the paper's, rasterising the reflective and refractive ranges again against
+the G-buffer's depth (its cost follows their triangles: 21 ms for the breakfast room's 105k chrome
+triangles at 320×180 on llvmpipe, 0.5 ms for the courtyard's mirror and windows), or a fullscreen
+pass that reads each pixel's point, normal and material from the G-buffer over the screen tiles
+those ranges' boxes cover (its cost follows the pixels: 2 ms for the whole 320×180 view).
+``PIXELS_PER_TRIANGLE`` weighs one against the other; both give the same rays.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from serenity.raster.context import finish, load_program
+from serenity.raster.context import draw_fullscreen, finish, fullscreen_vao, load_program
+from serenity.raster.culling import boxes_in_frustum
 
 TRACE_REFLECTION = 1
 TRACE_REFRACTION = 2
@@ -83,6 +86,11 @@ class RayCastingBuffer:
         return m.reshape(self.height, self.width)
 
 
+PIXELS_PER_TRIANGLE = 5.0
+"""What one reflective or refractive triangle rasterised again costs, in pixels of the fullscreen
+pass (llvmpipe, 2 cores: 105k triangles about 20 ms, 57,600 pixels about 2 ms, so ~5)."""
+TILE = 32
+"""Pixels per side of the screen tiles the pass shades (``RayCastPass.tiles``)."""
 RECORD_VEC4S = 5
 """vec4s per ray record in the storage buffer (``glsl/raycast.glsl``)."""
 
@@ -91,42 +99,130 @@ class RayCastPass:
     def __init__(self, ctx, scene_gl):
         self.ctx = ctx
         self.scene_gl = scene_gl
-        self.program = load_program(ctx, "raycast.glsl")
-        self.vao = scene_gl.vao(self.program, with_attributes=("in_position", "in_normal"))
+        self.program = load_program(ctx, "raycast.glsl", defines={"FROM_GBUFFER": 1})
+        self.vao = fullscreen_vao(ctx, self.program)
+        self.program_geometry = load_program(ctx, "raycast.glsl", defines={"FROM_GBUFFER": 0})
+        self.vao_geometry = scene_gl.vao(self.program_geometry, with_attributes=("in_position", "in_normal"))
         self.size = None
-        self.traced_ranges = [r for r in scene_gl.ranges if scene_gl.materials[r.material].needs_ray_tracing]
-        self.any_traced_material = bool(self.traced_ranges)
+        self.any_traced_material = any(m.needs_ray_tracing for m in scene_gl.materials)
+        traced = [r for r in scene_gl.ranges if scene_gl.materials[r.material].needs_ray_tracing]
+        self.traced_ranges = traced
+        #: which way the last ``render`` found the pixels: "gbuffer", "geometry" or None (nothing to find)
+        self.last_method: str | None = None
+        #: world boxes (R, 3) of the reflective and refractive draw ranges: the pass shades only the
+        #: screen tiles they cover
+        self.traced_lo = np.array([r.lo for r in traced], np.float64).reshape(-1, 3)
+        self.traced_hi = np.array([r.hi for r in traced], np.float64).reshape(-1, 3)
+        #: rectangles (x, y, w, h) the last ``render`` shaded (the fullscreen way)
+        self.last_rects: list[tuple[int, int, int, int]] = []
         self.counter = ctx.buffer(reserve=4)
         self.records = None
         self.fbo = None
-        self._depth = None
+        self._depth = self._depth_fbo = None  # the geometry way's framebuffer: the G-buffer's depth
 
     def resize(self, width: int, height: int) -> None:
         if self.size == (width, height):
             return
         if self.records is not None:
             self.records.release()
-        # one record per pixel at most (a pixel's visible surface is one fragment; coplanar ties
-        # can add a second, dropped on read)
+            self.fbo.release()
+        # one record per pixel at most
         self.records = self.ctx.buffer(reserve=width * height * RECORD_VEC4S * 16)
+        # no colour target: the pass writes the storage buffer only (a tiny one keeps the framebuffer complete)
+        self._target = self.ctx.texture((width, height), 1, dtype="f1")
+        self.fbo = self.ctx.framebuffer(color_attachments=[self._target])
+        self.fbo.color_mask = (False, False, False, False)
         self.size = (width, height)
 
-    def render(self, view_proj: np.ndarray, camera, depth) -> None:
-        """Append the rays of the reflective/refractive pixels; ``depth``: the frame's G-buffer
-        depth texture (already rendered with the same ``view_proj``)."""
-        ctx, p = self.ctx, self.program
+    def tiles(self, view_proj: np.ndarray, visible: np.ndarray | None = None) -> list[tuple[int, int, int, int]]:
+        """Scissor rectangles (x, y, w, h; GL origin bottom-left), not overlapping, over the
+        ``TILE``-pixel tiles that the reflective and refractive ranges' boxes cover on screen (all of
+        the view where a box reaches behind the camera): a fullscreen pass over a courtyard whose
+        mirror fills 2 % of the view cost 4 times the geometry it replaces. ``visible``: the ranges in
+        the frustum, when known."""
         w, h = self.size
+        if not len(self.traced_lo):
+            return []
+        keep = visible if visible is not None else boxes_in_frustum(view_proj, self.traced_lo, self.traced_hi)
+        lo, hi = self.traced_lo[keep], self.traced_hi[keep]
+        if not len(lo):
+            return []
+        corners = np.stack([np.where(np.array([(k >> a) & 1 for a in range(3)], bool), hi, lo)
+                            for k in range(8)], axis=1)                                     # (R, 8, 3)
+        clip = corners @ view_proj[:3, :3].T + view_proj[:3, 3]
+        cw = corners @ view_proj[3, :3] + view_proj[3, 3]                                    # (R, 8)
+        tx, ty = -(-w // TILE), -(-h // TILE)
+        mask = np.zeros((ty, tx), bool)
+        for c, ww in zip(clip, cw, strict=True):
+            if np.any(ww <= 1e-6):  # reaches behind the camera: its projection is unbounded
+                mask[:] = True
+                break
+            ndc = c[:, :2] / ww[:, None]
+            x0, y0 = np.floor((ndc.min(axis=0) * 0.5 + 0.5) * (w, h)).astype(int)
+            x1, y1 = np.ceil((ndc.max(axis=0) * 0.5 + 0.5) * (w, h)).astype(int)
+            x0, x1 = max(x0, 0) // TILE, min(x1, w) - 1
+            y0, y1 = max(y0, 0) // TILE, min(y1, h) - 1
+            if x1 >= 0 and y1 >= 0 and x0 * TILE <= x1 and y0 * TILE <= y1:
+                mask[y0:y1 // TILE + 1, x0:x1 // TILE + 1] = True
+        rects = []
+        for j in range(ty):  # each row's runs of covered tiles, one rectangle each
+            row = np.flatnonzero(np.diff(np.concatenate(([0], mask[j].astype(np.int8), [0]))))
+            for a, b in zip(row[::2], row[1::2], strict=True):
+                x, y = a * TILE, j * TILE
+                rects.append((x, y, min(b * TILE, w) - x, min(y + TILE, h) - y))
+        return rects
+
+    def render(self, view_proj: np.ndarray, camera, gbuffer, method: str | None = None) -> None:
+        """Append the rays of the reflective/refractive pixels of ``gbuffer`` (the frame's G-buffer,
+        drawn from ``camera`` with ``view_proj``); ``method`` "gbuffer" or "geometry" forces one way
+        (None: the cheaper, module doc)."""
         self.counter.write(np.zeros(1, np.uint32).tobytes())
+        self.last_rects, self.last_method = [], None
         if not self.traced_ranges:
             return
-        if self._depth is not depth:
-            if self.fbo is not None:
-                self.fbo.release()
-            self.fbo = ctx.framebuffer(depth_attachment=depth)
-            self._depth = depth
+        visible = boxes_in_frustum(view_proj, self.traced_lo, self.traced_hi)
+        rects = self.tiles(view_proj, visible)
+        if not rects:
+            return
+        triangles = sum(r.count for r, k in zip(self.traced_ranges, visible, strict=True) if k) // 3
+        pixels = sum(r[2] * r[3] for r in rects)
+        if method is None:
+            method = "geometry" if triangles * PIXELS_PER_TRIANGLE < pixels else "gbuffer"
+        self.last_method = method
+        if method == "geometry":
+            self._render_geometry(view_proj, camera, gbuffer.depth, visible)
+            return
+        self.last_rects = rects
+        ctx, p = self.ctx, self.program
+        w, h = self.size
         with ctx.debug_scope("raycast"):
             self.fbo.use()
-            self.fbo.depth_mask = False
+            for loc, (name, tex) in enumerate((("g_albedo", gbuffer.albedo), ("g_normal", gbuffer.normal),
+                                               ("g_position", gbuffer.position), ("g_material", gbuffer.material))):
+                tex.use(location=loc)
+                p[name].value = loc
+            self.counter.bind_to_storage_buffer(0)
+            self.records.bind_to_storage_buffer(1)
+            p["u_camera_pos"].value = tuple(float(x) for x in camera.position)
+            p["u_pixel_spread"].value = math.atan(2 * math.tan(math.radians(camera.fov_y_deg) / 2) / h)
+            p["u_width"].value = w
+            p["u_height"].value = h
+            p["u_capacity"].value = w * h
+            draw_fullscreen(ctx, self.vao, self.last_rects)
+
+    def _render_geometry(self, view_proj, camera, depth, visible) -> None:
+        """The paper's way: the visible reflective/refractive ranges drawn against ``depth``."""
+        ctx, p = self.ctx, self.program_geometry
+        w, h = self.size
+        if self._depth is not depth:
+            if self._depth_fbo is not None:
+                self._depth_fbo.release()
+            self._depth_fbo = ctx.framebuffer(depth_attachment=depth)
+            self._depth = depth
+        with ctx.debug_scope("raycast"):
+            fbo = self._depth_fbo
+            fbo.use()
+            fbo.depth_mask = False
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.depth_func = "<="
             ctx.disable(moderngl.CULL_FACE)
@@ -138,21 +234,25 @@ class RayCastPass:
             p["u_width"].value = w
             p["u_height"].value = h
             p["u_capacity"].value = w * h
-            for r in self.traced_ranges:
-                m = self.scene_gl.materials[r.material]
-                p["u_transparency"].value = float(m.transparency)
-                p["u_ior"].value = float(m.ior)
-                p["u_material_index"].value = float(r.material)
-                self.vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
-            ctx.disable(moderngl.DEPTH_TEST)
-            ctx.depth_func = "<"
-            self.fbo.depth_mask = True
+            try:
+                for r, k in zip(self.traced_ranges, visible, strict=True):
+                    if not k:
+                        continue
+                    m = self.scene_gl.materials[r.material]
+                    p["u_transparency"].value = float(m.transparency)
+                    p["u_ior"].value = float(m.ior)
+                    p["u_material_index"].value = float(r.material)
+                    self.vao_geometry.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
+            finally:
+                ctx.disable(moderngl.DEPTH_TEST)
+                ctx.depth_func = "<"
+                fbo.depth_mask = True
 
     def read(self) -> RayCastingBuffer:
         """Read back (sync point 1 of paper §10): the count, then only that many records."""
         w, h = self.size
         n = 0
-        if self.traced_ranges:
+        if self.any_traced_material:
             # llvmpipe does not count a draw's storage-buffer writes as pending on the buffer: a read
             # without the barrier and the finish returns what the previous draw left
             self.ctx.memory_barrier()
@@ -162,8 +262,8 @@ class RayCastPass:
             np.zeros(0, np.float32)
         rec = rec.reshape(n, RECORD_VEC4S, 4)
         pix = rec[:, 4, 0].astype(np.int32)
-        # pixel order (the atomic counter's is the rasteriser threads'); a coplanar tie's second
-        # fragment on the same pixel is dropped
+        # pixel order (the atomic counter's is the rasteriser threads'); with the geometry, a coplanar
+        # tie's second fragment on the same pixel is dropped
         pix, first = np.unique(pix, return_index=True)
         rec = rec[first]
         return RayCastingBuffer(

@@ -60,7 +60,8 @@ void main() {
     float keep = 1.0;                  // weight of L_surface
     float transparency = mat.z;
     if (transparency > 0.0) {
-        float f0 = pow((mat.w - 1.0) / (mat.w + 1.0), 2.0);
+        float ior = abs(mat.w);  // its sign is the side seen (gbuffer.glsl)
+        float f0 = pow((ior - 1.0) / (ior + 1.0), 2.0);
         float F = v_rays.y < -1.5 ? 1.0 : schlick(f0, cos_t);
         float wr = transparency * F;
         if (has_refl) { rgb += wr * traced(v_rays.x); keep -= wr; }

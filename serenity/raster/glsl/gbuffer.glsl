@@ -105,6 +105,8 @@ void main() {
     o_albedo = vec4(albedo, u_material_index);
     o_normal = vec4(n, u_specular);
     o_position = vec4(v_world, 1.0);
-    o_material = u_material;
+    // the ior's sign: which side of the surface the viewer sees (negative: its back), for the
+    // ray-casting buffer's refraction (raycast.glsl); n faces the viewer either way
+    o_material = vec4(u_material.xyz, side * u_material.w);
 }
 #endif

@@ -1,9 +1,14 @@
 // Ray-casting buffer (paper §9, Fig. 12-13): for every pixel whose visible surface reflects or
-// refracts, the secondary rays the CPU ray tracer must follow. Only the reflective/refractive
-// material ranges are drawn, against the G-buffer's depth (LEQUAL, no depth writes, early fragment
-// tests), so a fragment runs only where that surface is the visible one; each appends one record
-// to a storage buffer through an atomic counter, and the host reads back the count and the records
-// alone (stream compaction on the GPU) instead of four full-screen float targets.
+// refracts, the secondary rays the CPU ray tracer must follow. Two ways to find them, the cheaper
+// for the frame (raster/raycast.py): FROM_GBUFFER 0 rasterises the reflective/refractive material
+// ranges again, against the G-buffer's depth (LEQUAL, no depth writes, early fragment tests), so a
+// fragment runs only where that surface is the visible one (the paper's way; cheap for a few
+// large mirrors); FROM_GBUFFER 1 reads each pixel's point, shading normal and material from the
+// G-buffer in a fullscreen pass over the screen tiles those ranges cover (cheap for 100k chrome
+// triangles: the breakfast room's chairs cost 21 ms a frame to rasterise again at 320x180). Each
+// pixel that needs rays appends one record to a storage buffer through an atomic counter, and the
+// host reads back the count and the records alone (stream compaction on the GPU) instead of four
+// full-screen float targets.
 // Record i = records[5i .. 5i+4]:
 //   0 origin   xyz = world position (m), w = ray-cone width at the surface (m)
 //   1 reflect  xyz = unit reflected direction, w = cone spread angle (rad) after the bounce
@@ -11,9 +16,60 @@
 //              1 = trace reflection, 2 = trace refraction, 4 = total internal reflection
 //   3 normal   xyz = shading normal facing the viewer, w = material index
 //   4 pixel    x = row * width + column (row 0 = top), exact in a float up to 2^24 pixels
+// FROM_GBUFFER: the G-buffer's normal faces the viewer, and the sign of its ior (g_material.w) says
+// which side of the surface the viewer sees (negative: the back, where a refracted ray leaves the
+// medium).
 // Ray cones after Akenine-Moller et al., "Texture Level of Detail Strategies for Real-Time Ray
 // Tracing" (Ray Tracing Gems, ch. 20): spread = pixel spread angle; width = distance * spread.
 #extension GL_ARB_ES3_1_compatibility : require
+#ifndef FROM_GBUFFER
+#define FROM_GBUFFER 1
+#endif
+#if FROM_GBUFFER
+#include "fullscreen.glsl"
+
+#if defined FRAGMENT_SHADER
+uniform sampler2D g_albedo;     // a = material index
+uniform sampler2D g_normal;     // xyz = shading normal facing the viewer
+uniform sampler2D g_position;   // xyz = world point, w = 0 where nothing is seen
+uniform sampler2D g_material;   // shininess, reflectivity, transparency, ior (negative: the back seen)
+uniform vec3 u_camera_pos;
+uniform float u_pixel_spread;   // rad per pixel: atan(2 tan(fov/2) / height)
+uniform int u_width;
+uniform int u_height;
+uniform uint u_capacity;        // records the buffer holds
+layout(std430, binding = 0) buffer RayCount { uint ray_count; };
+layout(std430, binding = 1) buffer RayRecords { vec4 records[]; };
+void main() {
+    if (gl_HelperInvocation) return;   // a quad's helper lanes must not append
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    vec4 pos = texelFetch(g_position, px, 0);
+    vec4 mat = texelFetch(g_material, px, 0);
+    if (pos.w == 0.0 || (mat.y <= 0.0 && mat.z <= 0.0)) return;  // no surface, or one that needs no ray
+    vec3 n = normalize(texelFetch(g_normal, px, 0).xyz);
+    vec3 v = pos.xyz - u_camera_pos;
+    float dist = length(v);
+    v /= dist;
+    bool entering = mat.w > 0.0;       // the front of the surface: the ray enters the material
+    float ior = abs(mat.w);
+    float eta = entering ? 1.0 / ior : ior;
+    vec3 r = reflect(v, n);
+    vec3 t = refract(v, n, eta);
+    float flags = 1.0;                 // Fresnel reflection exists for glass too
+    bool tir = dot(t, t) == 0.0;
+    if (mat.z > 0.0 && !tir) flags += 2.0;
+    if (mat.z > 0.0 && tir) flags += 4.0;
+    uint i = atomicAdd(ray_count, 1u);
+    if (i >= u_capacity) return;
+    int row = u_height - 1 - px.y;
+    records[5u * i + 0u] = vec4(pos.xyz, dist * u_pixel_spread);
+    records[5u * i + 1u] = vec4(r, u_pixel_spread);
+    records[5u * i + 2u] = vec4(tir ? vec3(0.0) : normalize(t), flags);
+    records[5u * i + 3u] = vec4(n, texelFetch(g_albedo, px, 0).a);
+    records[5u * i + 4u] = vec4(float(row * u_width + px.x), 0.0, 0.0, 0.0);
+}
+#endif
+#else
 #include "scene_vertex.glsl"
 
 #if defined FRAGMENT_SHADER
@@ -55,3 +111,4 @@ void main() {
     records[5u * i + 4u] = vec4(float(row * u_width + int(gl_FragCoord.x)), 0.0, 0.0, 0.0);
 }
 #endif
+#endif  // FROM_GBUFFER
