@@ -687,6 +687,43 @@ def viewer_cost(data: dict) -> str:
         f"\n\nThe read-back of HDR, LDR and AOVs that the viewer skips: {f1(data['readback_ms'])} ms per frame.")
 
 
+STARTUP_PHASES = ("imports", "scene load", "renderer set-up", "tracer process start", "frame", "sky volume (gather)",
+                  "ray tracer (kd-tree)", "probe rays (trace, surfels, moments)", "probe cache read",
+                  "surfel shadow rays", "surfel updates", "probe gathers", "wait for the tracer process", "write PNG",
+                  "write EXR", "close (tracer process stops)")
+
+
+@table("startup", "results/startup.json")
+def startup(data: dict) -> str:
+    """`serenity render` of a big scene as a fresh process, empty and warm caches: seconds, memory, phases."""
+    s, ph = data["summary"], data["phases"]
+
+    def rng(kind: str, key: str, fmt: str = "{:.1f}") -> str:
+        v = s[kind][key]
+        return fmt.format(v["median"]) + (f" ({fmt.format(v['min'])}–{fmt.format(v['max'])})"
+                                          if data["runs"] > 1 else "")
+
+    rows = [["**`serenity render`, spawn to exit (s)**", rng("cold", "seconds"), rng("warm", "seconds")],
+            ["peak resident memory, largest process (MB)", rng("cold", "peak_rss_mb", "{:.0f}"),
+             rng("warm", "peak_rss_mb", "{:.0f}")],
+            ["last frame (ms)", rng("cold", "frame_ms", "{:.0f}"), rng("warm", "frame_ms", "{:.0f}")],
+            ["*instrumented run:* renderer's / tracer process's peak (MB)",
+             *(f"{ph[k]['renderer_peak_rss_mb']:.0f} / " + ("–" if ph[k]["tracer_peak_rss_mb"] is None
+                                                            else f"{ph[k]['tracer_peak_rss_mb']:.0f}")
+               for k in ("cold", "warm"))],
+            ["Python's own start", *(f"{ph[k]['python_start_s']:.2f}" for k in ("cold", "warm"))]]
+    for name in STARTUP_PHASES:
+        cells = [ph[k]["by_phase"].get(name) for k in ("cold", "warm")]
+        if not any(cells):
+            continue
+        depth = next(c["depth"] for c in cells if c)
+        calls = max(c["calls"] for c in cells if c)
+        label = "&nbsp;&nbsp;" * depth + name + (f" (×{calls})" if calls > 1 else "")
+        rows.append([label, *("–" if c is None else f"{c['seconds']:.2f}" for c in cells)])
+    return md([f"{Path(data['scene']).stem} {size_label(data['size'])}, `{preset(data['quality'])}`",
+               "empty caches", "warm caches"], rows)
+
+
 # ----------------------------------------------------------------------------------- the documents
 
 
