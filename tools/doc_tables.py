@@ -602,14 +602,24 @@ def amortise(data: dict) -> str:
 
 @table("aa", "results/aa.json")
 def aa(data: dict) -> str:
-    """Edges: FXAA and jittered accumulation of a still view, against the path-traced reference."""
+    """Edges: FXAA, TAA and jittered accumulation of a still view, and FXAA and TAA with a moving
+    camera (the last poses' mean, and the references' noise floor), against the path-traced reference."""
     rows = []
     for r in data["results"]:
         ms = r.get("all_frames_ms", r["aa_ms"] if r["aa_ms"] else 0.0)
-        rows.append([r["scene"], r["method"], f"{r['flip']:.4f}", f"{r['rel_mse']:.4f}", f"{r['edge_flip']:.4f}",
-                     f"{r['edge_rel_mse']:.4f}", "—" if not ms else f1(ms)])
-    return md(["scene", "method", "FLIP", "relMSE", "edge pixels' FLIP", "edge pixels' relMSE",
-               "ms (FXAA pass, or every accumulated frame)"], rows)
+        rows.append([r["scene"], "still", r["method"], f"{r['flip']:.4f}", f"{r['rel_mse']:.4f}",
+                     f"{r['edge_flip']:.4f}", f"{r['edge_rel_mse']:.4f}", "—" if not ms else f1(ms)])
+    moving = data.get("moving", {})
+    for r in moving.get("results", []):
+        rows.append([r["scene"], "moving", r["method"], f"{r['flip']:.4f}", f"{r['rel_mse']:.4f}",
+                     f"{r['edge_flip']:.4f}", f"{r['edge_rel_mse']:.4f}", "—" if not r["aa_ms"] else f1(r["aa_ms"])])
+    for name, floors in moving.get("reference_floor", {}).items():
+        rows.append([name, "moving", f"reference's noise floor ({floors[0]['spp']} spp)",
+                     f"{statistics.mean(f['flip'] for f in floors):.4f}",
+                     f"{statistics.mean(f['rel_mse'] for f in floors):.4f}",
+                     "—", "—", "—"])
+    return md(["scene", "camera", "method", "FLIP", "relMSE", "edge pixels' FLIP", "edge pixels' relMSE",
+               "ms (the AA pass, or every accumulated frame)"], rows)
 
 
 @table("texture-taps", "results/aa.json")
