@@ -6,15 +6,17 @@ frame's projection is shifted within the pixel by the next point of a short Halt
 without anti-aliasing), and a resolve pass before the tone map blends each pixel's new sample with
 its history — the last resolved image, reprojected through the pixel's surface point into the last
 frame's unjittered view (``glsl/reproject.glsl``, shared with the indirect light's history), clipped
-to the range of this frame's 3×3 neighbourhood and weighted by inverse tone-mapped luminance. A
+to the range of this frame's 3×3 neighbourhood, a sample brighter than all its neighbours weighted
+down by its tone-mapped excess. A
 still view converges to the mean of the cycle's sub-pixel samples (what
 ``Renderer.render_accumulated`` computes), and a moving one keeps most of it: the history follows
 the surfaces; where a surface was hidden in the last frame (a disocclusion) or came in from off the
 image the pixel starts afresh from this frame's sample.
 
 The history restarts (``reset``) on a resize, on a camera cut (``TAAConfig.cut_angle_deg``,
-``cut_distance``) and when the renderer's config changes. Its cost: one fullscreen pass of 9 + 5
-texture taps and a reprojection per pixel, and one RGBA32F target more.
+``cut_distance``) and when the renderer's config changes. Its cost: one fullscreen pass that reads
+per pixel a 3×3 neighbourhood of colour and position, a reprojection and up to 9 history taps, and
+two RGBA32F targets (this frame's, the last frame's). ``docs/techniques.md`` says why its settings.
 """
 
 from __future__ import annotations

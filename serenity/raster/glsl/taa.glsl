@@ -8,15 +8,21 @@
 //            centre's place, not the jittered sample's), bilinear over the taps that showed that
 //            surface (depth test: a disocclusion, or a point off the image, keeps no history); with all
 //            4 taps taken, a 5-tap Catmull-Rom instead (sharper: bilinear history blurs a moving image
-//            a little more every frame). The sky's pixels reproject their view direction (w = 0) and
-//            take the taps that showed the sky.
+//            a little more every frame). A pixel with a depth step in its 3x3 neighbourhood (an edge:
+//            its jittered samples fall on either side) reprojects its nearest neighbour's point (the
+//            silhouette's motion) and takes the taps without the depth test. The sky's pixels
+//            reproject their view direction (w = 0) and take the taps that showed the sky.
 //   clip     the history clipped towards the mean of this frame's 3x3 neighbourhood, into the box of
 //            mean +- gamma * standard deviation (variance clipping), in YCoCg of the Reinhard-
-//            compressed colour c / (1 + exposure * luminance(c)): what it showed of a light, a shadow
-//            or a surface that has changed or moved is pulled back into what this frame shows there
-//   blend    out = (w_c * c + w_h * h) / (w_c + w_h), w_c = a / (1 + exposure * L(c)),
-//            w_h = (1 - a) / (1 + exposure * L(h)): weights by the inverse of the tone-mapped
-//            luminance, so that a single bright sample (a sun glint) does not smear into its history
+//            compressed colour c / (1 + exposure * luminance(c)), and no brighter than the brightest
+//            of the nine: what it showed of a light, a shadow or a surface that has changed or moved
+//            is pulled back into what this frame shows there
+//   blend    out = (w_c * c + w_h * h) / (w_c + w_h), w_c = a / (1 + exposure * E(c)), w_h = 1 - a,
+//            E(c) = c's luminance above its brightest neighbour's (u_weights 2; Karis' E = L for
+//            both, 1; none, 0): a single bright sample (a firefly) does not smear into the history
+//   a, gamma u_alpha and u_gamma where the reprojection moves the image a pixel or more, u_alpha_still
+//            and u_gamma_still where it stands still, in between by the distance: a still view
+//            averages many jitter cycles in a wide box, or its edges step as the jitter cycles
 // Output: rgb = the resolved image, a = the pixel's view depth (-1: sky), which the next frame reads.
 #include "fullscreen.glsl"
 #include "reproject.glsl"
