@@ -35,6 +35,11 @@ OPTIONAL_PACKAGES = {"mitsuba", "flip_evaluator", "matplotlib", "embreex", "pyoi
 """Third-party packages of the extras: imported inside the function that uses them (or through
 ``serenity.optional.require``), never at a module's top."""
 
+HEAVY_PACKAGES = {"trimesh"}
+"""Required packages that take most of a second to import (trimesh, and the scipy it pulls in) and
+that a few functions use (reading and writing mesh files, building spheres): imported inside those
+functions, so that the tracer process and a scene without a mesh file never load them."""
+
 LAZY_IMPORT_PACKAGES = ("serenity.commands",)
 """Where a function may import anything: a command imports what it runs when it runs, so that
 ``serenity --help`` does not load Warp, OpenGL or trimesh."""
@@ -208,10 +213,11 @@ def test_plain_modules_do_not_import_warp_or_moderngl(module, heavy):
 
 
 def test_function_local_imports_only_where_the_rule_allows():
-    """Inside a function: an optional package, or anything in a command module; nothing else."""
+    """Inside a function: an optional or a heavy package, or anything in a command module; nothing else."""
     bad = []
     for i in IMPORTS:
-        if not i.local or i.target.split(".")[0] in OPTIONAL_PACKAGES or i.module in PENDING_LOCAL_IMPORTS:
+        if not i.local or i.target.split(".")[0] in OPTIONAL_PACKAGES | HEAVY_PACKAGES \
+                or i.module in PENDING_LOCAL_IMPORTS:
             continue
         if any(_under(i.module, p) for p in LAZY_IMPORT_PACKAGES):
             continue
