@@ -24,6 +24,7 @@ region, as :func:`serenity.eval.metrics.flip` does with a mask.
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import uniform_filter
 
 from serenity.errors import SerenityError
 from serenity.eval.metrics import DEFAULT_EXPOSURE, REL_MSE_EPS, depth_edges, flip_map
@@ -93,8 +94,6 @@ def leak_ratio(ours, ref, box: int = LEAK_BOX, dark: float = LEAK_DARK) -> dict:
     ``dark`` × the reference image's mean, the largest ratio ours ÷ reference of the box means.
     {"max_ratio": float or None (no dark box), "dark_fraction": the image's share of dark boxes,
     "over_4": the share of the dark boxes where ours is more than 4× the reference}."""
-    from scipy.ndimage import uniform_filter
-
     lo, lr = luminance(ours), luminance(ref)
     if lo.shape != lr.shape:
         raise SerenityError(f"images differ in size: {lo.shape} vs reference {lr.shape} (shape mismatch)")
