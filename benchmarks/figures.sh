@@ -19,7 +19,7 @@ R=benchmarks/results
 
 # step name | minutes on the 2-core machine from a fresh clone (references not cached) | command
 STEPS=(
-  "frontier|22|$PY benchmarks/bench_frontier.py --no-progress"
+  "frontier|30|$PY benchmarks/bench_frontier.py --no-progress"
   "frame-traced-probes-320|1|$SER bench courtyard --frames 24 --size 320x180 --quality traced-probes --json $R/frame_bench_traced-probes_320x180.json --chart $R/frame_bench_traced-probes_320x180.png"
   "frame-traced-probes-640|1|$SER bench courtyard --frames 24 --size 640x360 --quality traced-probes --json $R/frame_bench_traced-probes_640x360.json --chart $R/frame_bench_traced-probes_640x360.png"
   "frame-lpv-fast-320|1|$SER bench courtyard --frames 24 --size 320x180 --quality lpv-fast --json $R/frame_bench_lpv-fast_320x180.json --chart $R/frame_bench_lpv-fast_320x180.png"
@@ -40,6 +40,7 @@ STEPS=(
   "temporal-stability|20|$PY benchmarks/bench_stability.py --temporal"
   "amortise|2|$PY benchmarks/bench_amortise.py"
   "aa|2|$PY benchmarks/bench_aa.py"
+  "startup|3|$PY benchmarks/bench_startup.py --runs 2"
   "sky|2|$PY benchmarks/bench_sky.py --json $R/sky.json --chart $R/sky.png"
   "sky-sh|1|$PY benchmarks/bench_sky_sh.py"
   "sky-anchor|1|$PY benchmarks/bench_sky_anchor.py"
