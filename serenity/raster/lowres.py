@@ -19,7 +19,36 @@ from serenity.raster.context import FullscreenPass, LowResLayout, low_res_layout
 from serenity.raster.interop import read_texture
 
 
-class LowResGuide(FullscreenPass):
+class _ClassDepthPass(FullscreenPass):
+    """A fullscreen pass whose targets share a depth texture holding each texel's class
+    (``glsl/lowres.glsl``: background, surface, glossy surface), laid out by ``_layout``, which the
+    low-res passes drawn into the same targets depth-test against."""
+
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        self.depth = None
+        self.layout: LowResLayout | None = None
+
+    def _layout(self, width: int, height: int) -> LowResLayout:
+        raise NotImplementedError
+
+    def target_size(self, width: int, height: int) -> tuple[int, int]:
+        return self._layout(width, height).texture_size
+
+    def resize(self, width: int, height: int) -> None:
+        if self.size == (width, height):
+            return
+        super().resize(width, height)
+        if self.depth is not None:
+            self.depth.release()
+        self.fbo.release()
+        self.layout = self._layout(width, height)
+        self.depth = self.ctx.depth_texture(self.layout.texture_size)
+        self.fbo = self.ctx.framebuffer(color_attachments=[getattr(self, name) for name in self.TARGETS],
+                                        depth_attachment=self.depth)
+
+
+class LowResGuide(_ClassDepthPass):
     """The guide texture, and a depth texture of the same size holding each texel's class (background,
     surface, glossy surface: ``glsl/lowres.glsl``), which the low-res passes depth-test against."""
 
@@ -30,22 +59,12 @@ class LowResGuide(FullscreenPass):
         super().__init__(ctx)
         self.scale = max(1, int(scale))
         self.balance = balance
-        self.depth = None
-        self.layout: LowResLayout | None = None
 
-    def target_size(self, width: int, height: int) -> tuple[int, int]:
-        return low_res_layout(width, height, self.scale, self.balance).texture_size
+    def _layout(self, width: int, height: int) -> LowResLayout:
+        return low_res_layout(width, height, self.scale, self.balance)
 
     def resize(self, width: int, height: int) -> None:
-        if self.size == (width, height):
-            return
         super().resize(width, height)
-        if self.depth is not None:
-            self.depth.release()
-        self.fbo.release()
-        self.layout = low_res_layout(width, height, self.scale, self.balance)
-        self.depth = self.ctx.depth_texture(self.layout.texture_size)
-        self.fbo = self.ctx.framebuffer(color_attachments=[self.guide], depth_attachment=self.depth)
         self.fbo.viewport = self.layout.viewport
 
     def render(self, gbuffer, camera_pos, camera_forward):
@@ -73,7 +92,7 @@ class LowResGuide(FullscreenPass):
         return self.guide
 
 
-class IndirectRefinement(FullscreenPass):
+class IndirectRefinement(_ClassDepthPass):
     """Indirect light at full resolution where the upsampling of the low-res light fails.
 
     The joint bilateral upsampling (``glsl/upsample.glsl``) fills a pixel from the 2×2 low-res texels
@@ -96,19 +115,9 @@ class IndirectRefinement(FullscreenPass):
         super().__init__(ctx)
         self.ao_div = max(1, int(lowres_scale))
         self.below = float(below)
-        self.depth = None
-        self.layout: LowResLayout | None = None
 
-    def resize(self, width: int, height: int) -> None:
-        if self.size == (width, height):
-            return
-        super().resize(width, height)
-        if self.depth is not None:
-            self.depth.release()
-        self.fbo.release()
-        self.layout = LowResLayout((width, height))
-        self.depth = self.ctx.depth_texture((width, height))
-        self.fbo = self.ctx.framebuffer(color_attachments=[self.irr, self.gloss], depth_attachment=self.depth)
+    def _layout(self, width: int, height: int) -> LowResLayout:
+        return LowResLayout((width, height))
 
     def classify(self, gbuffer, guide, guide_pass, camera_pos, camera_forward) -> None:
         """Mark this frame's refined pixels (and clear the targets) from the G-buffer and the low-res

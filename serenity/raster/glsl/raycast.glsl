@@ -27,12 +27,11 @@
 #endif
 #if FROM_GBUFFER
 #include "fullscreen.glsl"
+#else
+#include "scene_vertex.glsl"
+#endif
 
 #if defined FRAGMENT_SHADER
-uniform sampler2D g_albedo;     // a = material index
-uniform sampler2D g_normal;     // xyz = shading normal facing the viewer
-uniform sampler2D g_position;   // xyz = world point, w = 0 where nothing is seen
-uniform sampler2D g_material;   // shininess, reflectivity, transparency, ior (negative: the back seen)
 uniform vec3 u_camera_pos;
 uniform float u_pixel_spread;   // rad per pixel: atan(2 tan(fov/2) / height)
 uniform int u_width;
@@ -40,75 +39,58 @@ uniform int u_height;
 uniform uint u_capacity;        // records the buffer holds
 layout(std430, binding = 0) buffer RayCount { uint ray_count; };
 layout(std430, binding = 1) buffer RayRecords { vec4 records[]; };
+
+// Append the record of pixel px, whose visible surface point p (unit normal n facing the viewer;
+// ``entering``: the viewer sees the front, the side a ray enters the material by) has this ior,
+// transparency and material index.
+void append_rays(ivec2 px, vec3 p, vec3 n, bool entering, float ior, float transparency, float material) {
+    vec3 v = p - u_camera_pos;
+    float dist = length(v);
+    v /= dist;
+    float eta = entering ? 1.0 / ior : ior;
+    vec3 r = reflect(v, n);
+    vec3 t = refract(v, n, eta);
+    float flags = 1.0;                 // Fresnel reflection exists for glass too
+    bool tir = dot(t, t) == 0.0;
+    if (transparency > 0.0 && !tir) flags += 2.0;
+    if (transparency > 0.0 && tir) flags += 4.0;
+    uint i = atomicAdd(ray_count, 1u);
+    if (i >= u_capacity) return;
+    int row = u_height - 1 - px.y;
+    records[5u * i + 0u] = vec4(p, dist * u_pixel_spread);
+    records[5u * i + 1u] = vec4(r, u_pixel_spread);
+    records[5u * i + 2u] = vec4(tir ? vec3(0.0) : normalize(t), flags);
+    records[5u * i + 3u] = vec4(n, material);
+    records[5u * i + 4u] = vec4(float(row * u_width + px.x), 0.0, 0.0, 0.0);
+}
+
+#if FROM_GBUFFER
+uniform sampler2D g_albedo;     // a = material index
+uniform sampler2D g_normal;     // xyz = shading normal facing the viewer
+uniform sampler2D g_position;   // xyz = world point, w = 0 where nothing is seen
+uniform sampler2D g_material;   // shininess, reflectivity, transparency, ior (negative: the back seen)
 void main() {
     if (gl_HelperInvocation) return;   // a quad's helper lanes must not append
     ivec2 px = ivec2(gl_FragCoord.xy);
     vec4 pos = texelFetch(g_position, px, 0);
     vec4 mat = texelFetch(g_material, px, 0);
     if (pos.w == 0.0 || (mat.y <= 0.0 && mat.z <= 0.0)) return;  // no surface, or one that needs no ray
-    vec3 n = normalize(texelFetch(g_normal, px, 0).xyz);
-    vec3 v = pos.xyz - u_camera_pos;
-    float dist = length(v);
-    v /= dist;
-    bool entering = mat.w > 0.0;       // the front of the surface: the ray enters the material
-    float ior = abs(mat.w);
-    float eta = entering ? 1.0 / ior : ior;
-    vec3 r = reflect(v, n);
-    vec3 t = refract(v, n, eta);
-    float flags = 1.0;                 // Fresnel reflection exists for glass too
-    bool tir = dot(t, t) == 0.0;
-    if (mat.z > 0.0 && !tir) flags += 2.0;
-    if (mat.z > 0.0 && tir) flags += 4.0;
-    uint i = atomicAdd(ray_count, 1u);
-    if (i >= u_capacity) return;
-    int row = u_height - 1 - px.y;
-    records[5u * i + 0u] = vec4(pos.xyz, dist * u_pixel_spread);
-    records[5u * i + 1u] = vec4(r, u_pixel_spread);
-    records[5u * i + 2u] = vec4(tir ? vec3(0.0) : normalize(t), flags);
-    records[5u * i + 3u] = vec4(n, texelFetch(g_albedo, px, 0).a);
-    records[5u * i + 4u] = vec4(float(row * u_width + px.x), 0.0, 0.0, 0.0);
+    append_rays(px, pos.xyz, normalize(texelFetch(g_normal, px, 0).xyz), mat.w > 0.0, abs(mat.w), mat.z,
+                texelFetch(g_albedo, px, 0).a);
 }
-#endif
 #else
-#include "scene_vertex.glsl"
-
-#if defined FRAGMENT_SHADER
 layout(early_fragment_tests) in;
 in vec3 v_world;
 in vec3 v_normal;
-uniform vec3 u_camera_pos;
-uniform float u_pixel_spread;   // rad per pixel: atan(2 tan(fov/2) / height)
 uniform float u_transparency;
 uniform float u_ior;
 uniform float u_material_index;
-uniform int u_width;
-uniform int u_height;
-uniform uint u_capacity;        // records the buffer holds
-layout(std430, binding = 0) buffer RayCount { uint ray_count; };
-layout(std430, binding = 1) buffer RayRecords { vec4 records[]; };
 void main() {
     if (gl_HelperInvocation) return;   // a quad's helper lanes must not append
     vec3 n = normalize(v_normal);
-    vec3 v = v_world - u_camera_pos;
-    float dist = length(v);
-    v /= dist;
-    bool entering = dot(n, v) < 0.0;   // front face: the ray enters the material
-    if (!entering) n = -n;
-    float eta = entering ? 1.0 / u_ior : u_ior;
-    vec3 r = reflect(v, n);
-    vec3 t = refract(v, n, eta);
-    float flags = 1.0;                 // Fresnel reflection exists for glass too
-    bool tir = dot(t, t) == 0.0;
-    if (u_transparency > 0.0 && !tir) flags += 2.0;
-    if (u_transparency > 0.0 && tir) flags += 4.0;
-    uint i = atomicAdd(ray_count, 1u);
-    if (i >= u_capacity) return;
-    int row = u_height - 1 - int(gl_FragCoord.y);
-    records[5u * i + 0u] = vec4(v_world, dist * u_pixel_spread);
-    records[5u * i + 1u] = vec4(r, u_pixel_spread);
-    records[5u * i + 2u] = vec4(tir ? vec3(0.0) : normalize(t), flags);
-    records[5u * i + 3u] = vec4(n, u_material_index);
-    records[5u * i + 4u] = vec4(float(row * u_width + int(gl_FragCoord.x)), 0.0, 0.0, 0.0);
+    bool entering = dot(n, v_world - u_camera_pos) < 0.0;   // front face: the ray enters the material
+    append_rays(ivec2(gl_FragCoord.xy), v_world, entering ? n : -n, entering, u_ior, u_transparency,
+                u_material_index);
 }
-#endif
 #endif  // FROM_GBUFFER
+#endif
