@@ -261,8 +261,7 @@ class Renderer:
             self._sky_in_worker = self.sky_volume is not None and cfg.sky.method != "gather"
             self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix=VOLUME_THREAD,
                                                     initializer=lower_thread_priority, initargs=(cfg.volume_nice,))
-                                 if cfg.overlap and cfg.overlap_volumes and str(self.device).startswith("cpu")
-                                 and (self._sky_in_worker or self.lpv is not None) else None)
+                                 if self._volumes_in_worker() else None)
         self._upload_ms = self._timings.pop("upload")
         self._first = True
         self._changes = ChangeTracker()
@@ -615,7 +614,7 @@ class Renderer:
         if refined is not None:
             cam = self.scene.camera
             with self._stage("indirect refinement"):
-                refined.classify(gbuf, guide, self.lowres_guide, cam.position, cam.forward)
+                refined.classify(gbuf, self.lowres_guide, cam.position, cam.forward)
             self._indirect_passes(refined, gbuf, ao, sky_gl, full_res=False)  # timed as their techniques
         with self._stage("direct lighting"):  # the upsampling included (and the indirect light's history)
             history = None
@@ -798,6 +797,13 @@ class Renderer:
             return self._tracer_proc is not None and self._tracer_proc.own_group
         return where == "idle"
 
+    def _volumes_in_worker(self) -> bool:
+        """Whether the volumes' kernels run on a worker thread (``_volume_pool``), known from the
+        config alone (the tracer process, started before the volumes exist, asks it too)."""
+        cfg = self.config
+        return (cfg.overlap and cfg.overlap_volumes and str(self.device).startswith("cpu")
+                and ((cfg.sky.enabled and cfg.sky.method != "gather") or cfg.lpv.enabled))
+
     def _tracer_in_process(self) -> bool:
         """Whether the tracer runs in a process of its own (the overlapped schedule on the CPU)."""
         return self.config.overlap and str(self.device).startswith("cpu")
@@ -812,9 +818,7 @@ class Renderer:
             if self._tracer_proc is None:
                 session = self.config.tracer_session
                 if session is None:  # a group of its own where the main thread will wait for a volume worker
-                    cfg = self.config
-                    session = (cfg.overlap_volumes and ((cfg.sky.enabled and cfg.sky.method != "gather")
-                                                        or cfg.lpv.enabled))  # as ``_volume_pool``
+                    session = self._volumes_in_worker()
                 self._tracer_proc = TracerProcess(self.scene, self.device, nice=self.config.tracer_nice,
                                                  session=session)
             return self._tracer_proc

@@ -597,7 +597,8 @@ class SkyVolume:
 
     def _gather_pass_start(self, sun) -> None:
         """The surfels' radiance from the volume as it is (the start of a pass: one more bounce)."""
-        self._pass_before = self._coeffs.numpy().copy()
+        if self.config.gather_tolerance > 0.0:  # the light the pass starts from, for _pass_converged
+            self._pass_before = self._coeffs.numpy().copy()
         grid = (self.grid_origin, self.cell_size, self.resolution, self.normal_offset_m)
         self._gather.update_surfels(self._coeffs, self._open_sky(), self._vis_wp, grid, sun,
                                     scene_sun_irradiance(self.scene, sun))
@@ -608,11 +609,13 @@ class SkyVolume:
         the scene passes on; the bounces still missing then sum to about Δ_k·r/(1−r) of the light,
         and the passes stop once that is under ``SkyConfig.gather_tolerance`` (an open courtyard
         after 5 passes, a closed white room after about 20)."""
+        tol = self.config.gather_tolerance
+        if tol <= 0.0:
+            return False
         after = self._coeffs.numpy()
         change = float(np.abs(after - self._pass_before).sum() / max(float(np.abs(after).sum()), 1e-30))
         last, self._last_pass_change = self._last_pass_change, change
-        tol = self.config.gather_tolerance
-        if last is None or tol <= 0.0:
+        if last is None:
             return False
         if last <= 0.0:
             return True
@@ -621,8 +624,9 @@ class SkyVolume:
 
     def _update_gather(self, sun, full: bool) -> bool:
         """"gather": follow a new sky (miss radiance, surfel shadow rays), then run passes over the
-        volume — all ``gather_bounces`` of them when the volume was never lit or ``full``, else
-        ``transfer_layers`` y-layers per call (0 = a whole pass) until the passes are done."""
+        volume until they converge (:meth:`_pass_converged`; ``gather_bounces`` at most) — all of them
+        now when the volume was never lit or ``full``, else ``transfer_layers`` y-layers per call
+        (0 = a whole pass)."""
         g = self._ensure_gather()
         cfg = self.config
         y = self.resolution[1]

@@ -97,7 +97,7 @@ class IndirectPass:
             p["u_scale"].value = target.scale
             target.layout.set_uniforms(p)
             if (u := uniform(p, "u_ao_div")) is not None:
-                u.value = getattr(target, "ao_div", 1)
+                u.value = target.ao_div
         for loc, name in enumerate(("g_albedo", "g_normal", "g_position", "g_material")):
             if (u := uniform(p, name)) is not None:
                 u.value = loc

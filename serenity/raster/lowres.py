@@ -47,6 +47,27 @@ class _ClassDepthPass(FullscreenPass):
         self.fbo = self.ctx.framebuffer(color_attachments=[getattr(self, name) for name in self.TARGETS],
                                         depth_attachment=self.depth)
 
+    def _draw_classes(self, scope: str, textures: dict, layout: LowResLayout, **uniforms) -> None:
+        """Draw the pass over every texel, each writing its class as its depth (depth test "always"):
+        ``textures`` (uniform name → texture) on units 0, 1, …, ``layout``'s uniforms (the low-res
+        image the shader reads or writes) and the other ``uniforms`` set."""
+        p, ctx = self.program, self.ctx
+        with ctx.debug_scope(scope):
+            self.fbo.use()
+            for loc, (name, tex) in enumerate(textures.items()):
+                tex.use(location=loc)
+                p[name].value = loc
+            layout.set_uniforms(p)
+            for name, value in uniforms.items():
+                p[name].value = value
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.depth_func = "1"
+            try:
+                self.vao.render(vertices=3)
+            finally:
+                ctx.disable(moderngl.DEPTH_TEST)
+                ctx.depth_func = "<"
+
 
 class LowResGuide(_ClassDepthPass):
     """The guide texture, and a depth texture of the same size holding each texel's class (background,
@@ -70,25 +91,9 @@ class LowResGuide(_ClassDepthPass):
     def render(self, gbuffer, camera_pos, camera_forward):
         """The RGBA32F guide texture of ``gbuffer``: (W/scale, H/scale) texels laid out by ``layout``
         (the class depth alike)."""
-        p = self.program
-        with self.ctx.debug_scope("lowres guide"):
-            self.fbo.use()
-            gbuffer.position.use(location=0)
-            gbuffer.normal.use(location=1)
-            p["g_position"].value = 0
-            p["g_normal"].value = 1
-            p["u_scale"].value = self.scale
-            self.layout.set_uniforms(p)
-            p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
-            p["u_camera_forward"].value = tuple(float(x) for x in camera_forward)
-            ctx = self.ctx
-            ctx.enable(moderngl.DEPTH_TEST)
-            ctx.depth_func = "1"  # always: every texel writes its class
-            try:
-                self.vao.render(vertices=3)
-            finally:
-                ctx.disable(moderngl.DEPTH_TEST)
-                ctx.depth_func = "<"
+        self._draw_classes("lowres guide", {"g_position": gbuffer.position, "g_normal": gbuffer.normal}, self.layout,
+                           u_scale=self.scale, u_camera_pos=tuple(float(x) for x in camera_pos),
+                           u_camera_forward=tuple(float(x) for x in camera_forward))
         return self.guide
 
 
@@ -119,29 +124,13 @@ class IndirectRefinement(_ClassDepthPass):
     def _layout(self, width: int, height: int) -> LowResLayout:
         return LowResLayout((width, height))
 
-    def classify(self, gbuffer, guide, guide_pass, camera_pos, camera_forward) -> None:
+    def classify(self, gbuffer, guide: LowResGuide, camera_pos, camera_forward) -> None:
         """Mark this frame's refined pixels (and clear the targets) from the G-buffer and the low-res
-        ``guide`` texture drawn by ``guide_pass`` (a :class:`LowResGuide`: its scale and layout)."""
-        p = self.program
-        ctx = self.ctx
-        with ctx.debug_scope("indirect refinement"):
-            self.fbo.use()
-            for loc, (name, tex) in enumerate((("g_position", gbuffer.position), ("g_normal", gbuffer.normal),
-                                               ("u_guide", guide))):
-                tex.use(location=loc)
-                p[name].value = loc
-            p["u_scale"].value = guide_pass.scale
-            guide_pass.layout.set_uniforms(p)
-            p["u_camera_pos"].value = tuple(float(x) for x in camera_pos)
-            p["u_camera_forward"].value = tuple(float(x) for x in camera_forward)
-            p["u_refine_below"].value = self.below
-            ctx.enable(moderngl.DEPTH_TEST)
-            ctx.depth_func = "1"  # always: every pixel writes its class
-            try:
-                self.vao.render(vertices=3)
-            finally:
-                ctx.disable(moderngl.DEPTH_TEST)
-                ctx.depth_func = "<"
+        guide that ``guide`` (a :class:`LowResGuide`) drew this frame (its texture, scale and layout)."""
+        self._draw_classes("indirect refinement",
+                           {"g_position": gbuffer.position, "g_normal": gbuffer.normal, "u_guide": guide.guide},
+                           guide.layout, u_scale=guide.scale, u_camera_pos=tuple(float(x) for x in camera_pos),
+                           u_camera_forward=tuple(float(x) for x in camera_forward), u_refine_below=self.below)
 
     def refined_mask(self) -> np.ndarray:
         """(H, W) bool, top row first: the pixels the last :meth:`classify` marked (a read-back: for

@@ -104,9 +104,9 @@ class RayCastPass:
         self.program_geometry = load_program(ctx, "raycast.glsl", defines={"FROM_GBUFFER": 0})
         self.vao_geometry = scene_gl.vao(self.program_geometry, with_attributes=("in_position", "in_normal"))
         self.size = None
-        self.any_traced_material = any(m.needs_ray_tracing for m in scene_gl.materials)
         traced = [r for r in scene_gl.ranges if scene_gl.materials[r.material].needs_ray_tracing]
         self.traced_ranges = traced
+        self.any_traced_material = bool(traced)
         #: which way the last ``render`` found the pixels: "gbuffer", "geometry" or None (nothing to find)
         self.last_method: str | None = None
         #: world boxes (R, 3) of the reflective and refractive draw ranges: the pass shades only the
@@ -128,23 +128,20 @@ class RayCastPass:
             self.fbo.release()
         # one record per pixel at most
         self.records = self.ctx.buffer(reserve=width * height * RECORD_VEC4S * 16)
-        # no colour target: the pass writes the storage buffer only (a tiny one keeps the framebuffer complete)
+        # the pass writes the storage buffer only: a masked 8-bit target keeps the framebuffer complete
         self._target = self.ctx.texture((width, height), 1, dtype="f1")
         self.fbo = self.ctx.framebuffer(color_attachments=[self._target])
         self.fbo.color_mask = (False, False, False, False)
         self.size = (width, height)
 
-    def tiles(self, view_proj: np.ndarray, visible: np.ndarray | None = None) -> list[tuple[int, int, int, int]]:
+    def tiles(self, view_proj: np.ndarray, visible: np.ndarray) -> list[tuple[int, int, int, int]]:
         """Scissor rectangles (x, y, w, h; GL origin bottom-left), not overlapping, over the
-        ``TILE``-pixel tiles that the reflective and refractive ranges' boxes cover on screen (all of
-        the view where a box reaches behind the camera): a fullscreen pass over a courtyard whose
-        mirror fills 2 % of the view cost 4 times the geometry it replaces. ``visible``: the ranges in
-        the frustum, when known."""
+        ``TILE``-pixel tiles that the boxes of the reflective and refractive ranges in the frustum
+        (``visible``, a mask) cover on screen (all of the view where a box reaches behind the
+        camera): a fullscreen pass over a courtyard whose mirror fills 2 % of the view cost 4 times
+        the geometry it replaces."""
         w, h = self.size
-        if not len(self.traced_lo):
-            return []
-        keep = visible if visible is not None else boxes_in_frustum(view_proj, self.traced_lo, self.traced_hi)
-        lo, hi = self.traced_lo[keep], self.traced_hi[keep]
+        lo, hi = self.traced_lo[visible], self.traced_hi[visible]
         if not len(lo):
             return []
         corners = np.stack([np.where(np.array([(k >> a) & 1 for a in range(3)], bool), hi, lo)
@@ -194,26 +191,29 @@ class RayCastPass:
             return
         self.last_rects = rects
         ctx, p = self.ctx, self.program
-        w, h = self.size
         with ctx.debug_scope("raycast"):
             self.fbo.use()
             for loc, (name, tex) in enumerate((("g_albedo", gbuffer.albedo), ("g_normal", gbuffer.normal),
                                                ("g_position", gbuffer.position), ("g_material", gbuffer.material))):
                 tex.use(location=loc)
                 p[name].value = loc
-            self.counter.bind_to_storage_buffer(0)
-            self.records.bind_to_storage_buffer(1)
-            p["u_camera_pos"].value = tuple(float(x) for x in camera.position)
-            p["u_pixel_spread"].value = math.atan(2 * math.tan(math.radians(camera.fov_y_deg) / 2) / h)
-            p["u_width"].value = w
-            p["u_height"].value = h
-            p["u_capacity"].value = w * h
+            self._bind_records(p, camera)
             draw_fullscreen(ctx, self.vao, self.last_rects)
+
+    def _bind_records(self, p, camera) -> None:
+        """The storage buffers and the uniforms both ways' programs share (``append_rays``)."""
+        w, h = self.size
+        self.counter.bind_to_storage_buffer(0)
+        self.records.bind_to_storage_buffer(1)
+        p["u_camera_pos"].value = tuple(float(x) for x in camera.position)
+        p["u_pixel_spread"].value = math.atan(2 * math.tan(math.radians(camera.fov_y_deg) / 2) / h)
+        p["u_width"].value = w
+        p["u_height"].value = h
+        p["u_capacity"].value = w * h
 
     def _render_geometry(self, view_proj, camera, depth, visible) -> None:
         """The paper's way: the visible reflective/refractive ranges drawn against ``depth``."""
         ctx, p = self.ctx, self.program_geometry
-        w, h = self.size
         if self._depth is not depth:
             if self._depth_fbo is not None:
                 self._depth_fbo.release()
@@ -226,14 +226,8 @@ class RayCastPass:
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.depth_func = "<="
             ctx.disable(moderngl.CULL_FACE)
-            self.counter.bind_to_storage_buffer(0)
-            self.records.bind_to_storage_buffer(1)
+            self._bind_records(p, camera)
             p["u_view_proj"].write(view_proj.T.astype(np.float32).tobytes())
-            p["u_camera_pos"].value = tuple(float(x) for x in camera.position)
-            p["u_pixel_spread"].value = math.atan(2 * math.tan(math.radians(camera.fov_y_deg) / 2) / h)
-            p["u_width"].value = w
-            p["u_height"].value = h
-            p["u_capacity"].value = w * h
             try:
                 for r, k in zip(self.traced_ranges, visible, strict=True):
                     if not k:
@@ -252,7 +246,7 @@ class RayCastPass:
         """Read back (sync point 1 of paper §10): the count, then only that many records."""
         w, h = self.size
         n = 0
-        if self.any_traced_material:
+        if self.last_method is not None:  # else nothing was drawn: the counter holds its reset 0
             # llvmpipe does not count a draw's storage-buffer writes as pending on the buffer: a read
             # without the barrier and the finish returns what the previous draw left
             self.ctx.memory_barrier()

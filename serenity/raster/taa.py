@@ -24,11 +24,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import moderngl
 import numpy as np
 
 from serenity.errors import SerenityError
 from serenity.raster.context import fullscreen_vao, load_program, uniform
+from serenity.raster.temporal import HistoryTargets
 
 
 def halton(index: int, base: int) -> float:
@@ -110,37 +110,29 @@ class TAAPass:
         self.config = config or TAAConfig()
         self.program = load_program(ctx, self.SHADER)
         self.vao = fullscreen_vao(ctx, self.program)
-        self.size = None
-        self._sets: list[tuple] = []
-        self._turn = 0
+        #: the resolved images (rgb, view depth in a) and the last frame's unjittered camera
+        self.history = HistoryTargets(ctx, linear=True)
         self.reset()
+
+    @property
+    def size(self):
+        return self.history.size
 
     def resize(self, width: int, height: int) -> None:
         """(Re)allocate the targets for a width×height view; a new size restarts the history."""
-        if self.size == (width, height):
-            return
-        for targets in self._sets:
-            for o in targets:
-                o.release()
-        self._sets = []
-        for _ in range(2):
-            tex = self.ctx.texture((width, height), 4, dtype="f4")  # rgb = the image, a = view depth
-            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            tex.repeat_x = tex.repeat_y = False
-            self._sets.append((tex, self.ctx.framebuffer(color_attachments=[tex])))
-        self.size = (width, height)
-        self.reset()
+        if self.history.size != (width, height):
+            self.history.resize(width, height)
+            self.reset()
 
     def reset(self) -> None:
         """Forget the history: the next frame is unjittered and shown as rendered."""
-        self._prev = None  # (view_proj unjittered, camera position, forward, fov_y_deg)
+        self.history.prev = None
         self.frames = 0    # frames in the history (resolved since the reset)
-        self._seen_camera = None
         self._key = None
 
     @property
     def has_history(self) -> bool:
-        return self._prev is not None
+        return self.history.prev is not None
 
     def begin(self, camera, scene_extent: float, key=None) -> tuple[float, float]:
         """At a frame's start: restart the history on a camera cut or when ``key`` (the renderer's
@@ -149,8 +141,8 @@ class TAAPass:
         if self._key is not None and key != self._key:
             self.reset()
         self._key = key
-        if self._prev is not None:
-            _, pos, fwd, fov = self._prev
+        if self.history.prev is not None:
+            _, pos, fwd, fov = self.history.prev
             turn = math.degrees(math.acos(float(np.clip(np.dot(fwd, camera.forward), -1.0, 1.0))))
             move = float(np.linalg.norm(np.asarray(camera.position, np.float64) - pos))
             if (turn > cfg.cut_angle_deg or move > cfg.cut_distance * max(scene_extent, 1e-9)
@@ -164,42 +156,31 @@ class TAAPass:
         """The resolved image (a texture of this pass's, RGBA32F: rgb, view depth in a) of this
         frame's ``hdr_texture``, drawn with the projection shifted by ``jitter``; ``view_proj`` is the
         frame's unjittered world → clip. It becomes the next frame's history."""
-        cfg, p = self.config, self.program
-        out, fbo = self._sets[self._turn]
-        prev_tex = self._sets[1 - self._turn][0]
-        ramp = 1.0 if self._prev is None else 1.0 / (self.frames + 1)
+        cfg, p, hist = self.config, self.program, self.history
+        out = hist.target
+        ramp = 1.0 if hist.prev is None else 1.0 / (self.frames + 1)
         alpha, alpha_still = max(cfg.alpha, ramp), max(cfg.alpha_still, ramp)
         with self.ctx.debug_scope("taa"):
-            fbo.use()
+            hist.fbo.use()
             hdr_texture.use(location=0)
             gbuffer.position.use(location=1)
             gbuffer.normal.use(location=2)
-            prev_tex.use(location=3)
+            hist.last.use(location=3)
             values = {"u_hdr": 0, "u_position": 1, "u_normal": 2, "u_history": 3,
                       "u_jitter": (float(jitter[0]), float(jitter[1])), "u_alpha": float(alpha),
                       "u_alpha_still": float(alpha_still),
                       "u_gamma": float(cfg.gamma) if cfg.clip else 0.0,
                       "u_gamma_still": float(cfg.gamma_still), "u_exposure": float(exposure),
-                      "u_weights": WEIGHTS.index(cfg.weights),
-                      "u_has_prev": self._prev is not None, "u_catmull_rom": bool(cfg.catmull_rom),
-                      "u_pixel_angle": math.radians(camera.fov_y_deg) / self.size[1],
+                      "u_weights": WEIGHTS.index(cfg.weights), "u_catmull_rom": bool(cfg.catmull_rom),
                       "u_camera_pos": tuple(float(v) for v in camera.position),
                       "u_camera_forward": tuple(float(v) for v in camera.forward)}
-            mats = {"u_inv_view_proj": np.linalg.inv(view_proj)}
-            if self._prev is not None:
-                vp, pos, fwd, _ = self._prev
-                values.update(u_prev_camera_pos=tuple(float(v) for v in pos),
-                              u_prev_camera_forward=tuple(float(v) for v in fwd))
-                mats["u_prev_view_proj"] = vp
             for name, value in values.items():
                 if (u := uniform(p, name)) is not None:
                     u.value = value
-            for name, m in mats.items():
-                if (u := uniform(p, name)) is not None:
-                    u.write(np.asarray(m, np.float64).T.astype(np.float32).tobytes())
+            if (u := uniform(p, "u_inv_view_proj")) is not None:
+                u.write(np.linalg.inv(view_proj).T.astype(np.float32).tobytes())
+            hist.set_reproject_uniforms(p, camera)
             self.vao.render(vertices=3)
-        self._prev = (np.asarray(view_proj, np.float64).copy(), np.asarray(camera.position, np.float64).copy(),
-                      np.asarray(camera.forward, np.float64).copy(), float(camera.fov_y_deg))
+        hist.end(view_proj, camera)
         self.frames += 1
-        self._turn = 1 - self._turn
         return out

@@ -17,30 +17,39 @@ from __future__ import annotations
 
 import math
 
+import moderngl
 import numpy as np
 
 from serenity.raster.context import uniform
 
 
-class IndirectHistory:
-    """Two full-resolution targets (this frame's output, the last frame's) and the last frame's camera."""
+class HistoryTargets:
+    """Two full-resolution RGBA32F targets, this frame's output and the last frame's (rgb = the
+    image, a = view depth), and the camera the last one was drawn from: the history that
+    ``glsl/reproject.glsl`` reads (the indirect light's below, the anti-aliasing's ``raster/taa.py``)."""
 
-    def __init__(self, ctx):
+    def __init__(self, ctx, linear: bool = False):
         self.ctx = ctx
+        self.linear = linear  # bilinear reads of the textures (else nearest)
         self.size = None
         self._sets: list[tuple] = []
-        self._prev: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # view_proj, position, forward
+        #: the last frame's (view_proj, camera position, forward, fov_y_deg), None: no last frame
+        self.prev: tuple | None = None
         self._turn = 0
 
     def resize(self, width: int, height: int) -> None:
+        """(Re)allocate for a width×height view; a new size forgets the last frame."""
         if self.size == (width, height):
             return
         self.release()
         for _ in range(2):
-            light = self.ctx.texture((width, height), 4, dtype="f4")  # rgb = the light, a = view depth
-            self._sets.append((light, self.ctx.framebuffer(color_attachments=[light])))
+            tex = self.ctx.texture((width, height), 4, dtype="f4")
+            if self.linear:
+                tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+                tex.repeat_x = tex.repeat_y = False
+            self._sets.append((tex, self.ctx.framebuffer(color_attachments=[tex])))
         self.size = (width, height)
-        self._prev = None
+        self.prev = None
 
     def release(self) -> None:
         for targets in self._sets:
@@ -50,31 +59,52 @@ class IndirectHistory:
 
     @property
     def target(self):
-        """This frame's output texture (the deferred pass's third target), cleared by :meth:`begin`."""
+        """This frame's output texture."""
         return self._sets[self._turn][0]
 
-    def begin(self) -> None:
-        """Clear this frame's target to 'no surface' (view depth −1): the sky's pixels keep that."""
-        self._sets[self._turn][1].clear(0.0, 0.0, 0.0, -1.0)
+    @property
+    def fbo(self):
+        """This frame's output framebuffer."""
+        return self._sets[self._turn][1]
 
-    def set_uniforms(self, p, unit: int, camera, alpha: float) -> None:
-        """The uniforms of ``glsl/indirect_history.glsl`` in program ``p``, the last frame's output
-        bound to texture unit ``unit``."""
-        values = {"u_prev_irr": unit, "u_history_alpha": float(alpha), "u_has_prev": self._prev is not None,
-                  "u_pixel_angle": math.radians(camera.fov_y_deg) / self.size[1]}
-        if self._prev is not None:
-            vp, pos, fwd = self._prev
+    @property
+    def last(self):
+        """The last frame's output texture."""
+        return self._sets[1 - self._turn][0]
+
+    def set_reproject_uniforms(self, p, camera) -> None:
+        """``glsl/reproject.glsl``'s uniforms in program ``p``: the last frame's camera, and this one's
+        pixel angle."""
+        values = {"u_has_prev": self.prev is not None, "u_pixel_angle": math.radians(camera.fov_y_deg) / self.size[1]}
+        if self.prev is not None:
+            vp, pos, fwd, _ = self.prev
             values.update(u_prev_camera_pos=tuple(float(v) for v in pos),
                           u_prev_camera_forward=tuple(float(v) for v in fwd))
             if (u := uniform(p, "u_prev_view_proj")) is not None:
                 u.write(vp.T.astype(np.float32).tobytes())
-        self._sets[1 - self._turn][0].use(location=unit)
         for name, value in values.items():
             if (u := uniform(p, name)) is not None:
                 u.value = value
 
     def end(self, view_proj: np.ndarray, camera) -> None:
         """This frame is drawn: it becomes the last frame."""
-        self._prev = (np.asarray(view_proj, np.float64).copy(), np.asarray(camera.position, np.float64).copy(),
-                      np.asarray(camera.forward, np.float64).copy())
+        self.prev = (np.asarray(view_proj, np.float64).copy(), np.asarray(camera.position, np.float64).copy(),
+                     np.asarray(camera.forward, np.float64).copy(), float(camera.fov_y_deg))
         self._turn = 1 - self._turn
+
+
+class IndirectHistory(HistoryTargets):
+    """The indirect light's history: this frame's target is the deferred pass's third target."""
+
+    def begin(self) -> None:
+        """Clear this frame's target to 'no surface' (view depth −1): the sky's pixels keep that."""
+        self.fbo.clear(0.0, 0.0, 0.0, -1.0)
+
+    def set_uniforms(self, p, unit: int, camera, alpha: float) -> None:
+        """The uniforms of ``glsl/indirect_history.glsl`` in program ``p``, the last frame's output
+        bound to texture unit ``unit``."""
+        self.last.use(location=unit)
+        self.set_reproject_uniforms(p, camera)
+        for name, value in (("u_prev_irr", unit), ("u_history_alpha", float(alpha))):
+            if (u := uniform(p, name)) is not None:
+                u.value = value

@@ -14,32 +14,45 @@
 #define SERENITY_REPROJECT_GLSL
 #include "lowres.glsl"
 
-// Sum of the taps' weight * rgb (xyz) and of their weights (w); q (the last frame's pixel coordinate)
-// returned, for a caller that filters the last frame otherwise where every tap is taken.
-vec4 reproject_bilinear(sampler2D prev, mat4 prev_view_proj, vec3 prev_camera_pos, vec3 prev_camera_forward,
-                        float pixel_angle, vec3 p, vec3 n, vec2 shift, out vec2 q) {
-    vec2 size = vec2(textureSize(prev, 0));
-    vec4 c = prev_view_proj * vec4(p, 1.0);
+// The last frame's pixel coordinate q (integers at pixel centres) of its clip position c, plus
+// ``shift`` pixels; false (q far outside) where c lies behind its camera.
+bool prev_pixel(vec4 c, vec2 size, vec2 shift, out vec2 q) {
     q = vec2(-1e9);
-    if (c.w <= 1e-6) return vec4(0.0);
+    if (c.w <= 1e-6) return false;
     q = (c.xy / c.w * 0.5 + 0.5) * size - 0.5 + shift;
-    q = mix(q, floor(q + 0.5), lessThan(abs(q - floor(q + 0.5)), vec2(1e-3)));  // a still view: that pixel
+    return true;
+}
+
+// Sum of weight * rgb (xyz) and of the weights (w) of the 4 last-frame pixels around q, bilinearly
+// weighted, that lie in the image and showed the sky (``sky``) or else a surface at a view depth
+// within tol of zp.
+vec4 prev_taps(sampler2D prev, vec2 q, bool sky, float zp, float tol) {
+    ivec2 size = textureSize(prev, 0);
     ivec2 i0 = ivec2(floor(q));
     vec2 f = q - vec2(i0);
-    vec3 v = p - prev_camera_pos;
-    float zp = dot(v, prev_camera_forward);
-    float cosv = max(abs(dot(n, normalize(v))), 0.05);
-    float tol = zp * (0.02 + 1.5 * pixel_angle * sqrt(max(1.0 - cosv * cosv, 0.0)) / cosv);
     vec4 sum = vec4(0.0);
     for (int k = 0; k < 4; ++k) {
         ivec2 o = ivec2(k & 1, k >> 1);
         ivec2 t = i0 + o;
-        if (any(lessThan(t, ivec2(0))) || any(greaterThanEqual(t, ivec2(size)))) continue;
+        if (any(lessThan(t, ivec2(0))) || any(greaterThanEqual(t, size))) continue;
         vec4 a = texelFetch(prev, t, 0);
-        if (a.w < 0.0 || abs(a.w - zp) > tol) continue;  // not this surface then
+        if (sky ? a.w >= 0.0 : (a.w < 0.0 || abs(a.w - zp) > tol)) continue;  // not what p showed then
         float w = bilinear_weight(o, f);
         sum += vec4(w * a.rgb, w);
     }
     return sum;
+}
+
+// Sum of the taps' weight * rgb (xyz) and of their weights (w); q (the last frame's pixel coordinate)
+// returned, for a caller that filters the last frame otherwise where every tap is taken.
+vec4 reproject_bilinear(sampler2D prev, mat4 prev_view_proj, vec3 prev_camera_pos, vec3 prev_camera_forward,
+                        float pixel_angle, vec3 p, vec3 n, vec2 shift, out vec2 q) {
+    if (!prev_pixel(prev_view_proj * vec4(p, 1.0), vec2(textureSize(prev, 0)), shift, q)) return vec4(0.0);
+    q = mix(q, floor(q + 0.5), lessThan(abs(q - floor(q + 0.5)), vec2(1e-3)));  // a still view: that pixel
+    vec3 v = p - prev_camera_pos;
+    float zp = dot(v, prev_camera_forward);
+    float cosv = max(abs(dot(n, normalize(v))), 0.05);
+    float tol = zp * (0.02 + 1.5 * pixel_angle * sqrt(max(1.0 - cosv * cosv, 0.0)) / cosv);
+    return prev_taps(prev, q, false, zp, tol);
 }
 #endif

@@ -87,23 +87,8 @@ vec4 sky_history(vec2 size, out vec2 q) {
     vec2 ndc = gl_FragCoord.xy / size * 2.0 - 1.0;
     vec4 far = u_inv_view_proj * vec4(ndc, 1.0, 1.0);
     vec3 dir = far.xyz / far.w - u_camera_pos;
-    vec4 c = u_prev_view_proj * vec4(dir, 0.0);
-    q = vec2(-1e9);
-    if (c.w <= 1e-6) return vec4(0.0);
-    q = (c.xy / c.w * 0.5 + 0.5) * size - 0.5;
-    ivec2 i0 = ivec2(floor(q));
-    vec2 f = q - vec2(i0);
-    vec4 sum = vec4(0.0);
-    for (int k = 0; k < 4; ++k) {
-        ivec2 o = ivec2(k & 1, k >> 1);
-        ivec2 t = i0 + o;
-        if (any(lessThan(t, ivec2(0))) || any(greaterThanEqual(t, ivec2(size)))) continue;
-        vec4 a = texelFetch(u_history, t, 0);
-        if (a.w >= 0.0) continue;  // a surface then
-        float w = bilinear_weight(o, f);
-        sum += vec4(w * a.rgb, w);
-    }
-    return sum;
+    if (!prev_pixel(u_prev_view_proj * vec4(dir, 0.0), size, vec2(0.0), q)) return vec4(0.0);
+    return prev_taps(u_history, q, true, 0.0, 0.0);
 }
 
 // h moved towards the box's centre until it lies in the box (centre +- extent)
