@@ -291,23 +291,14 @@ class DeferredPass(FullscreenPass):
         self._set(p, "u_ambient_irradiance", light.ambient_irradiance)
 
     def _set_shadow_uniforms(self, p, shadow, light: LightingInputs) -> None:
-        if uniform(p, "u_cascade_vp") is None:  # a variant that samples no shadow map (the sky's half)
+        if uniform(p, "u_tile_vp") is None:  # a variant that samples no shadow map (the sky's half)
             return
         cfg = light.shadow
         cs = shadow.cascades
         n = len(cs)
-        mats = np.zeros((4, 4, 4), np.float32)
-        planes = np.zeros((4, 3, 3), np.float32)
-        for i, c in enumerate(cs):
-            mats[i] = c.view_proj.T
-            # a normal's image under the linear part L is L^-T n; GL reads a mat3 column by column
-            planes[i] = np.linalg.inv(c.view_proj[:3, :3])  # (L^-T)^T, row-major = L^-T column-major
-        p["u_cascade_vp"].write(mats.tobytes())
-        for name, value in shadow.blend_uniforms().items():  # the tiles' atlas slots and cross-fades
+        for name, value in shadow.tile_uniforms().items():  # the tiles, their atlas slots and cross-fades
             if (u := uniform(p, name)) is not None:
                 u.write(value)
-        if (u := uniform(p, "u_cascade_plane")) is not None:
-            u.write(planes.tobytes())
 
         def vec4(vals):
             return tuple(float(v) for v in list(vals) + [vals[-1]] * (4 - len(vals)))
@@ -315,8 +306,7 @@ class DeferredPass(FullscreenPass):
         p["u_cascade_count"].value = n
         p["u_atlas_tiles"].value = float(shadow.depth.width // shadow.tile_size)
         p["u_cascade_far"].value = vec4([c.far for c in cs])
-        p["u_cascade_texel"].value = vec4([c.texel_world for c in cs])
-        p["u_cascade_depth_range"].value = vec4([c.depth_range for c in cs])
+        self._set(p, "u_cascade_texel", vec4([c.texel_world for c in cs]))  # dropped where nothing reads it
         for name, v in (("u_shadow_bias", cfg.bias), ("u_normal_offset", cfg.normal_offset),
                         ("u_pcf_radius", cfg.pcf_radius), ("u_sun_tan_half", light.sun_tan_half),
                         ("u_pcss_max_blocker", cfg.pcss_max_blocker), ("u_cascade_blend", cfg.cascade_blend)):

@@ -141,23 +141,26 @@ class ShadowMaps:
     cascades: list[Cascade]
     tile_size: int
 
-    def blend_uniforms(self) -> dict[str, bytes]:
-        """``glsl/shadow_sampling.glsl``'s uniforms for where each cascade's tile lies and what it
-        cross-fades from (``Cascade.slot``, ``previous``, ``previous_weight``), as float32 bytes."""
-        slot, prev_slot, weight, texel, depth = (np.zeros(4, np.float32) for _ in range(5))
-        vp, plane = np.zeros((4, 4, 4), np.float32), np.zeros((4, 3, 3), np.float32)
+    def tile_uniforms(self) -> dict[str, bytes]:
+        """``glsl/shadow_sampling.glsl``'s uniforms for the tiles, as float32 bytes: per cascade i, its
+        tile at index i and what it cross-fades from at index i + 4 (``Cascade.previous``, with
+        ``u_cascade_prev_weight``; zeros where nothing does): the light matrix, the plane transform
+        (the inverse transpose of the matrix's linear part, as GL reads a mat3 column by column) and
+        (atlas slot, texel, depth extent, 0)."""
+        vp, plane = np.zeros((8, 4, 4), np.float32), np.zeros((8, 3, 3), np.float32)
+        info, weight = np.zeros((8, 4), np.float32), np.zeros(4, np.float32)
         for i, c in enumerate(self.cascades):
-            slot[i] = c.slot
-            q = c.previous
-            if q is None or c.previous_weight <= 0.0:
-                continue
-            prev_slot[i], weight[i], texel[i], depth[i] = q.slot, c.previous_weight, q.texel_world, q.depth_range
-            vp[i] = q.view_proj.T
-            plane[i] = np.linalg.inv(q.view_proj[:3, :3])  # as u_cascade_plane (DeferredPass)
-        return {"u_cascade_slot": slot.tobytes(), "u_cascade_prev_slot": prev_slot.tobytes(),
-                "u_cascade_prev_weight": weight.tobytes(), "u_cascade_prev_texel": texel.tobytes(),
-                "u_cascade_prev_depth_range": depth.tobytes(), "u_cascade_prev_vp": vp.tobytes(),
-                "u_cascade_prev_plane": plane.tobytes()}
+            tiles = [(i, c)]
+            if c.previous is not None and c.previous_weight > 0.0:
+                tiles.append((i + 4, c.previous))
+                weight[i] = c.previous_weight
+            for k, t in tiles:
+                vp[k] = t.view_proj.T
+                # a normal's image under the linear part L is L^-T n: (L^-T)^T row-major = L^-T column-major
+                plane[k] = np.linalg.inv(t.view_proj[:3, :3])
+                info[k] = (t.slot, t.texel_world, t.depth_range, 0.0)
+        return {"u_tile_vp": vp.tobytes(), "u_tile_plane": plane.tobytes(), "u_tile_info": info.tobytes(),
+                "u_cascade_prev_weight": weight.tobytes()}
 
 
 def fit_shadow_cascades(camera, aspect: float, sun_direction: np.ndarray, bounds: np.ndarray, count: int,

@@ -11,21 +11,17 @@
 uniform sampler2D u_shadow_map;       // depth atlas of T x T tiles: slot s at tile (s % T, s / T)
 uniform int u_cascade_count;
 uniform float u_atlas_tiles;          // tiles per side T (1, 2, or 3 with a staggered atlas's second slots)
-uniform vec4 u_cascade_slot;          // the atlas slot of each cascade's tile
-// A staggered tile's version before its last redraw (ShadowPass.render), cross-faded into the new
-// one: its weight (0 = none), slot, light matrix, plane transform, texel (m) and depth extent (m)
+// Each cascade's tile (index c) and, while a staggered tile cross-fades (ShadowPass.render), the same
+// tile as drawn before its last redraw (index c + 4, its weight in u_cascade_prev_weight, 0 = none):
+// one array per parameter, so that a lookup picks its tile by one index (llvmpipe gathers a
+// dynamically indexed uniform lane by lane, and a select between two sets of them reads both)
+uniform mat4 u_tile_vp[8];            // world -> light clip
+uniform mat3 u_tile_plane[8];         // inverse transpose of the tile's linear part: a world normal ->
+                                      // the normal of that plane in the map's coordinates
+uniform vec4 u_tile_info[8];          // atlas slot, one texel (m), light depth extent (m), 0
 uniform vec4 u_cascade_prev_weight;
-uniform vec4 u_cascade_prev_slot;
-uniform mat4 u_cascade_prev_vp[4];
-uniform mat3 u_cascade_prev_plane[4];
-uniform vec4 u_cascade_prev_texel;
-uniform vec4 u_cascade_prev_depth_range;
-uniform mat4 u_cascade_vp[4];         // world -> light clip
-uniform mat3 u_cascade_plane[4];      // inverse transpose of each cascade's linear part: a world
-                                      // normal -> the normal of that plane in the map's coordinates
 uniform vec4 u_cascade_far;           // view depth (m) where each cascade ends
-uniform vec4 u_cascade_texel;         // one texel, metres
-uniform vec4 u_cascade_depth_range;   // light depth extent, metres
+uniform vec4 u_cascade_texel;         // one texel of each cascade's tile, metres
 uniform float u_shadow_bias;          // texels
 uniform float u_normal_offset;        // texels
 uniform float u_pcf_radius;           // texels (PCF mode)
@@ -66,7 +62,7 @@ vec2 rotated(vec2 p, vec2 rot) {
 // grows with them (which detached and shortened the shadows of eaves on walls under a grazing sun).
 struct AtlasTile { vec2 base; float scale; vec2 lo; vec2 hi; float texels; vec2 grad; float z; };
 
-// s: the receiver in the tile's [0,1]^3 map coordinates; m: its normal there (u_cascade_plane);
+// s: the receiver in the tile's [0,1]^3 map coordinates; m: its normal there (u_tile_plane);
 // bias: depth units subtracted from the receiver
 AtlasTile atlas_tile(int slot, vec3 s, vec3 m, vec2 texel, float max_grad, float bias) {
     int t = int(u_atlas_tiles + 0.5);
@@ -144,17 +140,15 @@ float tile_visibility(mat4 vp, mat3 plane, int slot, float texel_w, float range,
 // Cascade c's visibility: its tile's, or while the tile's version before its last redraw still has a
 // weight w (a staggered cascade, ShadowPass.render), that version's at a fraction w of the pixels
 // (those whose noise is below w: the expected value is the cross-fade, each pixel switches once, and
-// the parameters are chosen per pixel so that a block of pixels runs one filter, not two); 1 outside
-// the tile (and the new version where p lies outside the old one). One filter per pixel: llvmpipe runs
+// the tile is chosen per pixel so that a block of pixels runs one filter, not two); 1 outside the
+// tile (and the new version where p lies outside the old one). One filter per pixel: llvmpipe runs
 // both sides of a branch, so the old version's coverage is tested first and the filter runs once.
 float cascade_visibility(int c, vec3 p, vec3 n, float ndl, float size) {
-    bool before = interleaved_gradient_noise(gl_FragCoord.xy + vec2(13.0, 29.0)) < u_cascade_prev_weight[c]
-                  && !outside_tile(tile_coords(u_cascade_prev_vp[c], u_cascade_prev_texel[c], p, n, ndl));
-    float v = tile_visibility(before ? u_cascade_prev_vp[c] : u_cascade_vp[c],
-                              before ? u_cascade_prev_plane[c] : u_cascade_plane[c],
-                              int(before ? u_cascade_prev_slot[c] : u_cascade_slot[c]),
-                              before ? u_cascade_prev_texel[c] : u_cascade_texel[c],
-                              before ? u_cascade_prev_depth_range[c] : u_cascade_depth_range[c], p, n, ndl, size);
+    int k = c;
+    if (interleaved_gradient_noise(gl_FragCoord.xy + vec2(13.0, 29.0)) < u_cascade_prev_weight[c]
+        && !outside_tile(tile_coords(u_tile_vp[c + 4], u_tile_info[c + 4].y, p, n, ndl))) k = c + 4;
+    vec4 info = u_tile_info[k];
+    float v = tile_visibility(u_tile_vp[k], u_tile_plane[k], int(info.x), info.y, info.z, p, n, ndl, size);
     return v < 0.0 ? 1.0 : v;
 }
 
