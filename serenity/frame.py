@@ -52,9 +52,8 @@ from serenity.kernels.lpv import (
     sky_vpls_from_samples,
     surfels_from_samples,
 )
-from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.skyvolume import SkyVolume
-from serenity.kernels.tracer_process import TracerProcess
+from serenity.kernels.tracers import InlineTracer, RestartingTracer, ThreadTracer, TracerProcess
 from serenity.raster.composite import CompositePass
 from serenity.raster.context import finish, get_context
 from serenity.raster.deferred import DeferredPass, LightingInputs
@@ -217,8 +216,8 @@ class Renderer:
         with self._stage("upload"):
             cfg = self.config
             self.traces = cfg.ray_tracing and any(m.needs_ray_tracing for m in scene.materials)
-            self.tracer = None
-            self._tracer_proc = None
+            self._tracing: RestartingTracer | None = None  # the ray tracer (``_ensure_tracer``)
+            self._build_reported = False
             if self.traces and self._tracer_in_process():  # first: its start-up runs beside the set-up below
                 self._ensure_tracer()
             self.scene_gl = SceneGL(self.ctx, scene)
@@ -249,10 +248,6 @@ class Renderer:
                 self.rt_deferred = DeferredPass(self.ctx)
                 self.rt_deferred.resize(self.width, 2 * self.height)
                 self.composite_pass = CompositePass(self.ctx)
-                # on CUDA the tracer overlaps in a thread (its launches are asynchronous); on the
-                # CPU it runs in the tracer process (``_ensure_tracer``)
-                self._pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-rt")
-                              if cfg.overlap and not str(self.device).startswith("cpu") else None)
             self._init_gi()
             # the volumes' kernels beside the GL passes (``_render``): on the CPU only, where the GL
             # passes are llvmpipe's threads and the kernels would otherwise wait for them in turn
@@ -368,7 +363,22 @@ class Renderer:
         if not wanted <= set(READ_BACK):
             raise SerenityError(f"read_back must be a bool or a subset of {READ_BACK}, got {read_back!r}")
         with single_threaded_blas():  # the frame's own threads (llvmpipe, Warp launches) fill the cores
-            return self._render(wanted, jitter)
+            try:
+                return self._render(wanted, jitter)
+            except BaseException:
+                self._abandon_frame()
+                raise
+
+    def _abandon_frame(self) -> None:
+        """After a frame that raised: let the volume worker finish what the frame queued (the next
+        frame reads what it writes), so that the next frame starts as any other; the ray tracer drops
+        hits the frame did not collect at its next submit."""
+        pool = getattr(self, "_volume_pool", None)
+        if pool is not None:
+            try:
+                pool.submit(lambda: None).result()  # one worker: runs after everything queued before it
+            except RuntimeError:  # shut down (closed)
+                pass
 
     def _render(self, wanted: set[str], jitter: tuple[float, float] | None) -> Frame:
         self._begin_frame()
@@ -495,16 +505,9 @@ class Renderer:
             rcb = self.raycast_pass.read().select(self.config.reflections, self.config.refractions)
         if not rcb.count:
             return rcb, None
-        tracer = self._ensure_tracer()
-        if tracer is self._tracer_proc:
-            tracer.submit(self._ray_batches(rcb))
-            return rcb, self._join_tracer_process
-        if self._pool is not None:
-            return rcb, self._pool.submit(self._trace, rcb).result
-        c0 = time.process_time()
-        traced = self._trace(rcb)
-        self._tracer_cpu_ms = (time.process_time() - c0) * 1e3
-        return rcb, lambda: traced
+        tracing = self._ensure_tracer()
+        handle = tracing.submit(self._ray_batches(rcb))
+        return rcb, lambda: self._join_tracer(handle)
 
     def _main_view(self, view_proj, gbuf):
         """Sun shadow cascades (paper §6) and SSAO (paper §3) of the main view (its G-buffer is
@@ -808,25 +811,43 @@ class Renderer:
         """Whether the tracer runs in a process of its own (the overlapped schedule on the CPU)."""
         return self.config.overlap and str(self.device).startswith("cpu")
 
-    def _ensure_tracer(self):
-        """The in-process tracer (serial schedule, or CUDA), or for the overlapped schedule on the
-        CPU the tracer process (``kernels/tracer_process``: a thread would stall behind the GL
-        calls that hold the GIL). The process starts with the renderer (its imports, scene and tree
-        run beside the GL set-up and the first frame's volumes); the in-process tracer is built on
-        the first frame that shows a traced pixel."""
-        if self._tracer_in_process():
-            if self._tracer_proc is None:
-                session = self.config.tracer_session
+    def _ensure_tracer(self) -> RestartingTracer:
+        """The ray tracer (``kernels/tracers``), restarted once where it stops or hangs: for the
+        overlapped schedule on the CPU a :class:`TracerProcess` (a thread would stall behind the GL
+        calls that hold the GIL), started with the renderer (its imports, scene and tree run beside
+        the GL set-up and the first frame's volumes); on CUDA a :class:`ThreadTracer` (its launches
+        run asynchronously); else an :class:`InlineTracer`. The in-process tracers build their
+        kd-tree on the first frame that shows a traced pixel."""
+        if self._tracing is None:
+            cfg, scene, device = self.config, self.scene, self.device
+            if self._tracer_in_process():
+                session = cfg.tracer_session
                 if session is None:  # a group of its own where the main thread will wait for a volume worker
                     session = self._volumes_in_worker()
-                self._tracer_proc = TracerProcess(self.scene, self.device, nice=self.config.tracer_nice,
-                                                 session=session)
-            return self._tracer_proc
-        if self.tracer is None:
-            t0 = time.perf_counter()
-            self.tracer = RayTracer(self.scene, device=self.device)
-            self._record(MAIN_LANE, "kd-tree build", t0, time.perf_counter())
-        return self.tracer
+
+                def make():
+                    return TracerProcess(scene, device, nice=cfg.tracer_nice, session=session)
+            elif cfg.overlap:
+                def make():
+                    return ThreadTracer(scene, device)
+            else:
+                def make():
+                    return InlineTracer(scene, device)
+            self._tracing = RestartingTracer(make)
+        return self._tracing
+
+    @property
+    def _tracer_proc(self) -> TracerProcess | None:
+        """The tracer process, where the ray tracer runs in one."""
+        t = None if self._tracing is None else self._tracing.tracer
+        return t if isinstance(t, TracerProcess) else None
+
+    @property
+    def tracer(self):
+        """The :class:`~serenity.kernels.raytrace.RayTracer` in this process (serial schedule, or
+        CUDA), once a frame has built it; None with the tracer process or before."""
+        t = None if self._tracing is None else self._tracing.tracer
+        return getattr(t, "ray_tracer", None)
 
     def _ray_batches(self, rcb: RayCastingBuffer) -> list:
         """(origins, directions, cone width, cone spread, transmissions, sun direction or None) of the
@@ -845,22 +866,17 @@ class Renderer:
             return None
         return np.asarray(self.scene.sun.direction, np.float64)
 
-    def _trace(self, rcb: RayCastingBuffer) -> tuple[dict | None, dict | None]:
-        """CPU ray tracing of the reflected and refracted rays, in this process."""
-        t0 = time.perf_counter()
-        refl, refr = (None if b is None else self.tracer.trace(*b[:4], transmissions=b[4], sun_direction=b[5])
-                      for b in self._ray_batches(rcb))
-        self._record(RT_LANE, "cpu ray tracing", t0, time.perf_counter())
-        return refl, refr
-
-    def _join_tracer_process(self) -> tuple[dict | None, dict | None]:
-        proc = self._tracer_proc
-        first = proc.build_seconds is None
-        results, t0, t1 = proc.result()
-        self._child_cpu_ms += proc.cpu_seconds * 1e3
-        self._tracer_cpu_ms = proc.cpu_seconds * 1e3
-        if first:
-            self._timings["kd-tree build"] = proc.build_seconds * 1e3
+    def _join_tracer(self, handle: int) -> tuple[dict | None, dict | None]:
+        """Sync 2: the hits of the reflected and the refracted rays submitted under ``handle``, with
+        the tracer's time on the timeline and its CPU time in the frame's."""
+        tracing = self._tracing
+        results, t0, t1 = tracing.result(handle)
+        if self._tracer_proc is not None:  # the child's CPU time: not in this process's
+            self._child_cpu_ms += tracing.cpu_seconds * 1e3
+        self._tracer_cpu_ms = tracing.cpu_seconds * 1e3
+        if not self._build_reported and tracing.build_seconds is not None:
+            self._timings["kd-tree build"] = tracing.build_seconds * 1e3
+            self._build_reported = True
         self._record(RT_LANE, "cpu ray tracing", t0, t1)
         return results[0], results[1]
 
@@ -922,21 +938,20 @@ class Renderer:
         self.close()
 
     def close(self) -> None:
-        """Stop the ray-tracing worker thread or process and the volume worker (the GL objects go
-        with the process's context). Closing twice is harmless."""
-        for name in ("_pool", "_volume_pool"):
-            pool = getattr(self, name, None)
-            if pool is not None:
-                pool.shutdown(wait=True)
-        proc = getattr(self, "_tracer_proc", None)
-        if proc is not None:
-            proc.close()
-            self._tracer_proc = None
+        """Stop the ray tracer (its worker thread or process) and the volume worker (the GL objects
+        go with the process's context). Closing twice is harmless."""
+        pool = getattr(self, "_volume_pool", None)
+        if pool is not None:
+            pool.shutdown(wait=True)
+        tracing = getattr(self, "_tracing", None)
+        if tracing is not None:
+            tracing.close()
+            self._tracing = None
 
     def __del__(self):
-        proc = getattr(self, "_tracer_proc", None)
-        if proc is not None:
-            proc.close()
+        tracing = getattr(self, "_tracing", None)
+        if tracing is not None:
+            tracing.close()
 
 
 def format_timings(timings: dict[str, float], wall_ms: float | None = None) -> str:

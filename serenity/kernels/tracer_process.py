@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import select
 
 try:
     import fcntl
@@ -48,6 +49,16 @@ from serenity.kernels.raytrace import RayTracer
 from serenity.threads import single_threaded_blas
 
 _HEADER = struct.Struct("<Q")
+
+#: seconds ``TracerProcess.result`` waits for the child's tracer to be built (a large scene's kd-tree
+#: with an empty cache) and then for one frame's hits, before it calls the child hung
+READY_TIMEOUT = 600.0
+RESULT_TIMEOUT = 60.0
+
+
+class TracerStopped(SerenityError):
+    """The tracer process died, closed its pipe or gave no answer in time (a restart may help; an
+    error the tracer itself reported is a plain :class:`SerenityError`)."""
 
 #: where the scene's pickle waits for the child: memory (tmpfs) where there is one
 SCENE_DIR = "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os.W_OK) else None
@@ -128,10 +139,13 @@ def _autogroup(pid) -> str | None:
 
 
 class TracerProcess:
-    """A :class:`~serenity.kernels.raytrace.RayTracer` of ``scene`` in a child process.
-
-    ``submit(batches)`` sends one frame's ray batches and returns at once; ``result()`` waits for
-    them and returns (results, t0, t1). One frame in flight at a time."""
+    """A :class:`~serenity.kernels.raytrace.RayTracer` of ``scene`` in a child process, behind the
+    tracers' protocol (``serenity.kernels.tracers``): ``submit(batches)`` sends one frame's ray
+    batches and returns a handle at once; ``result(handle, timeout)`` waits for them and returns
+    (results, t0, t1). One frame in flight at a time: a submit after a frame that never collected its
+    result (the frame failed in between) first reads and drops that result. A child that has died,
+    closed its pipe or gives no answer within the timeout is a :class:`TracerStopped` (and is
+    killed); an exception in the child's tracing is a :class:`SerenityError` with its message."""
 
     def __init__(self, scene, device: str = "cpu", nice: int = NICE, session: bool = False):
         to_child_r, to_child_w = os.pipe()
@@ -146,7 +160,8 @@ class TracerProcess:
         _widen(to_child_w)
         _widen(from_child_r)
         self._out, self._in = to_child_w, from_child_r
-        self._pending = False
+        self._pending: int | None = None  # the handle of the frame in flight
+        self._handles = 0
         self._own_group: bool | None = None
         self.build_seconds: float | None = None
         """Seconds the child took to build its tracer (None until it has said it is ready)."""
@@ -199,33 +214,53 @@ class TracerProcess:
             self._own_group = None not in (child, mine) and child.split()[0] != mine.split()[0]
         return self._own_group
 
-    def _wait_ready(self) -> None:
+    @property
+    def alive(self) -> bool:
+        """Whether the child is still running."""
+        return self._proc.poll() is None
+
+    def _wait_ready(self, timeout: float | None) -> None:
         if self.build_seconds is None:
             try:
-                self.build_seconds = self._receive()[1]
+                self.build_seconds = self._receive(READY_TIMEOUT if timeout is None else max(timeout, READY_TIMEOUT))[1]
             finally:
                 self._remove_scene()
 
-    def _receive(self):
+    def _receive(self, timeout: float | None):
         try:
+            ready, _, _ = select.select([self._in], [], [], timeout)
+            if not ready:
+                self._proc.kill()
+                raise TracerStopped(f"the ray-tracing process gave no answer within {timeout:.0f} s and was stopped")
             msg = _read(self._in)
-        except (EOFError, OSError) as e:
-            raise SerenityError(f"the ray-tracing process stopped ({e}); exit code {self._proc.poll()}") from None
+        except (EOFError, OSError, ValueError) as e:
+            raise TracerStopped(f"the ray-tracing process stopped ({e}); exit code {self._proc.poll()}") from None
         if msg[0] == "error":
             raise SerenityError(f"ray tracing failed in the tracer process: {msg[1]}")
         return msg
 
-    def submit(self, batches: list) -> None:
-        if self._pending:
-            raise RuntimeError("one frame at a time: call result() first")
-        _write(self._out, batches)
-        self._pending = True
+    def submit(self, batches: list) -> int:
+        """Send one frame's ray batches; returns the handle ``result`` takes."""
+        if self._pending is not None:  # a frame that failed before it collected its hits: drop them
+            self._wait_ready(None)
+            self._pending = None
+            self._receive(RESULT_TIMEOUT)
+        try:
+            _write(self._out, batches)
+        except OSError as e:
+            raise TracerStopped(f"the ray-tracing process stopped ({e}); exit code {self._proc.poll()}") from None
+        self._handles += 1
+        self._pending = self._handles
+        return self._handles
 
-    def result(self):
-        """(list of per-batch results, t0, t1) of the last ``submit``."""
-        self._wait_ready()
-        self._pending = False
-        _, results, t0, t1, self.cpu_seconds = self._receive()
+    def result(self, handle: int, timeout: float | None = RESULT_TIMEOUT):
+        """(list of per-batch results, t0, t1) of the submit that returned ``handle``; waits up to
+        ``timeout`` seconds for them (None: for ever) once the child's tracer is built."""
+        if handle != self._pending:
+            raise SerenityError(f"no ray batches in flight under handle {handle}")
+        self._wait_ready(timeout)
+        self._pending = None
+        _, results, t0, t1, self.cpu_seconds = self._receive(timeout)
         return results, t0, t1
 
     def close(self) -> None:

@@ -44,8 +44,7 @@ def test_scene_file_gone_once_the_tracer_is_ready(tmp_path, monkeypatch):
     proc = tp.TracerProcess(load("glass"))
     try:
         assert len(list(tmp_path.glob("serenity-scene-*.pickle"))) <= 1
-        proc.submit([None])
-        results, t0, t1 = proc.result()
+        results, t0, t1 = proc.result(proc.submit([None]))
         assert results == [None] and proc.build_seconds > 0 and t1 >= t0
         assert not list(tmp_path.glob("serenity-scene-*.pickle"))
     finally:
