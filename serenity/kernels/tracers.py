@@ -98,6 +98,7 @@ class ThreadTracer(_InProcess):
 
     def submit(self, batches: list) -> int:
         self._futures.clear()  # a frame that failed before it collected its hits: the pool runs in order
+        self._ensure()  # built on the calling thread, where the device's context is current
         self._handles += 1
         self._futures[self._handles] = self._pool.submit(self._timed, batches)
         return self._handles
