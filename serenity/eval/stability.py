@@ -35,7 +35,7 @@ from serenity.raster.interop import read_texture
 from serenity.raster.shadow import fit_shadow_cascades
 from serenity.scene import load
 from serenity.scene.model import Camera, Sky, Sun, direction_from_angles
-from serenity.scene.procedural import _Builder, plane_scene
+from serenity.scene.procedural import SceneBuilder, plane_scene
 
 
 def format_error(x) -> str:
@@ -97,7 +97,7 @@ def gather_thin_wall(frac: float, visibility: bool, device=None, rays: int = 256
     face, E on the lit face) of the gathered volume at mid-height, each facing out of the wall
     (W/m²). Exact dark face: 0 — nothing lies on its side. ``visibility``: ``SkyConfig.gather_visibility``
     (else plain trilinear; both with the default lookup offset of half a cell along the normal)."""
-    b = _Builder()
+    b = SceneBuilder()
     b.material("wall", albedo=(0.8, 0.8, 0.8))
     b.material("floor", albedo=(0.5, 0.5, 0.5))
     x0 = float(frac)
@@ -435,7 +435,7 @@ def shadow_scene(elevation: float, azimuth: float = 90.0, wall: bool = False, bo
     (x, z ∈ [−1, 1]). The camera looks down −z from (−3, 1.7, 18). ``raised``: a 1 m square 1 m
     under the plane's centre, hidden by it, so the plane is not the scene's bottom plane, which the
     shadow maps leave out (``raster/scene_gl.bottom_plane_triangles``), but a caster like any other."""
-    b = _Builder()
+    b = SceneBuilder()
     b.material("plane", albedo=(0.5, 0.5, 0.5))
     b.material("block", albedo=(0.5, 0.5, 0.5))
     b.rect("plane", (0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, -20.0))
@@ -531,7 +531,7 @@ def contact_leak(shadow, size=(320, 180), band: float = 0.15):
     touches only the pixels whose sample falls within a texel of the foot (the Cornell box's
     worst pixel is one, 0.08 mm inside the wall), so the fraction is small but each is a bright
     pixel on a black one.)"""
-    b = _Builder()
+    b = SceneBuilder()
     b.material("plane", albedo=(0.5, 0.5, 0.5))
     b.material("block", albedo=(0.5, 0.5, 0.5))
     b.rect("plane", (0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, -20.0))
@@ -752,7 +752,7 @@ def mirror_shadow_case(size=(160, 90), device=None, rt_sun_shadows: str = "trace
 def horizon_scene(elevation: float):
     """A 4 × 3 m grey block (albedo 0.5) on a grey plane under the atmosphere, the sun ``elevation``°
     in the west (azimuth 270°); the camera looks at the block's sunlit west face."""
-    b = _Builder()
+    b = SceneBuilder()
     b.material("ground", albedo=(0.5, 0.5, 0.5))
     b.material("block", albedo=(0.5, 0.5, 0.5))
     b.rect("ground", (0.0, 0.0, 0.0), (30.0, 0.0, 0.0), (0.0, 0.0, -30.0))
@@ -813,7 +813,7 @@ def nested_glass_error(count: int = 32, transmissions: int = 4, seed: int = 1, d
     the inner faces separate glass from the same glass, so rays bend only at the outer faces and
     leave parallel to where they came from. Returns the distances (m) of the traced wall hits from
     the exact ones (inf where the ray did not reach the wall)."""
-    b = _Builder()
+    b = SceneBuilder()
     b.material("glass", albedo=(0.95,) * 3, transparency=0.95, ior=1.5)
     b.material("wall", albedo=(0.5,) * 3)
     b.box("glass", (-1.0, 0.0, -0.5), (1.0, 2.0, 0.5))

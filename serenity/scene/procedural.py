@@ -51,7 +51,8 @@ from serenity.scene.model import (
 from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, sun_from_time
 from serenity.scene.texture import texture_from_array
 
-__all__ = ["scene_names", "scene_descriptions", "build_scene", "plane_scene", "tile_texture", "lumpy_mesh"]
+__all__ = ["SceneBuilder", "scene_names", "scene_descriptions", "build_scene", "plane_scene", "tile_texture",
+           "lumpy_mesh"]
 
 _Y = np.array([0.0, 1.0, 0.0])
 
@@ -59,8 +60,19 @@ _Y = np.array([0.0, 1.0, 0.0])
 # ----------------------------------------------------------------------------------------- geometry builder
 
 
-class _Builder:
-    """Collects triangles per material; ``scene()`` makes one :class:`Mesh` per used material."""
+class SceneBuilder:
+    """Builds a :class:`Scene` from primitives (the built-in scenes here, and small test scenes made
+    for one measurement).
+
+    Declare each material (``material``), add shapes made of it (``rect``, ``quad``, ``box``,
+    ``cylinder``, ``sphere``, ``prism``, ``arch_wall``, or raw triangles with ``add``), then call
+    ``scene()``, which makes one :class:`Mesh` per material that has triangles. Metres, y up::
+
+        b = SceneBuilder()
+        b.material("floor", albedo=(0.5, 0.5, 0.5))
+        b.rect("floor", (0, 0, 0), (10, 0, 0), (0, 0, -10))   # a 20 × 20 m floor facing +y
+        scene = b.scene("floor", Camera((0, 2, 8), (0, 0, 0)), Sun((0.3, 1.0, 0.2)))
+    """
 
     def __init__(self):
         self.materials: list[Material] = []
@@ -68,11 +80,15 @@ class _Builder:
         self._parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = {}
 
     def material(self, name: str, **kw) -> str:
+        """Declare material ``name`` (keywords: :class:`Material`'s fields); returns ``name``, the key
+        the shapes take. Materials keep their order of declaration (the scene's material indices)."""
         self._index[name] = len(self.materials)
         self.materials.append(Material(name, **kw))
         return name
 
     def add(self, mat: str, pos, nrm, uv, faces) -> None:
+        """Raw triangles of material ``mat``: positions and normals (V, 3), uvs (V, 2), faces (F, 3)
+        indices into them (counter-clockwise seen from the side the normals face)."""
         self._parts.setdefault(self._index[mat], []).append(
             (np.asarray(pos, np.float64), np.asarray(nrm, np.float64), np.asarray(uv, np.float64),
              np.asarray(faces, np.int64)))
@@ -220,6 +236,8 @@ class _Builder:
 
     def scene(self, name: str, camera: Camera, sun: Sun, sky: Sky | None = None,
               quads: list[OcclusionQuad] | None = None, location=None) -> Scene:
+        """The :class:`Scene` of everything added: ``sky`` defaults to ``Sky()`` (the atmosphere),
+        ``quads`` (the sky volume's occlusion quads) to none; ``location`` as :class:`Scene`'s."""
         meshes = []
         for mi, mat in enumerate(self.materials):
             parts = self._parts.get(mi)
@@ -285,7 +303,7 @@ def _default_sun(when: str | None = None) -> tuple[Sun, tuple[float, float]]:
 
 
 def courtyard_scene(time: str | None = None, name: str = "courtyard") -> Scene:
-    b = _Builder()
+    b = SceneBuilder()
     b.material("ground", albedo=(1.0, 1.0, 1.0), albedo_texture=tile_texture(), specular=0.04, shininess=16.0)
     plaster = [
         b.material("plaster_north", albedo=(0.78, 0.70, 0.55), specular=0.02, shininess=8.0),
@@ -386,7 +404,7 @@ def lumpy_mesh(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
 
 def cornell_scene() -> Scene:
     mm = 0.001
-    b = _Builder()
+    b = SceneBuilder()
     b.material("white", albedo=(0.725, 0.71, 0.68))
     b.material("red", albedo=(0.63, 0.065, 0.05))
     b.material("green", albedo=(0.14, 0.45, 0.091))
@@ -427,7 +445,7 @@ def cornell_scene() -> Scene:
 
 
 def thin_wall_scene() -> Scene:
-    b = _Builder()
+    b = SceneBuilder()
     b.material("ground", albedo=(0.5, 0.5, 0.5))
     b.material("wall", albedo=(0.8, 0.8, 0.8))
     b.material("red", albedo=(0.8, 0.1, 0.08))
@@ -463,7 +481,7 @@ def terrain_scene() -> Scene:
     v01, v10, v11 = v00 + 1, v00 + n, v00 + n + 1
     # rows go south (+z), columns east (+x): (v00, v10, v11) is counter-clockwise seen from above
     faces = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
-    b = _Builder()
+    b = SceneBuilder()
     b.material("grass", albedo=(0.22, 0.32, 0.12), specular=0.02, shininess=8.0)
     b.add("grass", pos, vertex_normals(pos, faces), pos[:, [0, 2]] / 8.0, faces)
     quads = []
@@ -484,7 +502,7 @@ def terrain_scene() -> Scene:
 
 
 def mirror_box_scene() -> Scene:
-    b = _Builder()
+    b = SceneBuilder()
     b.material("floor", albedo=(1.0, 1.0, 1.0), albedo_texture=tile_texture(), specular=0.04, shininess=16.0)
     b.material("wall", albedo=(0.75, 0.75, 0.72))
     b.material("mirror", albedo=(0.05, 0.05, 0.05), specular=0.9, shininess=2000.0, reflectivity=0.95)
@@ -512,7 +530,7 @@ def mirror_box_scene() -> Scene:
 
 
 def glass_scene() -> Scene:
-    b = _Builder()
+    b = SceneBuilder()
     b.material("floor", albedo=(1.0, 1.0, 1.0), albedo_texture=tile_texture(), specular=0.04, shininess=16.0)
     b.material("glass", albedo=(0.95, 0.95, 0.95), specular=0.5, shininess=1000.0, transparency=0.95, ior=1.5)
     b.material("red", albedo=(0.8, 0.1, 0.08))
@@ -536,7 +554,7 @@ def plane_scene(elevation_deg: float = 60.0, azimuth_deg: float = 180.0, albedo:
                 irradiance: float = 1000.0) -> Scene:
     """A single 40 × 40 m diffuse plane at y = 0 (albedo ``albedo``), the sun at (elevation, azimuth)
     with ``irradiance`` W·m⁻² per channel, a black constant sky, the camera looking down at 40°."""
-    b = _Builder()
+    b = SceneBuilder()
     b.material("plane", albedo=(albedo,) * 3)
     b.rect("plane", (0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, -20.0), 0.25)
     camera = Camera(position=(0.0, 10.0, 12.0), target=(0.0, 0.0, -1.0), fov_y_deg=50.0, near=0.1, far=200.0)
@@ -547,7 +565,7 @@ def plane_scene(elevation_deg: float = 60.0, azimuth_deg: float = 180.0, albedo:
 def penumbra_scene() -> Scene:
     """A 6 m pole and a 1 m cube on a grey plane, the sun 30° high: the pole's shadow tip lies 10 m
     from its base, where the real sun's 0.53° disc spreads a ~9 cm penumbra (paper Fig. 4)."""
-    b = _Builder()
+    b = SceneBuilder()
     b.material("ground", albedo=(0.5, 0.5, 0.5))
     b.material("pole", albedo=(0.7, 0.7, 0.7))
     b.rect("ground", (0.0, 0.0, 0.0), (20.0, 0.0, 0.0), (0.0, 0.0, -20.0), 0.25)
