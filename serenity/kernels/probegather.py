@@ -35,10 +35,19 @@ flipped a whole row at once; from the square's point itself, a surfel at a corne
 its ray inside the wall beside it or beyond the edge), re-traced when the sky map is rebaked (the
 sun moved). Rays that hit a back face (the probe sits inside or under geometry) mark the probe: a
 probe with more than ``BACKFACE_LIMIT`` of its rays on back faces is moved by up to half a cell to a
-free spot (DDGI's probe relocation, Majercik et al. 2019); its texel stays on the grid. Directions:
+free spot (DDGI's probe relocation, Majercik et al. 2019); its texel stays on the grid. Each probe is
+first judged on every ``RELOCATION_STRIDE``-th ray, as a spot to move to is, so that a probe inside
+geometry is traced in full only where it moves to (about half of a room's probes next to its
+surfaces). Directions:
 ``DIRECTION_SETS`` spherical Fibonacci sets of R directions, each turned by its own random rotation;
 probe p uses set p mod ``DIRECTION_SETS`` (neighbouring probes sample different directions, so the
 quantisation of one set does not line up across the volume).
+
+Probes no lookup reads (DDGI's probe classification, Majercik et al. 2021): a lookup at a surface
+point reads the 8 probes around it, moved by the normal offset, so a probe whose cells no triangle
+comes within that offset of (the air in the middle of a room, 60 % of the breakfast room's probes)
+is never read. Those probes are not traced or gathered (``reachable_probes``; their coefficients are
+zeros); a surfel's own lookup, from its mean position, is checked too.
 
 Costs (``benchmarks/``): the rays are traced once per scene (``ProbeGather._build``), in chunks that
 are merged into surfels and depth moments as they come (the hits of every ray never exist at once);
@@ -82,7 +91,7 @@ _INV_PI = wp.constant(1.0 / math.pi)
 
 
 #: bump when the traced data or its cached layout changes
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 #: host work over every probe ray (millions) runs in slices of this many, so that no temporary
 #: spans them all
 _SLICE = 1 << 20
@@ -115,6 +124,13 @@ VIS_BIAS_CELLS = 0.5
 
 #: beyond the grid's sides and top, the lookup fades to the open sky's coefficients over this many cells
 OPEN_FADE_CELLS = 2.0
+#: the probes the lookups can read (``reachable_probes``) are found around the triangles within the
+#: lookup's normal offset and this many cells more (rasterised positions, normal-mapped normals)
+REACH_MARGIN_CELLS = 0.02
+#: a triangle whose reach spans more probes than this is tested against each one's distance to its plane
+_REACH_PLANE_PROBES = 64
+#: rounds of tracing the probes that the surfels' own lookups read beyond the active ones (``ProbeGather``)
+_REACH_ROUNDS = 3
 
 
 @wp.func
@@ -262,6 +278,7 @@ def gather_probes(
     res_y: int,
     first_layer: int,
     rays: int,
+    active: wp.array(dtype=wp.int32),
     surfel: wp.array2d(dtype=wp.int32),
     surfel_radiance: wp.array(dtype=wp.vec3),
     miss_radiance: wp.array2d(dtype=wp.vec3),
@@ -273,7 +290,8 @@ def gather_probes(
 ):
     """The i-th probe of the y-layers from ``first_layer`` on (x fastest, then z; stored (z, y, x)):
     E_k = scale_k·4π/R·Σ_r L_r·Y_k(ω_r), L_r the radiance of the surfel ray r hit (surfel[p, r] ≥ 0),
-    the miss radiance of the probe's direction set (−1), or 0 (−2: a back face)."""
+    the miss radiance of the probe's direction set (−1), or 0 (−2: a back face); zeros for a probe
+    that is not ``active`` (no lookup reads it: :func:`reachable_probes`)."""
     t = wp.tid() + offset
     res_z = surfel.shape[0] // (res_x * res_y)
     slab = res_x * res_z
@@ -282,6 +300,10 @@ def gather_probes(
     z = rem // res_x
     x = rem - z * res_x
     probe = (z * res_y + y) * res_x + x
+    if active[probe] == 0:
+        for k in range(27):
+            coeffs[probe, k] = 0.0
+        return
     s = probe % basis.shape[0]
     acc_r = vec9()
     acc_g = vec9()
@@ -476,13 +498,19 @@ class _SurfelMerge:
         self.hit_surfel[h:h + len(idx)] = local
         self.hits += len(idx)
 
+    def means(self) -> tuple[np.ndarray, np.ndarray]:
+        """The surfels so far: mean positions and (unit) mean normals, float64 (S, 3) each."""
+        cnt = np.maximum(self.sums[:, :1], 1.0)
+        sn = self.sums[:, 4:7] / cnt
+        sn /= np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12)
+        return self.sums[:, 1:4] / cnt, sn
+
     def finish(self):
         """(surfel per ray (N,) int32: ≥ 0, −1 a miss, −2 a back face; the surfels' mean positions,
         normals and albedo, float64 (S, 3) each; their shadow rays' origins, ``shadow_origins``)."""
         total, inv = self.sums, self.merged
-        cnt = np.maximum(total[:, :1], 1.0)
-        sp, sn, sa = total[:, 1:4] / cnt, total[:, 4:7] / cnt, total[:, 7:10] / cnt
-        sn /= np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12)
+        sp, sn = self.means()
+        sa = total[:, 7:10] / np.maximum(total[:, :1], 1.0)
         surfel, hit_surfel = self.surfel, self.hit_surfel[:self.hits]
         for a in range(0, len(surfel), _SLICE):  # in place, in slices: no temporaries of every ray
             s = surfel[a:a + _SLICE]
@@ -539,6 +567,64 @@ def scene_key(scene) -> str:
     return h.hexdigest()
 
 
+def lookup_probes(points: np.ndarray, origin, cell, resolution) -> np.ndarray:
+    """(N, 8) int64: the probes (storage order z, y, x) the lookup at ``points`` (N, 3), already moved
+    by the normal offset, reads: the corners of its cell, clamped to the grid (:func:`volume_irradiance`)."""
+    res = np.asarray(resolution, np.int64)
+    g = np.clip((np.asarray(points, np.float64).reshape(-1, 3) - np.asarray(origin, np.float64))
+                / np.asarray(cell, np.float64), 0.0, res - 1)
+    i0 = np.floor(g).astype(np.int64)
+    i1 = np.minimum(i0 + 1, res - 1)
+    out = np.empty((len(g), 8), np.int64)
+    for corner in range(8):
+        c = np.where([(corner >> k) & 1 for k in range(3)], i1, i0)
+        out[:, corner] = (c[:, 2] * res[1] + c[:, 1]) * res[0] + c[:, 0]
+    return out
+
+
+def reachable_probes(vertices: np.ndarray, faces: np.ndarray, origin, cell, resolution, reach: float) -> np.ndarray:
+    """(P,) bool in storage order (z, y, x): the probes a lookup at a point of the triangles
+    ``vertices[faces]`` can read. The lookup at surface point p with unit normal n reads the 8 probes
+    around x = p + offset·n (:func:`volume_irradiance`, sky.glsl), in grid units clamped to the grid;
+    x lies within ``reach`` (the offset and a margin) of a triangle, so the triangles' boxes grown by
+    ``reach``, clamped to the grid, hold every such x, and the probes around them are all a lookup can
+    read. A triangle whose grown box spans more than ``_REACH_PLANE_PROBES`` probes and lies inside the
+    grid keeps only the probes within one cell (each axis) and ``reach`` of its plane."""
+    x, y, z = (int(a) for a in resolution)
+    res = np.array([x, y, z])
+    origin, cell = np.asarray(origin, np.float64), np.asarray(cell, np.float64)
+    out = np.zeros(x * y * z, bool)
+    faces = np.asarray(faces).reshape(-1, 3)
+    if not len(faces):
+        return out
+    for a in range(0, len(faces), _SLICE // 4):  # (N, 3, 3) float64 of every triangle at once: 18 MB per 262k
+        tri = np.asarray(vertices)[faces[a:a + _SLICE // 4]].astype(np.float64)
+        glo = (tri.min(axis=1) - reach - origin) / cell
+        ghi = (tri.max(axis=1) + reach - origin) / cell
+        lo = np.floor(np.clip(glo, 0.0, res - 1)).astype(np.int64)
+        hi = np.minimum(np.floor(np.clip(ghi, 0.0, res - 1)).astype(np.int64) + 1, res - 1)
+        span = hi - lo + 1
+        big = (span.prod(axis=1) > _REACH_PLANE_PROBES) & np.all(glo >= 0.0, axis=1) & np.all(ghi <= res - 1, axis=1)
+        small = ~big
+        # the small boxes as a 3D difference array: +-1 at their 8 corners, summed along each axis
+        diff = np.zeros((z + 1, y + 1, x + 1), np.int64)
+        lo_s, hi_s = lo[small], hi[small] + 1
+        for corner in range(8):
+            c = np.where([(corner >> k) & 1 for k in range(3)], hi_s, lo_s)
+            sign = -1 if bin(corner).count("1") % 2 else 1
+            flat = (c[:, 2] * (y + 1) + c[:, 1]) * (x + 1) + c[:, 0]
+            diff.reshape(-1)[:] += sign * np.bincount(flat, minlength=diff.size)
+        out |= (diff.cumsum(0).cumsum(1).cumsum(2)[:z, :y, :x] > 0).reshape(-1)
+        for t in np.flatnonzero(big):
+            n = np.cross(tri[t, 1] - tri[t, 0], tri[t, 2] - tri[t, 0])
+            n /= max(float(np.linalg.norm(n)), 1e-30)
+            kz, ky, kx = np.meshgrid(*(np.arange(lo[t, k], hi[t, k] + 1) for k in (2, 1, 0)), indexing="ij")
+            q = origin + np.stack([kx, ky, kz], axis=-1).reshape(-1, 3) * cell
+            near = np.abs((q - tri[t, 0]) @ n) <= float(np.abs(n) @ cell) + reach
+            out[((kz.reshape(-1) * y + ky.reshape(-1)) * x + kx.reshape(-1))[near]] = True
+    return out
+
+
 def direction_sets(rays: int, sets: int = DIRECTION_SETS, seed: int = 0) -> np.ndarray:
     """(sets, rays, 3) float64 unit directions: a spherical Fibonacci set of ``rays`` points, turned
     by one random rotation per set."""
@@ -564,15 +650,25 @@ class ProbeGather:
     (one more bounce) then ``gather`` of its y-layers into the volume's coefficients."""
 
     def __init__(self, tracer, positions: np.ndarray, cell: np.ndarray, rays: int, surfel_size: float,
-                 device, glossy_energy=None, transmissions: int = 0, cache_key: str | None = None):
+                 device, glossy_energy=None, transmissions: int = 0, cache_key: str | None = None,
+                 active: np.ndarray | None = None, grid: tuple | None = None):
         """``glossy_energy``: per material of the tracer's scene, the albedo its surfels gain from
         its Phong lobe (module docstring), None: none; ``transmissions``: transparent interfaces a
         ray is bent through before the hit it lights the probe with; ``cache_key``: a digest of the
         tracer's scene (geometry and materials), with which a big trace is cached on disk (like the
         kd-tree: ``$SERENITY_CACHE`` or ``~/.cache/serenity``) and read back by the next renderer of
-        the same scene and grid; None: no cache."""
+        the same scene and grid; None: no cache. ``active``: (P,) bool, the probes a lookup can read
+        (:func:`reachable_probes`); only they are traced and gathered, the others hold zeros; None:
+        every probe. ``grid``: (origin, resolution, normal offset in m) of the volume, with which the
+        surfels' own lookups are checked to read active probes only (else those probes are traced too)."""
         self.device = device
         self.rays = int(rays)
+        n_probes = len(positions)
+        #: (P,) bool: the probes traced and gathered (``active``)
+        self.active = np.ones(n_probes, bool) if active is None else np.asarray(active, bool).reshape(-1).copy()
+        if len(self.active) != n_probes:
+            raise ValueError(f"active: {len(self.active)} flags for {n_probes} probes")
+        self.grid = None if grid is None or active is None else grid
         self.tracer = tracer
         self.glossy_energy = None if glossy_energy is None else np.asarray(glossy_energy, np.float32)
         self.transmissions = int(transmissions)
@@ -595,6 +691,7 @@ class ProbeGather:
                 self._save(path)
         dev = device
         self._basis = wp.array(np.stack([sh_basis(d) for d in self.dirs]).astype(np.float32), dtype=vec9, device=dev)
+        self._active = wp.array(self.active.astype(np.int32), dtype=wp.int32, device=dev)
         self._miss = wp.zeros((DIRECTION_SETS, self.rays), dtype=wp.vec3, device=dev)
         self._radiance = wp.zeros(self.surfel_count, dtype=wp.vec3, device=dev)
         self._visible = wp.zeros(self.surfel_count, dtype=float, device=dev)
@@ -633,18 +730,23 @@ class ProbeGather:
         bar.close()
 
     def _build(self, positions, cell, surfel_size) -> None:
-        """Trace the probes' rays, move probes out of geometry, merge the hits into surfels and the
-        distances into depth moments, chunk by chunk: the hits of every ray at once (14M rays of a
-        262k-triangle room: half a GB, and as much again to merge them) never exist."""
+        """Trace the active probes' rays, move probes out of geometry, merge the hits into surfels and
+        the distances into depth moments, chunk by chunk: the hits of every ray at once (14M rays of a
+        262k-triangle room: half a GB, and as much again to merge them) never exist. Where a surfel's
+        own lookup reads a probe that is not active (its mean lies off the triangles), that probe is
+        made active and traced too (``_REACH_ROUNDS`` rounds at most)."""
         n_probes, r = len(positions), self.rays
         s = np.arange(n_probes) % DIRECTION_SETS
         cell = np.asarray(cell, np.float64)
         origins = np.asarray(positions, np.float64).copy()
-        self.moments = np.empty((n_probes, VIS_OCT * VIS_OCT, 2), np.float32)
-        merge = _SurfelMerge(n_probes * r, self._surfel_anchor(), surfel_size)
-        weights = _MomentWeights(self.dirs32)
         cap = VIS_MAX_CELLS * float(np.linalg.norm(cell))
+        self.moments = np.empty((n_probes, VIS_OCT * VIS_OCT, 2), np.float32)
+        self.moments[~self.active] = (cap, cap * cap)  # no lookup reads them: as if every ray missed
+        merge = _SurfelMerge(n_probes * r, self._surfel_anchor(), surfel_size)
+        merge.surfel.reshape(n_probes, r)[~self.active] = -2  # not traced: no light (the gather skips them)
+        weights = _MomentWeights(self.dirs32)
         bad = np.zeros(n_probes, bool)  # probes with too many back faces: merged once their place is settled
+        self.relocated = 0
 
         def merge_probes(probes, hits, rays):  # the probes' rays (a mask of the chunk's) into the surfels
             hits = {k: v[rays] for k, v in hits.items()}
@@ -652,40 +754,68 @@ class ProbeGather:
             merge.add(rows, *(hits[k] for k in ("hit", "back", "position", "normal", "albedo")))
             self.moments[probes] = weights.moments(_hit_distances(hits, origins[probes], r, cap), s[probes])
 
-        for a, b, hits in self._trace_chunks(origins, s, progress=True):
-            bad[a:b] = hits["back"].reshape(b - a, r).mean(axis=1) > BACKFACE_LIMIT
-            for i in np.flatnonzero(bad[a:b]):
-                hits["hit"][i * r:(i + 1) * r] = False
-                hits["back"][i * r:(i + 1) * r] = False
-            merge.add(slice(a * r, b * r), *(hits[k] for k in ("hit", "back", "position", "normal", "albedo")))
-            self.moments[a:b] = weights.moments(_hit_distances(hits, origins[a:b], r, cap), s[a:b])
-            del hits
-        self.relocated = 0
-        for off in RELOCATIONS:  # probes inside geometry: try a free spot nearby
-            if not bad.any():
+        def trace(act):  # the probes ``act`` (sorted indices) traced, relocated where needed, merged
+            # first judged on every RELOCATION_STRIDE-th ray, as a relocation spot is: a probe inside
+            # geometry (most of a room's probes next to its surfaces, or under its floor) is not traced
+            # in full where it is, only where it moves to
+            pre = self._backface_fraction(origins[act], s[act]) > BACKFACE_LIMIT
+            bad[act[pre]] = True
+            act = act[~pre]
+            for a, b, hits in self._trace_chunks(origins[act], s[act], progress=True):
+                probes = act[a:b]
+                first_bad = hits["back"].reshape(b - a, r).mean(axis=1) > BACKFACE_LIMIT
+                bad[probes] = first_bad
+                for i in np.flatnonzero(first_bad):
+                    hits["hit"][i * r:(i + 1) * r] = False
+                    hits["back"][i * r:(i + 1) * r] = False
+                rows = slice(probes[0] * r, (probes[-1] + 1) * r) if probes[-1] - probes[0] == b - a - 1 else \
+                    (probes[:, None] * r + np.arange(r)).reshape(-1)
+                merge.add(rows, *(hits[k] for k in ("hit", "back", "position", "normal", "albedo")))
+                self.moments[probes] = weights.moments(_hit_distances(hits, origins[probes], r, cap), s[probes])
+                del hits
+            for off in RELOCATIONS:  # probes inside geometry: try a free spot nearby
+                if not bad.any():
+                    break
+                idx = np.nonzero(bad)[0]
+                cand = origins[idx] + np.asarray(off) * cell
+                # judged on every RELOCATION_STRIDE-th ray of the set (a spread subset of the spherical
+                # Fibonacci points), then traced in full only where the spot is free
+                ok = self._backface_fraction(cand, s[idx]) <= BACKFACE_LIMIT
+                if not ok.any():
+                    continue
+                idx, cand = idx[ok], cand[ok]
+                for a, b, hits in self._trace_chunks(cand, s[idx]):
+                    keep = hits["back"].reshape(b - a, r).mean(axis=1) <= BACKFACE_LIMIT
+                    take = idx[a:b][keep]
+                    origins[take] = cand[a:b][keep]
+                    merge_probes(take, hits, np.repeat(keep, r))
+                    bad[take] = False
+                    self.relocated += len(take)
+                    del hits
+            if bad.any():  # no free spot found: kept, their back-face hits count as misses, traced again
+                idx = np.flatnonzero(bad)  # where they are (cheaper than keeping every bad probe's first rays)
+                self.inside += len(idx)
+                for a, b, hits in self._trace_chunks(origins[idx], s[idx]):
+                    merge_probes(idx[a:b], hits, np.ones((b - a) * r, bool))
+                    del hits
+                bad[idx] = False
+
+        self.inside = 0
+        todo = np.flatnonzero(self.active)
+        for _ in range(_REACH_ROUNDS):
+            if len(todo):
+                trace(todo)
+            if self.grid is None:
                 break
-            idx = np.nonzero(bad)[0]
-            cand = origins[idx] + np.asarray(off) * cell
-            # judged on every RELOCATION_STRIDE-th ray of the set (a spread subset of the spherical
-            # Fibonacci points), then traced in full only where the spot is free
-            ok = self._backface_fraction(cand, s[idx]) <= BACKFACE_LIMIT
-            if not ok.any():
-                continue
-            idx, cand = idx[ok], cand[ok]
-            for a, b, hits in self._trace_chunks(cand, s[idx]):
-                keep = hits["back"].reshape(b - a, r).mean(axis=1) <= BACKFACE_LIMIT
-                take = idx[a:b][keep]
-                origins[take] = cand[a:b][keep]
-                merge_probes(take, hits, np.repeat(keep, r))
-                bad[take] = False
-                self.relocated += len(take)
-                del hits
-        self.inside = int(bad.sum())  # no free spot found: kept, their back-face hits count as misses
-        if self.inside:  # traced again where they are (cheaper than keeping every bad probe's first rays)
-            idx = np.flatnonzero(bad)
-            for a, b, hits in self._trace_chunks(origins[idx], s[idx]):
-                merge_probes(idx[a:b], hits, np.ones((b - a) * r, bool))
-                del hits
+            sp, sn = merge.means()
+            origin, resolution, offset = self.grid
+            read = np.zeros(n_probes, bool)
+            read[lookup_probes(sp + offset * sn, origin, cell, resolution).reshape(-1)] = True
+            todo = np.flatnonzero(read & ~self.active)
+            if not len(todo):
+                break
+            self.active[todo] = True
+            merge.surfel.reshape(n_probes, r)[todo] = -1
         self.offsets = (origins - np.asarray(positions, np.float64)).astype(np.float32)
         surfel, sp, sn, sa, sv = merge.finish()
         self._set_surfels(surfel.reshape(-1, r), sp, sn, sa, sv)
@@ -699,14 +829,14 @@ class ProbeGather:
     # -- the disk cache
 
     _CACHED = ("surfel", "surfel_positions", "surfel_normals", "surfel_albedo", "surfel_shadow_origins", "moments",
-               "offsets")
+               "offsets", "active")
 
     def _key(self, scene_key: str, positions, cell, surfel_size) -> str:
         h = hashlib.blake2b(digest_size=20)
         h.update(f"probegather-v{FORMAT_VERSION}|{scene_key}|{self.rays}|{self.transmissions}|{surfel_size!r}|"
                  f"{DIRECTION_SETS}|{BACKFACE_LIMIT}|{RELOCATIONS}|{RELOCATION_STRIDE}".encode())
         for a in (np.asarray(positions, np.float64), np.asarray(cell, np.float64),
-                  np.zeros(0) if self.glossy_energy is None else self.glossy_energy):
+                  np.zeros(0) if self.glossy_energy is None else self.glossy_energy, self.active):
             h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()
 
@@ -718,7 +848,7 @@ class ProbeGather:
             np.savez(tmp, surfel=self._surfel.numpy(), surfel_positions=self.surfel_positions,
                      surfel_normals=self.surfel_normals, surfel_albedo=self.surfel_albedo,
                      surfel_shadow_origins=self.surfel_shadow_origins, moments=self.moments,
-                     offsets=self.offsets,
+                     offsets=self.offsets, active=self.active,
                      meta=np.array([FORMAT_VERSION, self.relocated, self.inside], np.int64))
             os.replace(tmp, path)
         except OSError:
@@ -737,11 +867,12 @@ class ProbeGather:
         m = len(a["surfel_positions"])
         if (len(meta) != 3 or meta[0] != FORMAT_VERSION or a["surfel"].shape != (n_probes, self.rays)
                 or a["surfel"].max(initial=-1) >= m or a["moments"].shape != (n_probes, VIS_OCT * VIS_OCT, 2)
-                or a["offsets"].shape != (n_probes, 3)
+                or a["offsets"].shape != (n_probes, 3) or a["active"].shape != (n_probes,)
+                or np.any(self.active & ~a["active"].astype(bool))
                 or a["surfel_shadow_origins"].shape != (m, 3)):
             return False
         self.relocated, self.inside = int(meta[1]), int(meta[2])
-        self.moments, self.offsets = a["moments"], a["offsets"]
+        self.moments, self.offsets, self.active = a["moments"], a["offsets"], a["active"].astype(bool)
         self._set_surfels(a["surfel"], a["surfel_positions"], a["surfel_normals"], a["surfel_albedo"],
                           a["surfel_shadow_origins"])
         return True
@@ -796,10 +927,14 @@ class ProbeGather:
         """(N,) fraction of back-face hits over every ``RELOCATION_STRIDE``-th ray of each probe's set."""
         sub = self.dirs32[:, ::RELOCATION_STRIDE]
         r = sub.shape[1]
-        o = np.repeat(origins.astype(np.float32), r, axis=0)
-        d = sub[sets].reshape(-1, 3)
-        g = self.tracer.trace(o, d, 0.0, 0.0, backfaces=True, transmissions=self.transmissions)
-        return g["backface"].reshape(len(origins), r).mean(axis=1)
+        out = np.empty(len(origins))
+        per = max(1, TRACE_CHUNK_RAYS // r)
+        for a in range(0, len(origins), per):  # chunks of about TRACE_CHUNK_RAYS (the tracer's G-buffer)
+            o = np.repeat(origins[a:a + per].astype(np.float32), r, axis=0)
+            d = sub[sets[a:a + per]].reshape(-1, 3)
+            g = self.tracer.trace(o, d, 0.0, 0.0, backfaces=True, transmissions=self.transmissions)
+            out[a:a + per] = g["backface"].reshape(-1, r).mean(axis=1)
+        return out
 
     def _set_surfels(self, surfel, sp, sn, sa, sv) -> None:
         """The surfel each ray hit ((P, R) int32: ≥ 0, −1 a miss, −2 a back face) and the surfels'
@@ -875,5 +1010,5 @@ class ProbeGather:
         """The probes of y-layers ``first_layer .. first_layer + layers - 1`` gathered into ``coeffs``."""
         x, y, z = resolution
         launch(gather_probes, layers * x * z,
-               [int(x), int(y), int(first_layer), self.rays, self._surfel, self._radiance, self._miss, self._basis,
-                scale, coeffs], device=self.device)
+               [int(x), int(y), int(first_layer), self.rays, self._active, self._surfel, self._radiance, self._miss,
+                self._basis, scale, coeffs], device=self.device)

@@ -78,6 +78,7 @@ from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads, occluded_np, quads_arrays  # noqa: F401 (re-exported)
 from serenity.kernels.probegather import (
     OPEN_FADE_CELLS,
+    REACH_MARGIN_CELLS,
     VIS_BIAS_CELLS,
     VIS_CRUSH,
     VIS_OCT,
@@ -85,6 +86,7 @@ from serenity.kernels.probegather import (
     ProbeGather,
     direction_sets,
     oct_encode_np,
+    reachable_probes,
     scene_key,
     visibility_atlas,
     volume_irradiance,
@@ -577,9 +579,15 @@ class SkyVolume:
             size = cfg.gather_surfel_size or 0.4 * float(np.min(self.cell_size))
             glossy = ([m.specular if m.reflectivity == 0 and m.transparency == 0 else 0.0
                        for m in self.scene.materials] if cfg.glossy else None)
+            # only the probes a lookup on the scene's surfaces can read are traced and gathered
+            pos, _, _, faces, _ = self.scene.merged()
+            reach = self.normal_offset_m + REACH_MARGIN_CELLS * float(np.min(self.cell_size))
+            active = reachable_probes(pos, faces, self.grid_origin, self.cell_size, self.resolution, reach)
             self._gather = g = ProbeGather(self.tracer, self.probe_positions(), self.cell_size,
                                            cfg.gather_rays, size, self.device, glossy_energy=glossy,
-                                           transmissions=cfg.gather_transmissions, cache_key=scene_key(self.scene))
+                                           transmissions=cfg.gather_transmissions, cache_key=scene_key(self.scene),
+                                           active=active, grid=(self.grid_origin, self.resolution,
+                                                                self.normal_offset_m))
             if cfg.gather_visibility:
                 atlas = visibility_atlas(g.moments, self.resolution)
                 self.visibility = (atlas, g.offsets)

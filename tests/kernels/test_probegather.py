@@ -313,3 +313,64 @@ def test_passes_stop_once_converged(device, tmp_path, monkeypatch):
     rel = np.abs(conv - full).sum() / np.abs(full).sum()
     print(f"{n_conv} passes, relative L1 from 64 passes {rel:.4f}")
     assert rel <= 3 * 0.005
+
+
+def test_reachable_probes_hold_every_lookup_and_skip_the_empty_air():
+    """Every probe a lookup at a point of the triangles (moved by up to the offset along any normal)
+    reads is reachable; probes far from every triangle are not; a big slanted triangle marks only the
+    probes near its plane, not its whole box."""
+    from serenity.kernels.probegather import lookup_probes, reachable_probes
+
+    rng = np.random.default_rng(3)
+    # a floor (two big triangles below the grid: the lookups clamp onto the bottom layer), a small box
+    # in the air, a big slanted quad inside the grid
+    v = np.array([[-9, -0.5, -9], [9, -0.5, -9], [9, -0.5, 9], [-9, -0.5, 9],
+                  [1.0, 4.0, 1.0], [1.3, 4.0, 1.0], [1.3, 4.2, 1.3],
+                  [-3.0, 1.0, -3.0], [3.0, 1.0, -3.0], [3.0, 7.0, 3.0], [-3.0, 7.0, 3.0]], np.float32)
+    f = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [7, 8, 9], [7, 9, 10]])
+    origin, cell, res, reach = np.array([-4.0, 0.0, -4.0]), np.full(3, 0.5), (17, 17, 17), 0.2
+    mask = reachable_probes(v, f, origin, cell, res, reach)
+    tri = v[f].astype(np.float64)
+    t = rng.integers(0, len(f), 200_000)
+    a, b = rng.random((2, len(t)))
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    p = tri[t, 0] + a[:, None] * (tri[t, 1] - tri[t, 0]) + b[:, None] * (tri[t, 2] - tri[t, 0])
+    n = rng.normal(size=p.shape)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    read = np.zeros(mask.size, bool)
+    read[lookup_probes(p + reach * rng.random((len(t), 1)) * n, origin, cell, res).reshape(-1)] = True
+    assert not np.any(read & ~mask)
+    assert read.sum() >= 0.9 * mask.sum()  # and not much more than that
+    grid = np.stack(np.meshgrid(*(np.arange(k) for k in res[::-1]), indexing="ij")[::-1], axis=-1).reshape(-1, 3)
+    q = origin + grid * cell
+    plane_n = np.array([0.0, 1.0, -1.0]) / math.sqrt(2.0)
+    box = np.linalg.norm(q - [1.15, 4.1, 1.15], axis=1)
+    far = (np.abs((q - tri[3, 0]) @ plane_n) > 2.0) & (q[:, 1] > 1.5) & (box > 2.0)
+    assert far.sum() > 500 and not np.any(mask[far])
+
+
+def test_probes_no_lookup_reads_are_not_traced(device, monkeypatch):
+    """Over a plane, a grid of 6 layers: the lookups on the plane read the lowest two, so only they are
+    traced and gathered (the others hold zeros), and the plane's light is what tracing every probe gives."""
+    import serenity.kernels.skyvolume as SV
+
+    def volume():
+        cfg = SkyConfig(method="gather", resolution=(3, 6, 3), gather_rays=128, ground_albedo=0.0)
+        vol = SkyVolume(_plane(), cfg, device=device)
+        vol.grid_origin, vol.cell_size = np.array([-1.0, 0.5, -1.0]), np.full(3, 1.0)
+        vol.rebuild()
+        return vol
+
+    vol = volume()
+    g = vol._gather
+    assert g.active.reshape(3, 6, 3)[:, :2].all() and not g.active.reshape(3, 6, 3)[:, 2:].any()
+    c = vol.coefficients()
+    assert np.all(c[:, 2:] == 0) and np.all(np.abs(c[:, :2]).max(axis=(2, 3)) > 0)
+    assert np.all(g._surfel.numpy()[~g.active] == -2)
+    monkeypatch.setattr(SV, "reachable_probes", lambda *a: np.ones(3 * 6 * 3, bool))
+    every = volume()
+    assert every._gather.active.all()
+    pts = np.array([[x, 0.0, z] for x in (-0.7, 0.2, 1.1) for z in (-0.4, 0.6)])
+    up = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    assert np.allclose(vol.irradiance(pts, up), every.irradiance(pts, up), rtol=2e-3)
