@@ -1,4 +1,4 @@
-"""The frame pipeline (serenity/frame.py): its stage names, determinism, memory over frames, and
+"""The frame pipeline (serenity/frame/): its stage names, determinism, memory over frames, and
 the two schedules (ray tracing in a process beside the GL work, or inline) agreeing."""
 
 from __future__ import annotations
