@@ -4,8 +4,8 @@ printed at the end (``--markdown``) from the same JSON.
 
     python benchmarks/bench_stability.py [--json FILE] [--png FILE] [--quick] [--only NAME ...]
 
-Cases (serenity/eval/stability.py has each one's set-up, metric and exact answer): LPV thin wall,
-self-illumination, near field; sky volume SH truncation under a low sun, quads on terrain; shadow
+Cases (the package serenity/eval/stability/ has each one's set-up, metric and exact answer): LPV
+thin wall, self-illumination, near field; sky volume SH truncation under a low sun, quads on terrain; shadow
 acne at 2°, peter-panning, cascade seams, PCSS penumbra at 10°; glass slab refraction, off-screen
 geometry in a mirror; sunset pops; frame to frame with the sun moving 0.05°/frame and the camera on
 ``serenity bench``'s path (60 frames each). ``--quick`` shrinks sizes and frame counts (a smoke run;
@@ -13,14 +13,13 @@ the committed results are from the full run). Milliseconds are wall clock on the
 machine that ran it (the committed ones: a 2-core machine shared with other jobs — compare within a
 row, not across machines).
 
-``--temporal`` instead measures every preset frame to frame (``serenity/eval/stability.py``,
-"temporal stability"): the courtyard at 160×90, the camera still and the sun's elevation sinking
-0.05° per frame, then the sun still and the camera moved 5 cm per frame, 40 steps each; per step the
-mean-luminance step and the 99th-percentile pixel step of the tone-mapped luminance, and which part
-of the light (direct sun, the rest) and which amortisation switch each pixel step comes from. It
-writes ``results/temporal_stability.json`` and, with ``results/temporal_stability_baseline.json``
-(the same measurement of the renderer without its temporal mitigations, ``--baseline``) beside it,
-the chart
+``--temporal`` instead measures every preset frame to frame (``serenity/eval/stability/temporal.py``):
+the courtyard at 160×90, the camera still and the sun's elevation sinking 0.05° per frame, then the
+sun still and the camera moved 5 cm per frame, 40 steps each; per step the mean-luminance step and
+the 99th-percentile pixel step of the tone-mapped luminance, and which part of the light (direct
+sun, the rest) and which amortisation switch each pixel step comes from. It writes
+``results/temporal_stability.json`` and, with ``results/temporal_stability_baseline.json`` (the same
+measurement of the renderer without its temporal mitigations, ``--baseline``) beside it, the chart
 ``results/temporal_stability.png``:
 
     python benchmarks/bench_stability.py --temporal [--frames N] [--no-breakdown]
@@ -218,8 +217,10 @@ def main(argv=None) -> int:
         if args.baseline:  # the renderer measured is another tree's: its commit, not this checkout's
             data["commit"] = args.baseline
             frames = "" if args.frames == 40 else f" --frames {args.frames}"
-            data["command"] = (f"git archive {args.baseline} serenity | tar -x -C DIR && cp serenity/eval/stability.py "
-                               f"DIR/serenity/eval/ && PYTHONPATH=DIR python benchmarks/bench_stability.py --temporal "
+            data["command"] = (f"git archive {args.baseline} serenity | tar -x -C DIR && "
+                               "rm -f DIR/serenity/eval/stability.py && "
+                               "cp -r serenity/eval/stability DIR/serenity/eval/ && "
+                               "PYTHONPATH=DIR python benchmarks/bench_stability.py --temporal "
                                f"--baseline {args.baseline}{frames}")
         write_results(BASELINE_JSON if args.baseline else TEMPORAL_JSON, data)
         if os.path.exists(TEMPORAL_JSON):
