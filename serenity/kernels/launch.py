@@ -62,14 +62,22 @@ MIN_ITEMS_PER_CHUNK = 4096
 MIN_CHEAP_ITEMS_PER_THREAD = 16384
 
 
+_pool_lock = threading.Lock()
+_retired: list[ThreadPoolExecutor] = []
+
+
 def _executor(n: int) -> ThreadPoolExecutor:
+    """The launch threads' pool, with at least ``n`` workers. The main thread and the volume worker
+    both launch: the pool is swapped under a lock, and a smaller one it replaces is kept, not shut
+    down, since the other thread may still be submitting to it (its idle workers cost nothing)."""
     global _pool, _pool_size
-    if _pool is None or _pool_size < n:
-        if _pool is not None:
-            _pool.shutdown(wait=True)
-        _pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="serenity-launch")
-        _pool_size = n
-    return _pool
+    with _pool_lock:
+        if _pool is None or _pool_size < n:
+            if _pool is not None:
+                _retired.append(_pool)
+            _pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="serenity-launch")
+            _pool_size = n
+        return _pool
 
 
 def chunk_ranges(dim: int, threads: int, min_items: int = MIN_ITEMS_PER_THREAD) -> list[tuple[int, int]]:

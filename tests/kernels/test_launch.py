@@ -1,7 +1,10 @@
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import pytest
 
 from serenity.device import init_warp
+from serenity.kernels import launch as launch_module
 from serenity.kernels.launch import ScatterGrid, Staging, chunk_ranges, host_array, launch, slot_base
 
 wp = init_warp()
@@ -223,3 +226,21 @@ def test_run_chunks_runs_each_chunk_once_and_raises_a_chunks_error():
 
     with pytest.raises(ValueError, match="chunk 5"):
         _run_chunks(fail, chunks, 2)
+
+
+def test_the_launch_pool_grows_safely_while_another_thread_uses_it():
+    """Two threads asking for ever larger pools while submitting to what they got: no submit meets a
+    pool that was shut down under it (the volume worker and the main thread both launch)."""
+    errors = []
+
+    def user(offset):
+        try:
+            for n in range(1, 40):
+                pool = launch_module._executor(n + offset)
+                pool.submit(lambda: None).result()
+        except RuntimeError as e:  # "cannot schedule new futures after shutdown"
+            errors.append(e)
+
+    with ThreadPoolExecutor(2) as ex:
+        list(ex.map(user, (0, 1)))
+    assert not errors
