@@ -59,6 +59,7 @@ from serenity.device import init_warp
 from serenity.errors import SerenityError
 from serenity.kernels.kdtree_build_kernels import clip_refs, emit_leaves, node_splits, scatter_refs, triangle_boxes
 from serenity.kernels.launch import launch
+from serenity.scene.cache import cache_dir  # noqa: F401 (where trees are cached; re-exported)
 
 FORMAT_VERSION = 2  # bump when the build or the cached layout changes
 CACHE_MIN_TRIANGLES = 10_000  # cache=None caches builds of at least this many triangles
@@ -278,12 +279,6 @@ def _depth_first_layout(heads: list[np.ndarray], splits: list[np.ndarray]) -> tu
 # ----------------------------------------------------------------------------------------------
 # host: validation and the disk cache
 # ----------------------------------------------------------------------------------------------
-
-
-def cache_dir() -> Path:
-    """Where built trees are cached: ``$SERENITY_CACHE`` or ``~/.cache/serenity``."""
-    env = os.environ.get("SERENITY_CACHE")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "serenity"
 
 
 def geometry_key(vertices: np.ndarray, faces: np.ndarray, config: KdBuildConfig) -> str:

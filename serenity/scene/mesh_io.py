@@ -69,11 +69,14 @@ sun, sky and occlusion quads, so GLB + TOML load back identically.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
+import pickle
 import struct
 import warnings
+from pathlib import Path
 from urllib.parse import unquote
 
 import numpy as np
@@ -81,6 +84,9 @@ from PIL import Image
 
 from serenity.colour import LUMA_REC709, srgb_to_linear
 from serenity.errors import SceneError
+from serenity.scene import model as _model_module
+from serenity.scene import texture as _texture_module
+from serenity.scene.cache import cache_dir
 from serenity.scene.model import IDENTITY_UV, Camera, Material, Mesh, Scene, Sky, Texture, vertex_normals
 from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, sun_from_time
 from serenity.scene.texture import texture_from_image, texture_to_srgb8
@@ -190,8 +196,20 @@ def _check_gltf_images(path: str, js: dict) -> None:
                 raise SceneError(f"{path}: texture image {uri!r} not found ({f})")
 
 
+#: a glTF whose files (the .gltf or .glb, its buffers and images) hold at least this many bytes is
+#: cached on disk once read (``_mesh_cache_path``)
+MESH_CACHE_MIN_BYTES = 1 << 20
+#: bump when what the cache holds changes in a way its key does not see
+MESH_CACHE_VERSION = 1
+
+
 def load_mesh_file(path) -> tuple[list[Mesh], list[Material]]:
-    """Meshes and materials of a .glb/.gltf/.obj/.ply file (see the module docstring)."""
+    """Meshes and materials of a .glb/.gltf/.obj/.ply file (see the module docstring).
+
+    A big glTF (``MESH_CACHE_MIN_BYTES``) is read back from the disk cache (``cache_dir()``, a pickle of
+    what this returns and the warnings it gave, keyed by the bytes of the file, its buffers and
+    images and of the loader's code) when it was read before: neither trimesh (and scipy) is
+    imported nor a texture decoded again (most of the breakfast room's second of loading)."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
     if ext not in MESH_EXTENSIONS:
@@ -201,6 +219,84 @@ def load_mesh_file(path) -> tuple[list[Mesh], list[Material]]:
     _check_readable_gltf(path)
     js = _gltf_json(path) if ext in (".glb", ".gltf") else {}
     _check_gltf_images(path, js)
+    cached = _mesh_cache_path(path, js) if ext in (".glb", ".gltf") else None
+    hit = _read_mesh_cache(cached)
+    if hit is None:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            meshes, materials = _read_mesh_file(path, ext, js)
+        notes = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+        for w in caught:
+            if not issubclass(w.category, UserWarning):
+                warnings.warn(w.message, w.category, stacklevel=2)
+        _write_mesh_cache(cached, (meshes, materials, notes))
+    else:
+        meshes, materials, notes = hit
+    for text in notes:
+        warnings.warn(text, UserWarning, stacklevel=2)
+    return meshes, materials
+
+
+def _mesh_cache_path(path: str, js: dict) -> Path | None:
+    """Where the read meshes of the glTF at ``path`` (its JSON ``js``) are cached: a digest of its bytes,
+    of every file its buffers and images name, and of the loader's own source; None below
+    ``MESH_CACHE_MIN_BYTES`` or where a file cannot be read (then nothing is cached)."""
+    h = hashlib.blake2b(digest_size=20)
+    h.update(f"mesh-v{MESH_CACHE_VERSION}".encode())
+    base = os.path.dirname(path)
+    files = [path] + [os.path.join(base, unquote(item["uri"])) for key in ("buffers", "images")
+                      for item in js.get(key, ()) if isinstance(item, dict) and isinstance(item.get("uri"), str)
+                      and item["uri"] and not item["uri"].startswith("data:")]
+    code = [m.__file__ for m in (_model_module, _texture_module)] + [__file__]
+    total = 0
+    try:
+        for f in code + files:
+            if f in files[1:] and not os.path.isfile(f):  # named but absent (an unused image: a .dds
+                h.update(f"absent {f}".encode())  # beside the .jpg the texture reads): so it stays
+                continue
+            with open(f, "rb") as fh:
+                data = fh.read()
+            total += len(data) if f not in code else 0
+            h.update(len(data).to_bytes(8, "little"))
+            h.update(data)
+    except (OSError, TypeError):
+        return None
+    if total < MESH_CACHE_MIN_BYTES:
+        return None
+    return cache_dir() / f"mesh-{h.hexdigest()}.pickle"
+
+
+def _read_mesh_cache(path: Path | None):
+    """(meshes, materials, warnings) cached at ``path``; None when absent or unreadable."""
+    if path is None or not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as f:
+            hit = pickle.load(f)
+    except Exception:  # a truncated or foreign file: read the mesh file again
+        return None
+    if not (isinstance(hit, tuple) and len(hit) == 3 and all(isinstance(x, list) for x in hit)
+            and all(isinstance(m, Mesh) for m in hit[0]) and all(isinstance(m, Material) for m in hit[1])):
+        return None
+    return hit
+
+
+def _write_mesh_cache(path: Path | None, value) -> None:
+    """Cache ``value`` at ``path`` (written aside, then moved into place); an unwritable cache is ignored."""
+    if path is None:
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as f:
+            pickle.dump(value, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
+def _read_mesh_file(path: str, ext: str, js: dict) -> tuple[list[Mesh], list[Material]]:
+    """:func:`load_mesh_file` through trimesh (checked: the file exists and is of a known type)."""
     import trimesh  # here: trimesh (and scipy) take most of a second to import, a tracer process needs neither
 
     try:

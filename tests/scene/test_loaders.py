@@ -1,6 +1,7 @@
 """Loading scenes from files: round trips, the TOML format, and clear errors for bad input."""
 
 import importlib.util
+import json
 import os
 import warnings
 
@@ -156,3 +157,47 @@ def test_trimesh_written_file_keeps_triangles_normals_uvs_and_material(ext, tmp_
                                atol=2e-3)
     if ext == ".glb":  # trimesh writes no metallicFactor (glTF's default 1): a white metal, roughness 0.9
         np.testing.assert_allclose(mat.albedo + mat.specular, 1.0, atol=1e-6)
+
+
+def test_big_gltf_is_read_back_from_the_disk_cache(tmp_path, monkeypatch):
+    """A glTF over the cache's size is read once; the next load reads the disk cache (trimesh not
+    called), gives the same meshes and materials and repeats the first load's warnings; a changed
+    buffer, image or a corrupt cache file is read from the glTF again."""
+    import pickle
+
+    import serenity.scene.mesh_io as mio
+    from tests.data.materials_gltf import write_materials_gltf
+
+    monkeypatch.setenv("SERENITY_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(mio, "MESH_CACHE_MIN_BYTES", 0)
+    path = write_materials_gltf(tmp_path / "model")
+    gltf = json.loads(path.read_text())
+    for m in gltf["materials"]:  # a texture read through TEXCOORD_1: a warning each load must give
+        m.get("pbrMetallicRoughness", {}).get("baseColorTexture", {})["texCoord"] = 1
+    path.write_text(json.dumps(gltf))
+    reads = []
+    monkeypatch.setattr(mio, "_read_mesh_file", lambda *a, _r=mio._read_mesh_file: (reads.append(1), _r(*a))[1])
+    with warnings.catch_warnings(record=True) as first_warnings:
+        warnings.simplefilter("always")
+        first = mio.load_mesh_file(path)
+    with warnings.catch_warnings(record=True) as again_warnings:
+        warnings.simplefilter("always")
+        again = mio.load_mesh_file(path)
+    assert len(reads) == 1 and len(list((tmp_path / "cache").glob("mesh-*.pickle"))) == 1
+    assert pickle.dumps(first) == pickle.dumps(again)
+    assert [str(w.message) for w in again_warnings] == [str(w.message) for w in first_warnings]
+    assert any("TEXCOORD_1" in str(w.message) for w in first_warnings)
+    buffer = next(path.parent.glob("*.bin"))
+    data = bytearray(buffer.read_bytes())
+    data[0] ^= 1  # another vertex coordinate
+    buffer.write_bytes(bytes(data))
+    changed = mio.load_mesh_file(path)
+    assert len(reads) == 2 and not np.array_equal(changed[0][0].positions, first[0][0].positions)
+    image = next(path.parent.glob("*.png"))
+    image.write_bytes(image.read_bytes() + b"\0")  # a changed image file: another key
+    mio.load_mesh_file(path)
+    assert len(reads) == 3
+    for f in (tmp_path / "cache").glob("mesh-*.pickle"):
+        f.write_bytes(b"not a pickle")
+    assert pickle.dumps(mio.load_mesh_file(path)[1]) == pickle.dumps(mio.load_mesh_file(path)[1])
+    assert len(reads) == 4
