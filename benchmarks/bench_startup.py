@@ -12,9 +12,10 @@ included) and the peak resident set of the whole tree of processes (``wait4``: t
 renderer and its tracer process; what ``/usr/bin/time -v`` reports) and the last frame's
 milliseconds. One more cold and warm pair runs the same command in an instrumented process (this
 script's ``--child``): the phases (imports, scene load, the renderer's set-up, the kd-tree, the
-probes' rays, the passes, the frames, the outputs), each with its seconds and the resident memory
-after it, and each process's own peak (the tracer process's read from its ``VmHWM`` before it
-stops).
+probes' rays, the passes, the frames, the outputs), each with its seconds, its CPU seconds (the
+renderer process's threads, not its tracer process's: on a shared machine a steadier measure of the
+work than the seconds) and the resident memory after it, and each process's own peak (the tracer
+process's read from its ``VmHWM`` before it stops).
 """
 
 from __future__ import annotations
@@ -97,11 +98,11 @@ def child(path: str, argv: list[str]) -> None:
         threading.Thread(target=poll, daemon=True).start()
     phases = []
 
-    def mark(name: str, t0: float, depth: int) -> None:
+    def mark(name: str, t0: float, depth: int, c0: float) -> None:
         phases.append({"phase": name, "start_s": t0 - entered, "seconds": time.perf_counter() - t0,
-                       "rss_mb": rss["now"], "depth": depth})
+                       "cpu_s": time.process_time() - c0, "rss_mb": rss["now"], "depth": depth})
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     import serenity.cli
     import serenity.commands.render  # noqa: F401 - what `serenity render` imports, timed here
     import serenity.frame
@@ -113,7 +114,7 @@ def child(path: str, argv: list[str]) -> None:
     import serenity.kernels.tracer_process as tp
     import serenity.scene
 
-    mark("imports", t0, 0)
+    mark("imports", t0, 0, c0)
     depth = [0]
 
     def timed(owner, attr: str, name: str) -> None:
@@ -121,13 +122,13 @@ def child(path: str, argv: list[str]) -> None:
 
         @functools.wraps(fn)
         def wrapper(*a, **k):
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             depth[0] += 1
             try:
                 return fn(*a, **k)
             finally:
                 depth[0] -= 1
-                mark(name, t, depth[0])
+                mark(name, t, depth[0], c)
 
         setattr(owner, attr, wrapper)
 
@@ -159,9 +160,9 @@ def child(path: str, argv: list[str]) -> None:
         close(self)
 
     tp.TracerProcess.close = close_and_note
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     status = serenity.cli.main(argv)
-    mark("serenity render (all)", t0, 0)
+    mark("serenity render (all)", t0, 0, c0)
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     with open(path, "w") as f:
         json.dump({"entered": entered, "status": status, "phases": phases, "renderer_peak_rss_mb": own,
@@ -169,11 +170,12 @@ def child(path: str, argv: list[str]) -> None:
 
 
 def summarise(phases: list[dict]) -> dict[str, dict]:
-    """Seconds per phase name (summed over calls) and the calls."""
+    """Seconds and CPU seconds (the process's threads) per phase name, summed over calls, and the calls."""
     out: dict[str, dict] = {}
     for p in phases:
-        s = out.setdefault(p["phase"], {"seconds": 0.0, "calls": 0, "depth": p["depth"]})
+        s = out.setdefault(p["phase"], {"seconds": 0.0, "cpu_s": 0.0, "calls": 0, "depth": p["depth"]})
         s["seconds"] += p["seconds"]
+        s["cpu_s"] += p.get("cpu_s", 0.0)
         s["calls"] += 1
     return out
 
@@ -215,7 +217,7 @@ def main() -> None:
         print(f"\n{kind} (instrumented): {d['seconds']:.1f} s; Python start {d['python_start_s']:.2f} s; "
               f"renderer peak {d['renderer_peak_rss_mb']:.0f} MB, tracer process peak {d['tracer_peak_rss_mb']:.0f} MB")
         for name, s in d["by_phase"].items():
-            print(f"  {'  ' * s['depth']}{name:40s} {s['seconds']:6.2f} s  x{s['calls']}")
+            print(f"  {'  ' * s['depth']}{name:40s} {s['seconds']:6.2f} s  cpu {s['cpu_s']:6.2f} s  x{s['calls']}")
     write_results(args.json, {"scene": args.scene, "size": args.size, "quality": "traced-probes", "runs": args.runs,
                               "plain": plain, "summary": summary, "phases": phases,
                               "command": " ".join([Path(sys.executable).name, *sys.argv])})
