@@ -1,4 +1,4 @@
-"""Every preset frame to frame (``serenity/eval/stability.py``, "temporal stability"): the courtyard at
+"""Every preset frame to frame (``serenity/eval/stability/temporal.py``): the courtyard at
 160×90 with the camera still and the sun sinking 0.05° a frame, and with the sun still and the camera
 moved 5 cm a frame (measured away from disocclusions). Goals: the worst step of the mean display
 luminance ≤ 1 % and the worst 99th-percentile pixel step ≤ 3 % of a frame.
