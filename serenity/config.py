@@ -14,6 +14,7 @@ the GL passes both read their settings from here.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -784,3 +785,16 @@ def preset_name(name: str, where: str | None = None) -> str:
         prefix = f"{where}: " if where else ""
         raise ConfigError(f"{prefix}quality preset must be one of {', '.join(QUALITY_PRESETS)}, got {name!r}")
     return name
+
+
+def changed_settings(old, new, prefix: str = "") -> list[str]:
+    """The settings in which config ``new`` differs from ``old`` (two configs of one dataclass, e.g.
+    two ``RenderConfig``): dotted paths into the sub-configs, e.g. ``["exposure", "lpv.glossy"]``."""
+    out = []
+    for f in dataclasses.fields(old):
+        a, b = getattr(old, f.name), getattr(new, f.name)
+        if dataclasses.is_dataclass(a) and type(a) is type(b):
+            out += changed_settings(a, b, f"{prefix}{f.name}.")
+        elif a != b:
+            out.append(prefix + f.name)
+    return out

@@ -1,12 +1,13 @@
 """RenderConfig and its sub-configs reject what they cannot render with a SerenityError naming the field;
 importing the config module loads neither Warp nor moderngl."""
 
+import dataclasses
 import subprocess
 import sys
 
 import pytest
 
-from serenity.config import LPVConfig, RenderConfig, ShadowConfig, SkyConfig, SSAOConfig
+from serenity.config import LPVConfig, RenderConfig, ShadowConfig, SkyConfig, SSAOConfig, changed_settings
 from serenity.errors import SerenityError
 
 
@@ -156,3 +157,11 @@ def test_sweep_files_and_viewer_scripts_take_former_preset_names(tmp_path):
     script.write_text('[[step]]\nframe = 1\nset = { quality = "medium" }\n')
     with pytest.warns(PresetRenamedWarning, match=r"s\.toml.*quality preset 'medium' is now called 'lpv-fast'"):
         assert load_script(str(script)).steps[0].value == {"quality": "lpv-fast"}
+
+
+def test_changed_settings_names_the_fields_that_differ():
+    base = RenderConfig.preset("lpv-fast")
+    new = dataclasses.replace(base, exposure=base.exposure * 2,
+                              shadow=dataclasses.replace(base.shadow, filter="pcf", size=base.shadow.size + 1))
+    assert sorted(changed_settings(base, new)) == ["exposure", "shadow.filter", "shadow.size"]
+    assert changed_settings(base, base) == [] and changed_settings(ShadowConfig(), ShadowConfig()) == []

@@ -4,6 +4,7 @@ the two schedules (ray tracing in a process beside the GL work, or inline) agree
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 import threading
 
@@ -12,7 +13,7 @@ import pytest
 
 from serenity.bench import camera_path, rss_mb, sun_path
 from serenity.config import RenderConfig
-from serenity.errors import ConfigError
+from serenity.errors import ConfigError, SerenityError
 from serenity.frame import LPV_UPDATE_STAGES, SKY_UPDATE_STAGES, STAGES, Renderer
 from serenity.scene import load
 
@@ -399,3 +400,20 @@ def test_tracer_start_auto_follows_the_tracers_scheduling_group(courtyard, monke
         order = {e[1]: e[2] for e in f.events}
         assert (order["ssao"] < order["ray casting buffer"]) == own_group
         assert order["ray casting buffer"] < order["wait for volumes"]
+
+
+def test_reconfigure_changes_live_settings_and_names_the_others(courtyard):
+    """``Renderer.reconfigure`` applies what every frame reads (the next frame shows it) and refuses,
+    in one line naming them, the settings built into the renderer."""
+    base = RenderConfig.preset("lpv-fast")
+    with Renderer(courtyard, *SIZE, config=base) as r:
+        before = r.render(read_back={"ldr"}).ldr
+        r.reconfigure(dataclasses.replace(base, exposure=base.exposure * 4))
+        after = r.render(read_back={"ldr"}).ldr
+        assert after.mean() > before.mean() + 5
+        with pytest.raises(SerenityError, match=r"^shadow\.size, rsm_size cannot change") as e:
+            r.reconfigure(dataclasses.replace(base, rsm_size=base.rsm_size * 2,
+                                              shadow=dataclasses.replace(base.shadow, size=base.shadow.size * 2)))
+        assert "\n" not in str(e.value) and r.config.exposure == base.exposure * 4
+    assert Renderer.needs_rebuild(base, dataclasses.replace(base, indirect_scale=1))
+    assert not Renderer.needs_rebuild(base, dataclasses.replace(base, lpv=dataclasses.replace(base.lpv, glossy=False)))

@@ -13,7 +13,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from serenity.colour import reinhard_srgb
-from serenity.config import RenderConfig, check_image_size
+from serenity.config import RenderConfig, changed_settings, check_image_size
 from serenity.device import resolve_device
 from serenity.errors import SerenityError
 from serenity.frame.record import MAIN_LANE, READ_BACK, STAGES, VOLUME_LANE, VOLUME_THREAD, ChangeTracker, Frame
@@ -433,6 +433,27 @@ class Renderer(VolumeStages, RayTracingStages):
             return img
         full = np.repeat(np.repeat(img, s, axis=0), s, axis=1)
         return np.ascontiguousarray(full[full.shape[0] - self.height:, :self.width])
+
+    LIVE_SETTINGS = frozenset({"exposure", "reflections", "refractions", "ssao.enabled", "shadow.filter",
+                               "lpv.diffuse", "lpv.glossy"})
+    """The settings every frame reads afresh (``reconfigure`` changes them between frames); every other
+    setting is built into the renderer's passes, volumes or tracer, and a change of it needs a new
+    ``Renderer``. (A technique switched on or off, e.g. both of the LPV's terms or both ray-traced
+    views off, is ``enabled``/``ray_tracing``: a rebuild.)"""
+
+    @classmethod
+    def needs_rebuild(cls, old: RenderConfig, new: RenderConfig) -> bool:
+        """Whether a renderer built with ``old`` must be built anew to render with ``new``."""
+        return any(s not in cls.LIVE_SETTINGS for s in changed_settings(old, new))
+
+    def reconfigure(self, config: RenderConfig) -> None:
+        """Render the next frames with ``config``, which may differ from this renderer's only in
+        ``LIVE_SETTINGS``; a ``SerenityError`` names the settings that need a new renderer."""
+        rebuild = [s for s in changed_settings(self.config, config) if s not in self.LIVE_SETTINGS]
+        if rebuild:
+            raise SerenityError(f"{', '.join(rebuild)} cannot change on a built renderer: build a new Renderer "
+                                f"(live: {', '.join(sorted(self.LIVE_SETTINGS))})")
+        self.config = config
 
     def __enter__(self) -> Renderer:
         return self

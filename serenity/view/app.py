@@ -288,11 +288,11 @@ class Viewer:
             changed = True
         if self._config_dirty:
             new = self.settings.config()
-            if Settings.needs_rebuild(self.renderer.config, new):
+            if Renderer.needs_rebuild(self.renderer.config, new):
                 self._build_renderer()
                 self.messages.append(f"renderer rebuilt for {self.settings.quality} quality / switches")
             else:
-                self.renderer.config = new
+                self.renderer.reconfigure(new)
             self._config_dirty = False
             changed = True
         return changed

@@ -172,14 +172,3 @@ class Settings:
                                     diffuse=bool(self.lpv_diffuse), glossy=bool(self.lpv_glossy)),
             ray_tracing=(self.reflections or self.refractions) and base.ray_tracing,
             reflections=bool(self.reflections), refractions=bool(self.refractions))
-
-    @staticmethod
-    def needs_rebuild(old: RenderConfig, new: RenderConfig) -> bool:
-        """True when ``new`` differs from ``old`` in more than what ``Renderer.render`` reads each
-        frame (exposure, SSAO on/off, the shadow filter, the LPV's diffuse/glossy terms, reflections /
-        refractions): the Renderer must be built again."""
-        live = dict(exposure=new.exposure, reflections=new.reflections, refractions=new.refractions,
-                    ssao=dataclasses.replace(old.ssao, enabled=new.ssao.enabled),
-                    shadow=dataclasses.replace(old.shadow, filter=new.shadow.filter),
-                    lpv=dataclasses.replace(old.lpv, diffuse=new.lpv.diffuse, glossy=new.lpv.glossy))
-        return dataclasses.replace(old, **live) != new

@@ -75,6 +75,7 @@ def test_time_of_day_gives_the_noaa_sun():
 
 def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
     from serenity.config import DEFAULT_QUALITY
+    from serenity.frame import Renderer
     from serenity.view.controls import Settings, quality_config
 
     q = "lpv-fast"  # a preset with every technique (the default, traced-probes, has no SSAO and no LPV)
@@ -83,18 +84,18 @@ def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
     for name, value in (("exposure", 0.05), ("ssao", False), ("shadow_filter", "pcf"), ("lpv_diffuse", False),
                         ("lpv_glossy", False), ("reflections", False), ("refractions", False), ("taa", False)):
         t = Settings(quality=q, **{name: value})
-        assert not Settings.needs_rebuild(base, t.config()), name
+        assert not Renderer.needs_rebuild(base, t.config()), name
     for name, value in (("sky_lighting", False), ("quality", "traced-probes")):
-        assert Settings.needs_rebuild(base, Settings(**{"quality": q, name: value}).config()), name
+        assert Renderer.needs_rebuild(base, Settings(**{"quality": q, name: value}).config()), name
     # one term of a pair switches live; both off turns the technique off, which needs a rebuild
     lpv = Settings(quality=q, lpv_glossy=False).config().lpv
     assert lpv.enabled and lpv.diffuse and not lpv.glossy
     off = Settings(quality=q, lpv_diffuse=False, lpv_glossy=False).config()
-    assert not off.lpv.enabled and Settings.needs_rebuild(base, off)
+    assert not off.lpv.enabled and Renderer.needs_rebuild(base, off)
     rt = Settings(quality=q, refractions=False).config()
     assert rt.ray_tracing and rt.reflections and not rt.refractions
     off = Settings(quality=q, reflections=False, refractions=False).config()
-    assert not off.ray_tracing and Settings.needs_rebuild(base, off)
+    assert not off.ray_tracing and Renderer.needs_rebuild(base, off)
     assert quality_config(DEFAULT_QUALITY) == Settings().config(), "the viewer starts at serenity render's quality"
     with pytest.raises(SerenityError, match="quality preset"):
         quality_config("ultra")
