@@ -582,6 +582,13 @@ def lookup_probes(points: np.ndarray, origin, cell, resolution) -> np.ndarray:
     return out
 
 
+def reach_key(reach: float, resolution) -> str:
+    """What :func:`reachable_probes` (and the surfels' check, ``ProbeGather``) depend on beyond the scene
+    and the probes' positions: the cache key of a trace whose active probes are made on demand."""
+    return f"reach {float(reach)!r} {tuple(int(r) for r in resolution)} {REACH_MARGIN_CELLS!r} " \
+           f"{_REACH_PLANE_PROBES} {_REACH_ROUNDS}"
+
+
 def reachable_probes(vertices: np.ndarray, faces: np.ndarray, origin, cell, resolution, reach: float) -> np.ndarray:
     """(P,) bool in storage order (z, y, x): the probes a lookup at a point of the triangles
     ``vertices[faces]`` can read. The lookup at surface point p with unit normal n reads the 8 probes
@@ -651,7 +658,7 @@ class ProbeGather:
 
     def __init__(self, tracer, positions: np.ndarray, cell: np.ndarray, rays: int, surfel_size: float,
                  device, glossy_energy=None, transmissions: int = 0, cache_key: str | None = None,
-                 active: np.ndarray | None = None, grid: tuple | None = None):
+                 active=None, grid: tuple | None = None, active_key: str | None = None):
         """``glossy_energy``: per material of the tracer's scene, the albedo its surfels gain from
         its Phong lobe (module docstring), None: none; ``transmissions``: transparent interfaces a
         ray is bent through before the hit it lights the probe with; ``cache_key``: a digest of the
@@ -659,15 +666,21 @@ class ProbeGather:
         kd-tree: ``$SERENITY_CACHE`` or ``~/.cache/serenity``) and read back by the next renderer of
         the same scene and grid; None: no cache. ``active``: (P,) bool, the probes a lookup can read
         (:func:`reachable_probes`); only they are traced and gathered, the others hold zeros; None:
-        every probe. ``grid``: (origin, resolution, normal offset in m) of the volume, with which the
+        every probe; or a function that returns them, called only when the probes are traced (not
+        when they are read from the disk cache), with ``active_key`` a string of everything they
+        depend on beyond the scene and the grid (:func:`reach_key`), which the cache key takes
+        instead of them. ``grid``: (origin, resolution, normal offset in m) of the volume, with which the
         surfels' own lookups are checked to read active probes only (else those probes are traced too)."""
         self.device = device
         self.rays = int(rays)
         n_probes = len(positions)
         #: (P,) bool: the probes traced and gathered (``active``)
-        self.active = np.ones(n_probes, bool) if active is None else np.asarray(active, bool).reshape(-1).copy()
-        if len(self.active) != n_probes:
-            raise ValueError(f"active: {len(self.active)} flags for {n_probes} probes")
+        self._active_fn = None
+        if callable(active) and active_key is not None:
+            self._active_fn, self.active = active, None
+        else:
+            self._set_active(active() if callable(active) else active, n_probes)
+        self._active_key = active_key if self._active_fn is not None else None
         self.grid = None if grid is None or active is None else grid
         self.tracer = tracer
         self.glossy_energy = None if glossy_energy is None else np.asarray(glossy_energy, np.float32)
@@ -683,6 +696,8 @@ class ProbeGather:
             path = cache_dir() / f"probegather-{self.cache_key}.npz"
             self.from_cache = self._load(path, len(positions))
         if not self.from_cache:
+            if self.active is None:
+                self._set_active(self._active_fn(), len(positions))
             # chunk after chunk of rays: freed, not kept on the heap; the moments' small matrix
             # products on one thread (BLAS's threads only spun beside the tracer's: 5x slower)
             with mapped_large_blocks(), single_threaded_blas():
@@ -698,6 +713,11 @@ class ProbeGather:
         self._visible_host = np.zeros(self.surfel_count, np.float32)
         self._vis_sun = np.array([0.0, 1.0, 0.0])
         self._vis_parts, self._vis_left, self._vis_next = 1, 0, 0
+
+    def _set_active(self, active, n_probes: int) -> None:
+        self.active = np.ones(n_probes, bool) if active is None else np.asarray(active, bool).reshape(-1).copy()
+        if len(self.active) != n_probes:
+            raise ValueError(f"active: {len(self.active)} flags for {n_probes} probes")
 
     def _trace_chunks(self, origins: np.ndarray, sets: np.ndarray, progress: bool = False):
         """The rays of the given probes (their direction sets) in chunks of about ``TRACE_CHUNK_RAYS``
@@ -836,7 +856,8 @@ class ProbeGather:
         h.update(f"probegather-v{FORMAT_VERSION}|{scene_key}|{self.rays}|{self.transmissions}|{surfel_size!r}|"
                  f"{DIRECTION_SETS}|{BACKFACE_LIMIT}|{RELOCATIONS}|{RELOCATION_STRIDE}".encode())
         for a in (np.asarray(positions, np.float64), np.asarray(cell, np.float64),
-                  np.zeros(0) if self.glossy_energy is None else self.glossy_energy, self.active):
+                  np.zeros(0) if self.glossy_energy is None else self.glossy_energy,
+                  self.active if self._active_key is None else np.frombuffer(self._active_key.encode(), np.uint8)):
             h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()
 
@@ -868,7 +889,7 @@ class ProbeGather:
         if (len(meta) != 3 or meta[0] != FORMAT_VERSION or a["surfel"].shape != (n_probes, self.rays)
                 or a["surfel"].max(initial=-1) >= m or a["moments"].shape != (n_probes, VIS_OCT * VIS_OCT, 2)
                 or a["offsets"].shape != (n_probes, 3) or a["active"].shape != (n_probes,)
-                or np.any(self.active & ~a["active"].astype(bool))
+                or (self.active is not None and np.any(self.active & ~a["active"].astype(bool)))
                 or a["surfel_shadow_origins"].shape != (m, 3)):
             return False
         self.relocated, self.inside = int(meta[1]), int(meta[2])

@@ -86,6 +86,7 @@ from serenity.kernels.probegather import (
     ProbeGather,
     direction_sets,
     oct_encode_np,
+    reach_key,
     reachable_probes,
     scene_key,
     visibility_atlas,
@@ -582,12 +583,13 @@ class SkyVolume:
             # only the probes a lookup on the scene's surfaces can read are traced and gathered
             pos, _, _, faces, _ = self.scene.merged()
             reach = self.normal_offset_m + REACH_MARGIN_CELLS * float(np.min(self.cell_size))
-            active = reachable_probes(pos, faces, self.grid_origin, self.cell_size, self.resolution, reach)
+            grid = (self.grid_origin.copy(), self.cell_size.copy(), self.resolution)
             self._gather = g = ProbeGather(self.tracer, self.probe_positions(), self.cell_size,
                                            cfg.gather_rays, size, self.device, glossy_energy=glossy,
                                            transmissions=cfg.gather_transmissions, cache_key=scene_key(self.scene),
-                                           active=active, grid=(self.grid_origin, self.resolution,
-                                                                self.normal_offset_m))
+                                           active=lambda: reachable_probes(pos, faces, *grid, reach),
+                                           active_key=reach_key(reach, self.resolution),
+                                           grid=(self.grid_origin, self.resolution, self.normal_offset_m))
             if cfg.gather_visibility:
                 atlas = visibility_atlas(g.moments, self.resolution)
                 self.visibility = (atlas, g.offsets)
