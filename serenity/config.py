@@ -575,12 +575,14 @@ class RenderConfig:
     last frame's at the same surface point (reprojected per pixel; disocclusions take this frame's
     alone), 1 = none of the last frame's. Against the light that slid over the surfaces with the
     low-res points as the camera moved (``raster/temporal.py``; ``docs/stability.md``)."""
-    indirect_refine_below: float = 0.05
+    indirect_refine_below: float = 0.0
     """With ``indirect_scale`` > 1: pixels whose most alike low-res texel (the upsampling's guide
     similarity: depth and normal, ``glsl/lowres.glsl``) is below this have their indirect light
     computed at full resolution instead of upsampled (``raster/lowres.IndirectRefinement``): surfaces
     narrower than the low-res grid and the far sides of silhouettes, which otherwise take a
-    neighbouring surface's light. 0 = none."""
+    neighbouring surface's light. 0 = none: the LPV presets' light is smooth enough that refining
+    moved FLIP by at most 0.0007 (courtyard, Cornell box) for 9–15 % of their frame; the
+    ``traced-probes`` preset sets 0.05 (docs/techniques.md)."""
     lowres_tile_balance: bool = True
     """Lay those reduced-resolution images out centred on the GL rasteriser's 64-pixel tiles
     (``raster/context.LowResLayout``): llvmpipe shades each tile on one thread, and at 320×180 a
@@ -738,7 +740,8 @@ PRESETS: dict[str, dict] = {
     # each probe weighed by whether it sees the point it lights. The probes already hold the
     # occlusion SSAO would add (FLIP is better in both test scenes without SSAO), and 128 rays leave
     # the Cornell box's probes blotchy (its light comes from a small sunlit patch). Indirect light at
-    # quarter resolution, 3 shadow cascades of 2.4 texels per image pixel, a coarse sky map.
+    # quarter resolution and at full resolution where upsampling finds no like texel (a table's
+    # edge), 3 shadow cascades of 2.4 texels per image pixel, a coarse sky map.
     "traced-probes": {"indirect_scale": 4,
                       "shadow": {"size": 1024, "texels_per_pixel": 2.4, "cascades": 3, "blocker_samples": 4,
                                  "filter_samples": 8, "stagger": True},
@@ -746,7 +749,7 @@ PRESETS: dict[str, dict] = {
                       "sky": {"sky_map_size": 64, "sky_steps": 8, "transfer_layers": 1, "method": "gather",
                               "fit": "content", "target_probes": 24_000, "gather_rays": 512, "normal_offset": 0.25},
                       "lpv": {"enabled": False},
-                      "rsm_size": 128, "sky_vpl_stride": 8},
+                      "rsm_size": 128, "sky_vpl_stride": 8, "indirect_refine_below": 0.05},
 }
 """Quality presets: field → value, or for a sub-config (shadow, ssao, sky, lpv) its field → value;
 every field a preset does not name keeps ``RenderConfig()``'s default. Each is one point of the
