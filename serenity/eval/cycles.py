@@ -81,7 +81,7 @@ import numpy as np
 
 from serenity.config import check_image_size
 from serenity.errors import SerenityError
-from serenity.eval.reference import _meshes_by_material, phong_alpha, sky_map, with_effective_sun
+from serenity.eval.reference import meshes_by_material, phong_alpha, sky_map, with_effective_sun
 from serenity.scene.model import IDENTITY_UV, apply_uv_transform, normal_map_frame
 
 ENV_VAR = "SERENITY_CYCLES_PYTHON"
@@ -275,7 +275,7 @@ def export_scene(scene, width: int, height: int, sky=_AUTO) -> tuple[dict, dict]
     arrays: dict = {}
     materials, meshes = [], []
     index: dict[int, int] = {}
-    for k, pos, nrm, uv, faces in _meshes_by_material(scene):
+    for k, pos, nrm, uv, faces in meshes_by_material(scene):
         m = scene.materials[k]
         if k not in index:
             index[k] = len(materials)
