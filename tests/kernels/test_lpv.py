@@ -738,13 +738,17 @@ def test_one_launch_propagation_equals_a_launch_per_iteration(device, kw):
     v.inject(p, n, f)
     v.inject_geometry(p[:1000], n[:1000], f[:1000, 0])
     got = {}
-    for one in (False, True):
-        runs = v.propagate(one_launch=one)
-        got[one] = (runs, [(v.level_grid(k, "accum").copy(), v.level_grid(k, "last").copy())
+    # the per-iteration launches with the early stop decided on the host (the CPU's way) and on the
+    # device (CUDA's: no copy per iteration; lpv/early_stop.py), and the one launch
+    for way in ("host", "device", "one"):
+        v._device_stop = way == "device"
+        runs = v.propagate(one_launch=way == "one")
+        got[way] = (runs, [(v.level_grid(k, "accum").copy(), v.level_grid(k, "last").copy())
                            for k in range(3)], v._far.numpy().copy())
     # two cascades fitted; the early stop (0.15) ends them at 5 and 6 of their 8 iterations
-    assert got[False][0] == got[True][0] and len(got[True][0]) == 2 and min(got[True][0]) >= 1
-    for (a, la), (b, lb) in zip(got[False][1], got[True][1], strict=True):
-        np.testing.assert_array_equal(a, b)
-        np.testing.assert_array_equal(la, lb)
-    np.testing.assert_array_equal(got[False][2], got[True][2])
+    for way in ("device", "one"):
+        assert got["host"][0] == got[way][0] and len(got[way][0]) == 2 and min(got[way][0]) >= 1
+        for (a, la), (b, lb) in zip(got["host"][1], got[way][1], strict=True):
+            np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(la, lb)
+        np.testing.assert_array_equal(got["host"][2], got[way][2])

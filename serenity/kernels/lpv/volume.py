@@ -28,6 +28,7 @@ from serenity.kernels.launch import (
 )
 from serenity.kernels.lpv.basis import MAX_CASCADES, SH_FLUX
 from serenity.kernels.lpv.cascades import CascadeGrid, fit_cascades
+from serenity.kernels.lpv.early_stop import level_stop
 from serenity.kernels.lpv.kernels import (
     Cascade,
     blend_shown,
@@ -138,6 +139,9 @@ class LightPropagationVolume:
         self._iters = wp.zeros(len(self._levels), dtype=int, device=dev)  # the one-launch propagation's
         self._done_dev = wp.zeros(len(self._levels), dtype=int, device=dev)
         self._sums = wp.zeros(2 * len(self._levels), dtype=wp.float64, device=dev)
+        #: decide the early stop on the device in the per-iteration launches on the CPU too (as on CUDA;
+        #: the CPU's default sums a view of the cells on the host, which costs no copy there)
+        self._device_stop = False
         # injection table (fitted cascades) and lookup table (active cascades)
         self._fit_table = wp.zeros(MAX_CASCADES, dtype=Cascade, device=dev)
         self._cas_table = wp.zeros(MAX_CASCADES, dtype=Cascade, device=dev)
@@ -337,6 +341,27 @@ class LightPropagationVolume:
                       inputs=[inj, self._trans_pos, self._trans_neg, self._level_table, nl, self._iters, self._far_from,
                               n_iter, lo, hi, float(thresh), self._level_on, self._ping, self._pong, self._accum,
                               self._far, self._done_dev, self._sums, 0], device=self.device)
+            done = self._done_dev.numpy()
+            for lv in np.flatnonzero(on):
+                self._done[lv] = int(done[lv])
+        elif not str(self.device).startswith("cpu") or self._device_stop:
+            # which cascades go on is decided on the device (lpv/early_stop.py): no copy per iteration
+            self._level_on.assign(on)
+            self._iters.assign(iters.astype(np.int32))
+            self._done_dev.zero_()
+            for k in range(n_iter):
+                active = [self._levels[lv] for lv in np.flatnonzero(on & (iters > k))]
+                if not active:
+                    break
+                lo = min(v.cell_base for v in active)
+                dim = max(v.cell_base + v.res**3 for v in active) - lo
+                self._launch_cells(self._propagate, dim,
+                                   [inj if k == 0 else bufs[(k - 1) % 2], self._accum, self._trans_pos,
+                                    self._trans_neg, self._level_table, nl, self._level_on, self._far_from, k + 1,
+                                    bufs[k % 2], self._accum, self._far, self._change, self._total], start=lo)
+                wp.launch(level_stop, dim=nl, inputs=[self._change, self._total, self._level_table, self._iters, k,
+                                                      float(thresh), self._level_on, self._done_dev],
+                          device=self.device)
             done = self._done_dev.numpy()
             for lv in np.flatnonzero(on):
                 self._done[lv] = int(done[lv])
