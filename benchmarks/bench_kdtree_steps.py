@@ -1,10 +1,11 @@
 """A/B of kd-tree traversal versions in one process: the traversal of several git revisions of
-``serenity/kernels/kdtree.py`` on the same tree and the same rays, timed back to back.
+the kd-tree (the package ``serenity/kernels/kdtree/``, or the single module ``kdtree.py`` it was
+before) on the same tree and the same rays, timed back to back.
 
     python benchmarks/bench_kdtree_steps.py --json FILE REV[@key=value,...] ... [--rounds 7] [--size 1280x720]
 
-Each REV's ``kdtree.py`` is loaded as its own module (``git show REV:serenity/kernels/kdtree.py``;
-``WORKTREE`` = the file as it is now), so each is its own Warp module; they share this checkout's
+Each REV's kd-tree is loaded under its own name (its files from ``git show``; ``WORKTREE`` = the
+files as they are now), so each is its own set of Warp modules; they share this checkout's
 build (``kdtree_build``), with :class:`serenity.config.KdBuildConfig` defaults unless the version
 says otherwise after an ``@`` (``HEAD@max_depth=40,min_empty_fraction=0.1``: the same traversal
 on a tree built with those settings); keys that are not build settings go to ``KdTree.intersect``
@@ -59,14 +60,48 @@ def module_from_source(name: str, src: str, tmp: Path):
     return mod
 
 
-def load_version(rev: str, tmp: Path, k: int):
-    """The kdtree module of git revision ``rev`` (or the working tree), loaded under its own name."""
+def package_from_files(name: str, files: dict[str, str], tmp: Path):
+    """A package of ``files`` (path within the package → text) written to ``tmp/name`` and imported
+    as ``name`` (the kd-tree package imports its own modules relatively, and reads its ``.h`` files
+    from beside them)."""
+    root = tmp / name
+    for rel, text in files.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+    spec = importlib.util.spec_from_file_location(name, root / "__init__.py", submodule_search_locations=[str(root)])
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+PACKAGE = "serenity/kernels/kdtree"
+
+
+def version_files(rev: str) -> dict[str, str] | str:
+    """The kd-tree of git revision ``rev`` (or the working tree): the package's files (path within it
+    → text), or, for a revision from before the package, the text of ``kdtree.py``."""
     if rev == "WORKTREE":
-        src = (ROOT / "serenity/kernels/kdtree.py").read_text()
-    else:
-        src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:serenity/kernels/kdtree.py"],
-                             check=True, capture_output=True, text=True).stdout
-    return module_from_source(f"kdtree_step{k}", src, tmp)
+        folder = ROOT / PACKAGE
+        if folder.is_dir():
+            return {str(p.relative_to(folder)): p.read_text() for p in sorted(folder.rglob("*"))
+                    if p.suffix in (".py", ".h")}
+        return (ROOT / f"{PACKAGE}.py").read_text()
+    listed = subprocess.run(["git", "-C", str(ROOT), "ls-tree", "-r", "--name-only", rev, f"{PACKAGE}/"],
+                            check=True, capture_output=True, text=True).stdout.split()
+    show = lambda path: subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:{path}"],  # noqa: E731
+                                       check=True, capture_output=True, text=True).stdout
+    if listed:
+        return {p[len(PACKAGE) + 1:]: show(p) for p in listed if p.endswith((".py", ".h"))}
+    return show(f"{PACKAGE}.py")
+
+
+def load_version(rev: str, tmp: Path, k: int):
+    """The kd-tree of git revision ``rev`` (or the working tree), loaded under its own name."""
+    files = version_files(rev)
+    if isinstance(files, str):
+        return module_from_source(f"kdtree_step{k}", files, tmp)
+    return package_from_files(f"kdtree_step{k}", files, tmp)
 
 
 def main(argv=None) -> dict:

@@ -6,8 +6,9 @@ traversal with ropes would do on the same trees and rays (the rope model, below)
                                        [--rope-sample 2000] [--rope-grid 32]
 
 Each SPEC is ``key=value,...`` of :class:`serenity.config.KdBuildConfig` ('' = the defaults). The
-counters are added to a copy of ``serenity/kernels/kdtree.py``'s traversal by text substitution
-(each substitution must apply, or this stops), loaded as its own module; the hits are checked
+counters are added to a copy of the kd-tree's traversal (``serenity/kernels/kdtree/traverse.py``)
+by text substitution (each substitution must apply, or this stops), the package loaded under its
+own name; the hits are checked
 against the real traversal on the same tree. Rays as in ``bench_kdtree.py``.
 
 The rope model answers whether a stackless traversal with ropes (Havran's neighbour links;
@@ -39,7 +40,7 @@ from serenity.scene.procedural import lumpy_mesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_kdtree import ray_sets  # noqa: E402
-from bench_kdtree_steps import module_from_source  # noqa: E402
+from bench_kdtree_steps import package_from_files, version_files  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 #: a rope walk that passes more leaves than this has lost its way (a bug in the model): stop
@@ -57,19 +58,20 @@ SUBSTITUTIONS = [
      "            prim, best_t, hit_u, hit_v = intersect_leaf("),
     ("                    if t0 <= best_t:\n                        popped = 1",
      "                    if t0 <= best_t:\n                        popped = 1\n                        n_pop += 1"),
-    ("    if prim < 0:\n        best_t = _INF\n    return prim, best_t, hit_u, hit_v",
-     "    if prim < 0:\n        best_t = _INF\n    return prim, best_t, float(n_inner) + 0.001 * float(n_pop), "
+    ("    if prim < 0:\n        best_t = INF\n    return prim, best_t, hit_u, hit_v",
+     "    if prim < 0:\n        best_t = INF\n    return prim, best_t, float(n_inner) + 0.001 * float(n_pop), "
      "float(n_leaf) * 1000.0 + float(n_tri)"),
 ]
 
 
 def counting_module(tmp: Path):
-    src = (ROOT / "serenity/kernels/kdtree.py").read_text()
+    files = version_files("WORKTREE")
+    src = files["traverse.py"]
     for old, new in SUBSTITUTIONS:
         if src.count(old) != 1:
             raise SystemExit(f"kdtree_counts: the traversal changed, cannot place a counter at:\n{old}")
         src = src.replace(old, new)
-    return module_from_source("kdtree_counting", src, tmp)
+    return package_from_files("kdtree_counting", {**files, "traverse.py": src}, tmp)
 
 
 def node_boxes_and_ropes(head: np.ndarray, split: np.ndarray, lo: np.ndarray, hi: np.ndarray):

@@ -5,11 +5,12 @@ benchmark's rays, on 1 thread and on all threads.
 
 Rays and scene as in ``bench_kdtree.py`` (coherent camera rays; incoherent random rays from their
 hits). The default call is timed as it runs: every Warp launch the query makes through
-``serenity.kernels.launch.launch`` is timed by wrapping ``serenity.kernels.kdtree``'s reference to
-it (the query itself is not changed), and so is the counting sort as a whole
-(``counting_order``: its launches, ``count_keys`` and the placing passes, plus numpy's prefix sum of
-the bins). ``other`` is the call's wall time less its timed parts: the conversion of the numpy
-inputs, the arrays' allocation, the results' copy back, Python. Per phase the median over
+``serenity.kernels.launch.launch`` is timed by wrapping the kd-tree package's references to it
+(``serenity.kernels.kdtree.query``, ``reorder``, ``cpu.sort``; the query itself is not changed),
+and so is the counting sort as a whole (``counting_order``: its launches, ``count_keys`` and the
+placing passes, plus numpy's prefix sum of the bins). ``other`` is the call's wall time less its
+timed parts: the conversion of the numpy inputs, the arrays' allocation, the results' copy back,
+Python. Per phase the median over
 ``--rounds`` calls (after one warm-up call) of its milliseconds per call, and its share of the
 call's median. Phases:
 - ``sample_key_changes``: whether the batch is coherent (keys of 4096 pairs of consecutive rays);
@@ -21,8 +22,8 @@ call's median. Phases:
   rays per kernel thread; ``gather_rays`` and ``gather_array`` are read too, for JSON of earlier
   versions of the query);
 - ``trace``: the traversal (``trace_packets``, 16-ray packets, for a reordered batch and for a
-  coherent one in the caller's order; ``trace_rays``, interleaved, when asked for; ``intersect_rays``,
-  one ray per kernel thread, for any other batch);
+  coherent one in the caller's order; ``intersect_rays``, one ray per kernel thread, for any other
+  batch; ``trace_rays``, for JSON of earlier versions);
 - ``scatter_hits``: the four results back at their rays' own indices, as one 16-byte record per ray
   (``scatter_array``, one launch per result array, for JSON of earlier versions).
 """
@@ -58,23 +59,30 @@ def phase_name(kernel) -> str:
     return key
 
 
-def instrument(kd, times: dict) -> None:
-    """Wrap ``kd.launch`` and ``kd.counting_order`` so that each call adds its wall seconds to
-    ``times[phase]`` (the current call's entries)."""
-    launch, counting_order = kd.launch, kd.counting_order
+def instrument(modules: list, times: dict) -> None:
+    """Wrap each of ``modules``' ``launch`` and ``counting_order`` (where it has them) so that each call
+    adds its wall seconds to ``times[phase]`` (the current call's entries)."""
 
-    def timed_launch(kernel, *args, **kwargs):
-        t = time.perf_counter()
-        launch(kernel, *args, **kwargs)
-        times[phase_name(kernel)] += time.perf_counter() - t
+    def timed_launch(launch):
+        def run(kernel, *args, **kwargs):
+            t = time.perf_counter()
+            launch(kernel, *args, **kwargs)
+            times[phase_name(kernel)] += time.perf_counter() - t
+        return run
 
-    def timed_order(*args, **kwargs):
-        t = time.perf_counter()
-        out = counting_order(*args, **kwargs)
-        times["counting_order"] += time.perf_counter() - t
-        return out
+    def timed_order(counting_order):
+        def run(*args, **kwargs):
+            t = time.perf_counter()
+            out = counting_order(*args, **kwargs)
+            times["counting_order"] += time.perf_counter() - t
+            return out
+        return run
 
-    kd.launch, kd.counting_order = timed_launch, timed_order
+    for mod in modules:
+        if hasattr(mod, "launch"):
+            mod.launch = timed_launch(mod.launch)
+        if hasattr(mod, "counting_order"):
+            mod.counting_order = timed_order(mod.counting_order)
 
 
 def main(argv=None) -> dict:
@@ -86,13 +94,15 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     init_warp()
     import serenity.kernels.kdtree as kd
+    from serenity.kernels.kdtree import query, reorder
+    from serenity.kernels.kdtree.cpu import sort
 
     width, height = (int(x) for x in args.size.lower().split("x"))
     v, f = lumpy_mesh(args.subdivisions)
     tree = kd.KdTree.build(v, f, progress=True)
     sets = ray_sets(tree, width, height)
     current: dict = defaultdict(float)
-    instrument(kd, current)
+    instrument([query, reorder, sort], current)
     thread_counts = sorted({1, cpu_threads()})
     results = {}
     for threads in thread_counts:

@@ -12,8 +12,6 @@ import trimesh
 from serenity.device import init_warp
 from serenity.errors import SerenityError
 from serenity.kernels.kdtree import (
-    CPU_RAYS_PER_THREAD,
-    INTERLEAVE_FACTORS,
     KEY_LANES,
     PACKET_LANES,
     SORT_COARSE_BITS,
@@ -24,7 +22,6 @@ from serenity.kernels.kdtree import (
     TRACE_MODULE_OPTIONS,
     KdBuildConfig,
     KdTree,
-    inner_step_flat,
     intersect_triangle,
     ray_order,
     ray_sort_key,
@@ -432,14 +429,14 @@ def _edge_case_rays(rng, tree, n):
     return o, d, tmax
 
 
-def test_interleaved_and_packet_traversals_give_the_one_ray_bits(device):
-    """The CPU's interleaved kernels (every slot count shipped) and packets (``PACKET_LANES``), closest
-    and any hit, reordered or not, one thread or several, give the one-ray traversal's hits bit for
-    bit, on rays that hit split planes, run inside them, are axis-parallel or invalid, on a soup, a
-    closed mesh, a flat grid of coplanar triangles and a soup of 12 copies of each triangle (leaves
-    of more triangles than the packets' SIMD leaf test takes at once, and every hit a tie that the
-    lower index wins); random rays put every octant into one packet (on CUDA ``rays_per_thread`` is
-    accepted and one ray per thread is traced)."""
+def test_packet_traversal_gives_the_one_ray_bits(device):
+    """The CPU's packets (``PACKET_LANES``), closest and any hit, reordered or not, one thread or
+    several, give the one-ray traversal's hits bit for bit, on rays that hit split planes, run inside
+    them, are axis-parallel or invalid, on a soup, a closed mesh, a flat grid of coplanar triangles
+    and a soup of 12 copies of each triangle (leaves of more triangles than the packets' SIMD leaf
+    test takes at once, and every hit a tie that the lower index wins); random rays put every octant
+    into one packet (on CUDA ``rays_per_thread`` is accepted and one ray per thread is traced). Any
+    other ``rays_per_thread`` is an error."""
     rng = np.random.default_rng(21)
     torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=40, minor_sections=20)
     grid = trimesh.creation.box((4.0, 4.0, 4.0)).subdivide().subdivide()
@@ -455,106 +452,30 @@ def test_interleaved_and_packet_traversals_give_the_one_ray_bits(device):
         one = tree.intersect(o, d, tmax, device=device, rays_per_thread=1, sort=False)
         occ = tree.occluded(o, d, tmax, device=device, rays_per_thread=1, sort=False)
         assert 0.05 < one.hit.mean() < 0.95
-        for k in (*INTERLEAVE_FACTORS, PACKET_LANES):
-            for sort, threads in ((False, 1), (True, 1), (True, 3), (False, 3)):
-                kw = dict(device=device, rays_per_thread=k, sort=sort, threads=threads)
-                assert _hits_equal(tree.intersect(o, d, tmax, **kw), one), (k, sort, threads)
-                assert np.array_equal(tree.occluded(o, d, tmax, **kw), occ), (k, sort, threads)
-    with pytest.raises(SerenityError, match="rays_per_thread"):
-        tree.intersect(o, d, device="cpu", rays_per_thread=5)
+        for sort, threads in ((False, 1), (True, 1), (True, 3), (False, 3)):
+            kw = dict(device=device, rays_per_thread=PACKET_LANES, sort=sort, threads=threads)
+            assert _hits_equal(tree.intersect(o, d, tmax, **kw), one), (sort, threads)
+            assert np.array_equal(tree.occluded(o, d, tmax, **kw), occ), (sort, threads)
+    for k in (2, 4, 5):
+        with pytest.raises(SerenityError, match="rays_per_thread"):
+            tree.intersect(o, d, device="cpu", rays_per_thread=k)
 
 
-
-@wp.kernel
-def _steps(head: wp.array(dtype=int), split: wp.array(dtype=float), oa: wp.array(dtype=float),
-           da: wp.array(dtype=float), ia: wp.array(dtype=float), t0: wp.array(dtype=float),
-           t1: wp.array(dtype=float), teps: wp.array(dtype=float), flat: wp.array2d(dtype=float),
-           ref: wp.array2d(dtype=float)):
-    i = wp.tid()
-    flags = wp.where(da[i] > 0.0, 1, 0) | wp.where(ia[i] == 0.0, 2, 0)
-    nn, nt1, push, pushed, pt0, empty = inner_step_flat(head[i], split[i], oa[i], ia[i], flags, t0[i], t1[i],
-                                                        teps[i])
-    flat[i, 0] = float(nn)
-    flat[i, 1] = nt1
-    flat[i, 2] = float(push)
-    flat[i, 3] = float(pushed * push)
-    flat[i, 4] = pt0 * float(push)
-    flat[i, 5] = float(empty)
-    # trace_kd's step, as written there
-    h = head[i]
-    child = h >> 4
-    first = child
-    second = child + 1
-    empty_first = (h >> 2) & 1
-    empty_second = (h >> 3) & 1
-    if oa[i] > split[i] or (oa[i] == split[i] and da[i] > 0.0):
-        first = child + 1
-        second = child
-        empty_first = (h >> 3) & 1
-        empty_second = (h >> 2) & 1
-    node = first
-    tt1 = t1[i]
-    rpush = 0
-    rt0 = float(0.0)
-    leaf_end = empty_first
-    if ia[i] == 0.0:
-        if oa[i] == split[i] and empty_second == 0:
-            rpush = 1
-            rt0 = t0[i]
-    else:
-        ts = (split[i] - oa[i]) * ia[i]
-        if ts <= 0.0 or ts > t1[i] + teps[i]:
-            node = first
-        elif ts < t0[i] - teps[i]:
-            node = second
-            leaf_end = empty_second
-        else:
-            if empty_second == 0:
-                rpush = 1
-                rt0 = wp.max(t0[i], ts - teps[i])
-            tt1 = wp.min(t1[i], ts + teps[i])
-    ref[i, 0] = float(node)
-    ref[i, 1] = tt1
-    ref[i, 2] = float(rpush)
-    ref[i, 3] = float(second * rpush)
-    ref[i, 4] = rt0
-    ref[i, 5] = float(leaf_end)
-
-
-def test_branch_free_step_makes_trace_kd_s_choices():
-    """The interleaved kernels' branch-free inner-node step against ``trace_kd``'s branches, on
-    inputs drawn from a few values so that every tie occurs: origin on the plane, parallel rays
-    (inverse direction 0, direction 0 or tiny of either sign), the plane at the interval's ends
-    with and without the overlap, empty-leaf flags."""
-    rng = np.random.default_rng(23)
-    n = 200_000
-    head = ((rng.integers(1, 1000, n) << 4) | (rng.integers(0, 4, n) << 2) | rng.integers(0, 3, n)).astype(np.int32)
-    split = rng.choice([-1.0, 0.0, 0.5, 1.0], n).astype(np.float32)
-    oa = rng.choice([-1.0, 0.0, 0.5, 1.0, 2.0], n).astype(np.float32)
-    ia = rng.choice([0.0, 1.0, -1.0, 2.0, -2.0, 0.5, -0.5], n).astype(np.float32)
-    da = np.where(ia != 0, 1 / np.where(ia != 0, ia, 1), rng.choice([0.0, 1e-38, -1e-38], n)).astype(np.float32)
-    t0 = rng.choice([0.0, 0.25, 0.5, 1.0], n).astype(np.float32)
-    t1 = (t0 + rng.choice([0.0, 0.25, 0.5, 1.0, 2.0], n)).astype(np.float32)
-    teps = rng.choice([0.0, 0.25], n).astype(np.float32)
-    arrays = [wp.array(a, device="cpu") for a in (head, split, oa, da, ia, t0, t1, teps)]
-    flat = wp.zeros((n, 6), dtype=float, device="cpu")
-    ref = wp.zeros((n, 6), dtype=float, device="cpu")
-    wp.launch(_steps, n, [*arrays, flat, ref], device="cpu")
-    flat, ref = flat.numpy(), ref.numpy()
-    assert ref[:, 2].mean() > 0.05 and (ref[:, 0] != (head >> 4)).mean() > 0.1  # pushes, right children
-    assert np.array_equal(flat, ref)
 
 def test_default_cpu_kernels_trace_reordered_and_coherent_batches_in_packets(monkeypatch):
     """The default CPU query: a reordered (incoherent) batch goes to packets and its results to the
     scatter, camera rays (left in their order, coherent) to packets, with the one-ray kernel's bits,
     and a small batch of random rays (not reordered, not coherent) to one ray per thread."""
     import serenity.kernels.kdtree as K
+    from serenity.kernels.kdtree import query, reorder
 
     v, f = lumpy_mesh(3)
     tree = KdTree.build(v, f)
     launched = []
-    original = K.launch
-    monkeypatch.setattr(K, "launch", lambda kernel, *a, **kw: (launched.append(kernel), original(kernel, *a, **kw)))
+    original = query.launch
+    for module in (query, reorder):
+        monkeypatch.setattr(module, "launch",
+                            lambda kernel, *a, **kw: (launched.append(kernel), original(kernel, *a, **kw)))
     oc, dc = camera_rays(320, 180, position=(0.0, 0.6, 3.5))
     o2, d2 = random_rays(np.random.default_rng(22), SORT_MIN_RAYS + 1000, extent=2.0)
     packets = tree.intersect(oc, dc, device="cpu")
@@ -572,8 +493,8 @@ def test_default_cpu_kernels_trace_reordered_and_coherent_batches_in_packets(mon
     assert _hits_equal(hits, tree.intersect(o2, d2, device="cpu", sort=False))
     tree.occluded(o2, d2, device="cpu")
     assert launched[-2:] == [K.trace_packets_kernel(True), K.move_in_order]  # the flags: scatter_in_order
-    tree.intersect(o2, d2, device="cpu", rays_per_thread=CPU_RAYS_PER_THREAD)
-    assert launched[-2:] == [K.trace_rays_kernel(CPU_RAYS_PER_THREAD, False), K.scatter_hits]
+    tree.intersect(o2, d2, device="cpu", rays_per_thread=1)
+    assert launched[-2:] == [K.intersect_rays, K.scatter_hits]
 
 def test_build_does_not_depend_on_the_thread_count():
     from serenity.kernels.kdtree_build import build_arrays
