@@ -101,7 +101,7 @@ from serenity.kernels.kdtree_build import CACHE_MIN_TRIANGLES, cache_dir
 from serenity.kernels.launch import launch
 from serenity.scene.model import normal_map_frame, used_vertices
 
-wp.set_module_options(TRACE_MODULE_OPTIONS)  # no FMA contraction: watertight on CUDA too (kdtree.py)
+wp.set_module_options(TRACE_MODULE_OPTIONS)  # no FMA contraction: watertight on CUDA too (kdtree/layout.py)
 
 # ----------------------------------------------------------------------------------------------
 # constants
