@@ -14,8 +14,10 @@ the uniforms of ``glsl/sky.glsl`` that the program uses:
 
 A shader ``#include "sky.glsl"`` and calls ``sky_map_radiance(u_sky_map, dir)`` (the dome) and
 ``sky_irradiance(p, n)`` (adds albedo/π × it), or ``sky_irradiance_glossy(p, n, r, m, glossy)``
-(also the radiance around r filtered by the Phong lobe of exponent m). Before any upload the
-textures are 1×1 black, so binding is always valid.
+(also the radiance around r filtered by the Phong lobe of exponent m), which a lighting pass
+multiplies by ``sky_horizon_occlusion(r, ng, m)``, the lobe's share above the surface's flat face
+(``ng`` from ``gbuffer_flat_normal``: glsl/sky.glsl says why). Before any upload the textures are
+1×1 black, so binding is always valid.
 
 Uploads do not flip rows: sky-map array row i is texture row i (the mapping in sky.glsl and
 ``atmosphere.direction_to_paraboloid`` use that), volume arrays (Z, Y, X, C) are indexed as stored.
@@ -214,3 +216,8 @@ class SkyTexturesGL:
         """(N,3) the glossy radiance of ``sky_irradiance_glossy`` evaluated by GL at (N,3) points,
         normals and directions, for one Phong exponent."""
         return self._run(2, points, normals, directions, shininess)
+
+    def evaluate_horizon_occlusion(self, directions, geometric_normals, shininess: float) -> np.ndarray:
+        """(N,) ``sky_horizon_occlusion`` evaluated by GL for (N,3) mirror directions and geometric
+        normals, for one Phong exponent: the share of the glossy lobe above the surface's face."""
+        return self._run(3, directions, geometric_normals, None, shininess)[:, 0]

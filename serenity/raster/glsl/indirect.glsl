@@ -2,7 +2,9 @@
 // additive blending (so each technique has its own cost, as in the paper's Table 1):
 //   TECHNIQUE == 1  sky lighting (paper §7):   L += albedo/pi * E_sky(p, n)       (sky volume, L2 SH)
 //                   SKY_GLOSSY (SkyConfig.glossy): + k_s * L_sky(p, r, m), the volume's radiance around the
-//                   mirror direction r filtered by the Phong lobe (sky.glsl, sky_irradiance_glossy)
+//                   mirror direction r filtered by the Phong lobe (sky.glsl, sky_irradiance_glossy), times
+//                   the lobe's share above the surface's flat face (sky_horizon_occlusion; the face from
+//                   the G-buffer's positions in the main view, the shading normal in ray-traced views)
 //   TECHNIQUE == 2  LPV (paper §8, Fig. 10):   L += albedo/pi * E_lpv(p, n) + k_s * L_glossy(p, r, m)
 // u_diffuse / u_glossy (LPVConfig.diffuse / .glossy) switch the two LPV terms: a switched-off term
 // is not looked up. Main view: multiplied by SSAO (indirect light only, paper §3). Ray-traced views (u_rt_view): the
@@ -75,8 +77,15 @@ void main() {
 #if TECHNIQUE == 1
 #if SKY_GLOSSY
     vec3 sky_gloss;
-    diffuse = albedo / PI * sky_irradiance_glossy(p, n, reflect(-v, n), GBUF(g_material).x, sky_gloss);
-    glossy = nrm.w * sky_gloss;
+    vec3 r = reflect(-v, n);
+    float m = GBUF(g_material).x;
+    diffuse = albedo / PI * sky_irradiance_glossy(p, n, r, m, sky_gloss);
+#if LOWRES
+    vec3 ng = gbuffer_flat_normal(g_position, px, p, n);
+#else
+    vec3 ng = u_rt_view ? n : gbuffer_flat_normal(g_position, ivec2(gl_FragCoord.xy), p, n);
+#endif
+    glossy = nrm.w * sky_horizon_occlusion(r, ng, m) * sky_gloss;
 #else
     diffuse = albedo / PI * sky_irradiance(p, n);
 #endif

@@ -23,6 +23,9 @@
 // SKY_VISIBILITY (SkyConfig.gather_visibility with method "gather"): the 8 probes around the lookup are
 // read one by one (texelFetch) and each weighed by whether it sees the point, as
 // serenity/kernels/probegather.py's probe_visibility (DDGI's back-face weight and Chebyshev bound).
+// Specular occlusion of the glossy term by the surface's own horizon: sky_horizon_occlusion(r, ng, m),
+// the share of the Phong lobe (exponent m, around the mirror direction r) above the plane of the
+// geometric normal ng, and gbuffer_flat_normal, ng from a G-buffer's positions.
 #ifndef SERENITY_SKY_GLSL
 #define SERENITY_SKY_GLSL
 #include "common.glsl"
@@ -174,6 +177,50 @@ vec3 sky_volume_irradiance(sampler3D tex[7], vec3 open_sky[9], vec3 p, vec3 n, v
                            float normal_offset) {
     vec3 unused;
     return sky_volume_lookup(tex, open_sky, p, n, n, 0.0, origin, cell, res, normal_offset, unused);
+}
+
+// Specular occlusion by the horizon. A mesh's interpolated (shading) normals bend away from its flat faces
+// where they are averaged across a corner: a table's apron smoothed into its legs leans 50 degrees off its
+// face, and its mirror direction r points into the table. The light from there cannot reach the face: a
+// path tracer's reflected ray goes into the object and finds it dark inside. The normalised Phong lobe
+// cos^m around r is close to a 2-D Gaussian of standard deviation 1/sqrt(m + 1) per axis, so the share
+// of it above the plane with normal ng is Phi(dot(r, ng) * sqrt(m + 1)) (Phi: the normal CDF, here the
+// logistic 1 / (1 + exp(-1.7 x)), within 0.01 of it): 0.5 with r in the plane, about 0 with r a lobe's
+// width below it. Where the shading normal is the flat one (ng = n), dot(r, n) = dot(v, n): only a
+// grazing view loses a little.
+float sky_horizon_occlusion(vec3 r, vec3 ng, float m) {
+    return 1.0 / (1.0 + exp(-1.7 * dot(r, ng) * sqrt(max(m, 0.0) + 1.0)));
+}
+
+// The flat (geometric) normal at pixel q of a G-buffer's positions (xyz world, w = 0 where nothing is
+// drawn), with point p and shading normal n there: the cross product of a tangent per image axis, turned
+// to n's side. An axis's tangent is the central difference of its two neighbours where they lie on a line
+// through p (their differences from p agree within a quarter of their lengths), else the difference to
+// the nearer one (p on a silhouette or a crease: the neighbour on p's own face). One axis may be one-sided,
+// not both: the two one-sided tangents of a wire a few pixels wide both run along the wire, and the
+// normal they span has nothing to do with the wire's faces. n itself (no occlusion beyond the grazing
+// view's) at the image border, where both axes are one-sided, or where the tangents are less than
+// 15 degrees apart.
+vec3 gbuffer_flat_tangent(vec4 after, vec4 before, vec3 p, out bool central) {
+    vec3 a = after.w == 0.0 ? vec3(1e15) : after.xyz - p, b = before.w == 0.0 ? vec3(1e15) : p - before.xyz;
+    central = length(a - b) <= 0.25 * (length(a) + length(b));
+    return central ? a + b : (dot(a, a) < dot(b, b) ? a : b);
+}
+
+vec3 gbuffer_flat_normal(sampler2D positions, ivec2 q, vec3 p, vec3 n) {
+    ivec2 hi = textureSize(positions, 0) - 1;
+    if (any(lessThan(q, ivec2(1))) || any(greaterThan(q, hi - 1))) return n;
+    bool cx, cy;
+    vec3 tx = gbuffer_flat_tangent(texelFetch(positions, q + ivec2(1, 0), 0), texelFetch(positions, q - ivec2(1, 0), 0),
+                                   p, cx);
+    vec3 ty = gbuffer_flat_tangent(texelFetch(positions, q + ivec2(0, 1), 0), texelFetch(positions, q - ivec2(0, 1), 0),
+                                   p, cy);
+    if (!(cx || cy) || max(dot(tx, tx), dot(ty, ty)) > 1e20) return n;
+    vec3 c = cross(tx, ty);
+    float l = length(c);
+    if (!(l > 0.25 * length(tx) * length(ty))) return n;
+    c /= l;
+    return dot(c, n) < 0.0 ? -c : c;
 }
 
 uniform sampler2D u_sky_map;
