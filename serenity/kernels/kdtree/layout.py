@@ -52,7 +52,7 @@ MAX_CUTOUT_LAYERS = 64
 T_TOLERANCE = 1e-6  # relative (to the scene scale) overlap of near/far traversal intervals
 BOX_PADDING = 1e-5  # the root box is padded by this fraction of its largest extent
 TINY_DIRECTION = 1e-30  # a direction whose largest |component| is below this is a miss
-#: float32's largest finite value as a C literal, for the SIMD natives' finiteness tests (:func:`finite`)
+#: float32's largest finite value: :func:`finite`'s bound, and the SIMD natives' (``FLT_MAX_F``)
 FLT_MAX = float(np.finfo(np.float32).max)
 assert STACK_SIZE & (STACK_SIZE - 1) == 0  # a power of 2: the stack index is masked (``STACK_MASK``)
 STACK_MASK = wp.constant(STACK_SIZE - 1)

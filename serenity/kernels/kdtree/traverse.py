@@ -167,6 +167,7 @@ def intersect_rays(
     hit_v: wp.array(dtype=float),
     offset: int,
 ):
+    """Closest hits, one ray per kernel thread: ray i's triangle (−1: a miss), t (inf), u, v."""
     i = wp.tid() + offset
     prim, t, u, v = trace_kd(tree, origins[i], directions[i], tmin, tmax[i], False)
     hit_t[i] = t
@@ -187,6 +188,7 @@ def occlude_rays(
     occluded: wp.array(dtype=wp.int32),
     offset: int,
 ):
+    """Any hit, one ray per kernel thread: 1 where something lies on ray i within (tmin, tmax[i])."""
     i = wp.tid() + offset
     prim, t, u, v = trace_kd(tree, origins[i], directions[i], tmin, tmax[i], True)
     occluded[i] = wp.where(prim >= 0, 1, 0)
