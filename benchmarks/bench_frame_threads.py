@@ -69,13 +69,13 @@ def group_of(name: str, tid: int, python_names: dict[int, str]) -> str:
 
 def measure(width: int, height: int, frames: int, overlap: bool) -> dict:
     from serenity.bench import camera_path, sun_path
-    from serenity.config import RenderConfig
+    from serenity.config import RenderConfig, ScheduleConfig
     from serenity.frame import Renderer
     from serenity.scene import load
 
     scene = load("courtyard")
     cam0, sun0 = scene.camera, np.asarray(scene.sun.direction, np.float64).copy()
-    r = Renderer(scene, width, height, config=RenderConfig.preset("lpv-fast", overlap=overlap))
+    r = Renderer(scene, width, height, config=RenderConfig.preset("lpv-fast", schedule=ScheduleConfig(overlap=overlap)))
 
     def step(i: int) -> float:
         t = (i % 48) / 47

@@ -96,9 +96,10 @@ def our_configs() -> dict:
     """Our quality settings, name → RenderConfig: the single place the charted points come from (the
     quality presets, cheapest first), as an application renders them: waiting for GL only before the
     CPU stages (``sync_stages="cpu"``), not after every GL pass as a per-stage profile must."""
-    from serenity.config import QUALITY_PRESETS, RenderConfig
+    from serenity.config import QUALITY_PRESETS, RenderConfig, ScheduleConfig
 
-    return {name: RenderConfig.preset(name, sync_stages="cpu") for name in reversed(QUALITY_PRESETS)}
+    return {name: RenderConfig.preset(name, schedule=ScheduleConfig(sync_stages="cpu"))
+            for name in reversed(QUALITY_PRESETS)}
 
 
 def parse_size(text: str) -> tuple[int, int]:

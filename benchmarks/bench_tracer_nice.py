@@ -5,7 +5,7 @@ overlapped renderer per variant, frames interleaved in one process.
         [--frames 24] [--passes 10] [--json FILE] [--chart FILE.png]
 
 A variant is ``default`` (RenderConfig's own settings) or ``NICE[/session][/idle]``: the tracer
-process's niceness (``RenderConfig.tracer_nice``), in a session of its own (``tracer_session``: its
+process's niceness (``ScheduleConfig.tracer_nice``), in a session of its own (``tracer_session``: its
 own autogroup where Linux has them), and its rays handed over where the main thread is about to
 wait for the volume worker instead of right after the G-buffer (``tracer_start = "idle"``; without
 ``/idle`` "g-buffer"). ``own_group`` records whether the tracer got a scheduling group of its own,
@@ -45,7 +45,7 @@ RT, WAIT = "cpu ray tracing", "wait for ray tracing"
 
 
 def parse_variant(spec: str) -> dict:
-    """``NICE[/session][/idle]`` → the RenderConfig fields it sets; ``default`` → none (RenderConfig's
+    """``NICE[/session][/idle]`` → the ScheduleConfig fields it sets; ``default`` → none (ScheduleConfig's
     own: nice 19, a session of its own, the "auto" start)."""
     if spec.strip() == "default":
         return {}
@@ -58,14 +58,14 @@ def parse_variant(spec: str) -> dict:
 
 def run_size(scene_name: str, w: int, h: int, variants: list[str], frames: int, passes: int, quality: str) -> dict:
     from serenity.bench import camera_path, sun_path
-    from serenity.config import RenderConfig
+    from serenity.config import RenderConfig, ScheduleConfig
     from serenity.frame import Renderer
     from serenity.scene import load
 
     base = load(scene_name)
     names = ["serial", *variants]
-    configs = [RenderConfig.preset(quality, overlap=False)] + [
-        RenderConfig.preset(quality, overlap=True, **parse_variant(v)) for v in variants]
+    configs = [RenderConfig.preset(quality, schedule=ScheduleConfig(overlap=False))] + [
+        RenderConfig.preset(quality, schedule=ScheduleConfig(overlap=True, **parse_variant(v))) for v in variants]
     scenes = {k: copy.deepcopy(base) for k in names}
     renderers = {k: Renderer(scenes[k], w, h, config=c) for k, c in zip(names, configs, strict=True)}
     rec = {k: {"frame": [], "rt": [], "wait": [], "rt_cpu": []} for k in names}

@@ -28,6 +28,7 @@ _EXPORTS = {
     "SSAOConfig": "serenity.config",
     "SkyConfig": "serenity.config",
     "LPVConfig": "serenity.config",
+    "ScheduleConfig": "serenity.config",
     "SerenityError": "serenity.errors",
     "SceneError": "serenity.errors",
     "load": "serenity.scene",

@@ -22,7 +22,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from serenity.config import DEFAULT_QUALITY, RenderConfig
+from serenity.config import DEFAULT_QUALITY, RenderConfig, ScheduleConfig
 from serenity.device import resolve_device
 from serenity.frame import LPV_UPDATE_STAGES, MAIN_LANE, SKY_UPDATE_STAGES, STAGES, Renderer
 from serenity.io.results import machine_info, write_results
@@ -91,7 +91,7 @@ def run_schedules(scene, width, height, frames, device=None, schedules=(True, Fa
     try:
         for o in schedules:
             renderers[o] = Renderer(scenes[o], width, height, device=device,
-                                    config=RenderConfig.preset(quality, overlap=o))
+                                    config=RenderConfig.preset(quality, schedule=ScheduleConfig(overlap=o)))
         for i in tqdm(range(frames), desc=f"bench {scene.name} ({label})", disable=not progress, unit="frame"):
             t = i / max(1, frames - 1)
             order = schedules if i % 2 == 0 else tuple(reversed(schedules))

@@ -456,52 +456,12 @@ class LPVConfig:
 
 
 @dataclass(frozen=True)
-class RenderConfig:
-    """Everything one ``serenity.frame.Renderer`` renders with: exposure, the ambient baseline, the
-    sun's shadows (``shadow``), SSAO (``ssao``), the sky lighting volume (``sky``), the light
-    propagation volumes (``lpv``), and the ray-tracing pass (``ray_tracing`` and the fields after
-    it). Each GI technique is a sub-config with an ``enabled`` flag, e.g.
-    ``RenderConfig(lpv=LPVConfig(enabled=False))`` renders without the LPV.
+class ScheduleConfig:
+    """How a frame's work is scheduled on this machine: which parts run beside which (paper §10),
+    at what priority, and when the frame waits for the GL queue. None of it changes the image
+    (tests compare the schedules' images); ``benchmarks/bench_tracer_nice.py``,
+    ``bench_frame_threads.py`` and ``bench_pass_ab.py`` measure what each costs."""
 
-    A bare ``RenderConfig()`` is the "lpv" preset: the paper's techniques, every one on. It is not
-    the default: ``Renderer(scene, w, h)`` without a config renders ``DEFAULT_QUALITY``
-    ("traced-probes"), as every command does. Start from a preset with
-    ``RenderConfig.preset(name, **overrides)`` (no name: the default preset)."""
-
-    exposure: float = DEFAULT_EXPOSURE
-    """Multiplier applied to radiance (W·m⁻²·sr⁻¹) before Reinhard (see ``DEFAULT_EXPOSURE``)."""
-    ambient: str = "none"
-    """Indirect term while the GI techniques are absent: "none", or "constant" (the classic flat
-    ambient hack, irradiance π·L_sky on every surface — the baseline the GI must beat)."""
-    shadow: ShadowConfig = field(default_factory=ShadowConfig)
-    ssao: SSAOConfig = field(default_factory=SSAOConfig)
-    sky: SkyConfig = field(default_factory=SkyConfig)
-    """The sky lighting irradiance volume (paper §7); ``enabled=False`` turns the sky term off."""
-    lpv: LPVConfig = field(default_factory=LPVConfig)
-    """Light propagation volumes (paper §8); ``enabled=False`` turns the LPV off. Default: 3 cascades
-    of 12³, 8 iterations, the coarsest extended to cross the scene and at most 6 cells across it, far
-    light handed over to the finer cascades, clamped face flux, lookup occlusion."""
-    sync_stages: str = "each"
-    """When the frame waits for the GL queue (``ctx.finish()``): "each" = after every GL stage, so each
-    stage's wall time is its own (the profile ``serenity bench`` reports); "cpu" = only before the
-    stages that run on the CPU (the volumes' kernels, the wait for the tracer), so GL work never runs
-    beside them but a run of GL passes is not cut into waits (a GL stage's time is then only what
-    it took to queue); "none" = never before the read-back. (True / False read as "each" / "none".)
-    "each" by default, as every figure of a stage assumes; "cpu" is what an application that reads
-    no per-stage times would use (the frontier does): still frames 3-12 % faster in four of five
-    interleaved A/Bs (1 % slower in the fifth), the same images."""
-    ray_tracing: bool = True
-    """Ray-traced reflections and refractions for mirror/metal/glass pixels (paper §9)."""
-    reflections: bool = True
-    """Trace the reflected rays. False: none are traced, and the reflection term of the Fresnel blend
-    shows the rasterised surface instead (a mirror looks as with ``ray_tracing=False``)."""
-    refractions: bool = True
-    """Trace the refracted rays. False: none are traced, and a glass pixel's transmitted term shows
-    the rasterised surface instead (its Fresnel reflection stays)."""
-    transmissions: int = 4
-    """Transparent interfaces a refraction ray is bent through before the surface it shows (the
-    back face of a glass solid, a second pane, total internal reflection inside a prism); 0 = the
-    paper's single refraction, where glass solids show their own back faces."""
     overlap: bool = True
     """Run the CPU ray tracing in a worker thread while the GL work proceeds (paper §10); False
     traces inline first (the serial schedule, for comparison)."""
@@ -519,7 +479,7 @@ class RenderConfig:
     volumes run more in what they leave idle, at the risk of the frame waiting for them where it
     joins them ("wait for volumes"). 4: the G-buffer, CSM and SSAO get faster by more than the wait
     grows (frame −1.4 to −3.3 % against 0 at 320×180 and 640×360; 10: about −1 %, the frame waiting
-    2.4 ms for the volumes; ``benchmarks/bench_pass_ab.py --a-config volume_nice=0``)."""
+    2.4 ms for the volumes; ``benchmarks/bench_pass_ab.py --a-config schedule.volume_nice=0``)."""
     tracer_nice: int = 19
     """The niceness (-20..19), relative to this process's, of the tracer process that the overlapped
     schedule on the CPU traces in (``kernels/tracer_process``): 19 = the lowest priority, so that it
@@ -554,6 +514,72 @@ class RenderConfig:
     (``tracer_session`` took effect), else "g-buffer" — at nice 19 in the renderer's group a later
     start only delays a tracer that still waits for a core (tracer stage 5.0x the inline trace at
     640×360 against 3.3x from the G-buffer). The same images in every case (tests)."""
+    sync_stages: str = "each"
+    """When the frame waits for the GL queue (``ctx.finish()``): "each" = after every GL stage, so each
+    stage's wall time is its own (the profile ``serenity bench`` reports); "cpu" = only before the
+    stages that run on the CPU (the volumes' kernels, the wait for the tracer), so GL work never runs
+    beside them but a run of GL passes is not cut into waits (a GL stage's time is then only what
+    it took to queue); "none" = never before the read-back. (True / False read as "each" / "none".)
+    "each" by default, as every figure of a stage assumes; "cpu" is what an application that reads
+    no per-stage times would use (the frontier does): still frames 3-12 % faster in four of five
+    interleaved A/Bs (1 % slower in the fifth), the same images."""
+
+    def __post_init__(self):
+        if not (isinstance(self.volume_nice, int) and 0 <= self.volume_nice <= 19):
+            raise ConfigError(f"ScheduleConfig.volume_nice must be an int in 0..19, got {self.volume_nice!r}")
+        if not (isinstance(self.tracer_nice, int) and -20 <= self.tracer_nice <= 19):
+            raise ConfigError(f"ScheduleConfig.tracer_nice must be an int in -20..19, got {self.tracer_nice!r}")
+        if self.tracer_session not in (None, True, False):
+            raise ConfigError(f"ScheduleConfig.tracer_session must be None, True or False, got {self.tracer_session!r}")
+        if self.tracer_start not in ("auto", "g-buffer", "idle"):
+            raise ConfigError(f"ScheduleConfig.tracer_start must be auto, g-buffer or idle, got {self.tracer_start!r}")
+        if isinstance(self.sync_stages, bool):
+            object.__setattr__(self, "sync_stages", "each" if self.sync_stages else "none")
+        if self.sync_stages not in ("each", "cpu", "none"):
+            raise ConfigError(f"ScheduleConfig.sync_stages must be each, cpu or none, got {self.sync_stages!r}")
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """Everything one ``serenity.frame.Renderer`` renders with: exposure, the ambient baseline, the
+    sun's shadows (``shadow``), SSAO (``ssao``), the sky lighting volume (``sky``), the light
+    propagation volumes (``lpv``), and the ray-tracing pass (``ray_tracing`` and the fields after
+    it). Each GI technique is a sub-config with an ``enabled`` flag, e.g.
+    ``RenderConfig(lpv=LPVConfig(enabled=False))`` renders without the LPV.
+
+    A bare ``RenderConfig()`` is the "lpv" preset: the paper's techniques, every one on. It is not
+    the default: ``Renderer(scene, w, h)`` without a config renders ``DEFAULT_QUALITY``
+    ("traced-probes"), as every command does. Start from a preset with
+    ``RenderConfig.preset(name, **overrides)`` (no name: the default preset)."""
+
+    exposure: float = DEFAULT_EXPOSURE
+    """Multiplier applied to radiance (W·m⁻²·sr⁻¹) before Reinhard (see ``DEFAULT_EXPOSURE``)."""
+    ambient: str = "none"
+    """Indirect term while the GI techniques are absent: "none", or "constant" (the classic flat
+    ambient hack, irradiance π·L_sky on every surface — the baseline the GI must beat)."""
+    shadow: ShadowConfig = field(default_factory=ShadowConfig)
+    ssao: SSAOConfig = field(default_factory=SSAOConfig)
+    sky: SkyConfig = field(default_factory=SkyConfig)
+    """The sky lighting irradiance volume (paper §7); ``enabled=False`` turns the sky term off."""
+    lpv: LPVConfig = field(default_factory=LPVConfig)
+    """Light propagation volumes (paper §8); ``enabled=False`` turns the LPV off. Default: 3 cascades
+    of 12³, 8 iterations, the coarsest extended to cross the scene and at most 6 cells across it, far
+    light handed over to the finer cascades, clamped face flux, lookup occlusion."""
+    schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
+    """How the frame's work is scheduled (worker thread and process, priorities, GL waits): the same
+    image whatever it says."""
+    ray_tracing: bool = True
+    """Ray-traced reflections and refractions for mirror/metal/glass pixels (paper §9)."""
+    reflections: bool = True
+    """Trace the reflected rays. False: none are traced, and the reflection term of the Fresnel blend
+    shows the rasterised surface instead (a mirror looks as with ``ray_tracing=False``)."""
+    refractions: bool = True
+    """Trace the refracted rays. False: none are traced, and a glass pixel's transmitted term shows
+    the rasterised surface instead (its Fresnel reflection stays)."""
+    transmissions: int = 4
+    """Transparent interfaces a refraction ray is bent through before the surface it shows (the
+    back face of a glass solid, a second pane, total internal reflection inside a prism); 0 = the
+    paper's single refraction, where glass solids show their own back faces."""
     osm_size: int = 512
     """Texels per side of each of the 3 overlapped shadow maps of the ray-traced views (paper §9)."""
     rt_sun_shadows: str = "traced"
@@ -605,14 +631,6 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.exposure must be positive, got {self.exposure}")
         if not (isinstance(self.transmissions, int) and 0 <= self.transmissions <= 16):
             raise ConfigError(f"RenderConfig.transmissions must be an int in 0..16, got {self.transmissions!r}")
-        if not (isinstance(self.volume_nice, int) and 0 <= self.volume_nice <= 19):
-            raise ConfigError(f"RenderConfig.volume_nice must be an int in 0..19, got {self.volume_nice!r}")
-        if not (isinstance(self.tracer_nice, int) and -20 <= self.tracer_nice <= 19):
-            raise ConfigError(f"RenderConfig.tracer_nice must be an int in -20..19, got {self.tracer_nice!r}")
-        if self.tracer_session not in (None, True, False):
-            raise ConfigError(f"RenderConfig.tracer_session must be None, True or False, got {self.tracer_session!r}")
-        if self.tracer_start not in ("auto", "g-buffer", "idle"):
-            raise ConfigError(f"RenderConfig.tracer_start must be auto, g-buffer or idle, got {self.tracer_start!r}")
         if not (16 <= self.osm_size <= MAX_IMAGE_SIZE):
             raise ConfigError(f"RenderConfig.osm_size must be in 16..{MAX_IMAGE_SIZE}, got {self.osm_size}")
         if self.rt_sun_shadows not in ("traced", "osm"):
@@ -624,20 +642,18 @@ class RenderConfig:
                               f"got {self.indirect_refine_below!r}")
         if not (isinstance(self.indirect_history, (int, float)) and 0.0 < self.indirect_history <= 1.0):
             raise ConfigError(f"RenderConfig.indirect_history must be in (0, 1], got {self.indirect_history!r}")
-        if isinstance(self.sync_stages, bool):
-            object.__setattr__(self, "sync_stages", "each" if self.sync_stages else "none")
-        if self.sync_stages not in ("each", "cpu", "none"):
-            raise ConfigError(f"RenderConfig.sync_stages must be each, cpu or none, got {self.sync_stages!r}")
         if self.ambient not in ("none", "constant"):
             raise ConfigError(f"RenderConfig.ambient must be 'none' or 'constant', got {self.ambient!r}")
         if not (isinstance(self.texture_taps, int) and 1 <= self.texture_taps <= 16):
             raise ConfigError(f"RenderConfig.texture_taps must be an int in 1..16, got {self.texture_taps!r}")
         if self.antialiasing not in ("none", "fxaa", "taa"):
             raise ConfigError(f"RenderConfig.antialiasing must be 'none', 'fxaa' or 'taa', got {self.antialiasing!r}")
-        for name, kind in (("shadow", ShadowConfig), ("ssao", SSAOConfig), ("sky", SkyConfig), ("lpv", LPVConfig)):
+        for name, kind in (("shadow", ShadowConfig), ("ssao", SSAOConfig), ("sky", SkyConfig), ("lpv", LPVConfig),
+                           ("schedule", ScheduleConfig)):
             value = getattr(self, name)
             if not isinstance(value, kind):
-                hint = f" (e.g. {name}={kind.__name__}(enabled=False) to turn it off)" if name != "shadow" else ""
+                hint = (f" (e.g. {name}={kind.__name__}(enabled=False) to turn it off)"
+                        if name not in ("shadow", "schedule") else "")
                 raise ConfigError(f"RenderConfig.{name} must be a {kind.__name__}, got {value!r}{hint}")
         if self.sky.enabled and self.sky.method == "gather" and self.lpv.enabled and self.lpv.diffuse:
             raise ConfigError("RenderConfig: sky.method='gather' already lights the probes with the bounced "
@@ -708,7 +724,8 @@ class KdBuildConfig:
         return int(max(0, min(d, KD_MAX_DEPTH)))
 
 
-SUB_CONFIGS = {"shadow": ShadowConfig, "ssao": SSAOConfig, "sky": SkyConfig, "lpv": LPVConfig}
+SUB_CONFIGS = {"shadow": ShadowConfig, "ssao": SSAOConfig, "sky": SkyConfig, "lpv": LPVConfig,
+               "schedule": ScheduleConfig}
 
 PRESETS: dict[str, dict] = {
     # The paper's pipeline as published (§6–§9): indirect light and SSAO at full resolution, the sky

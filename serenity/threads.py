@@ -8,7 +8,7 @@ the real work. Measured on the 2-core machine while other jobs ran: the sky proj
 (26 × 7232) @ (7232 × 3) product took 2–10 ms with OpenBLAS's default pool and 0.15 ms on one
 thread, and the sky transfer's Warp launch next to it went from ~15 to ~5.5 CPU-ms.
 
-:func:`lower_thread_priority` lowers one worker thread's priority (``RenderConfig.volume_nice``).
+:func:`lower_thread_priority` lowers one worker thread's priority (``ScheduleConfig.volume_nice``).
 
 :func:`single_threaded_blas` limits the BLAS pool to one thread for the duration of a ``with``
 block (``threadpoolctl``, the library scikit-learn uses for the same purpose) and restores the

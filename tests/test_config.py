@@ -7,7 +7,15 @@ import sys
 
 import pytest
 
-from serenity.config import LPVConfig, RenderConfig, ShadowConfig, SkyConfig, SSAOConfig, changed_settings
+from serenity.config import (
+    LPVConfig,
+    RenderConfig,
+    ScheduleConfig,
+    ShadowConfig,
+    SkyConfig,
+    SSAOConfig,
+    changed_settings,
+)
 from serenity.errors import SerenityError
 
 
@@ -27,11 +35,11 @@ from serenity.errors import SerenityError
     (ShadowConfig, {"contact_pixels": 0.0}, "ShadowConfig.contact_pixels"),
     (ShadowConfig, {"contact_texels": -1.0}, "ShadowConfig.contact_texels"),
     (RenderConfig, {"rt_sun_shadows": "pcss"}, "RenderConfig.rt_sun_shadows"),
-    (RenderConfig, {"tracer_nice": 20}, "RenderConfig.tracer_nice"),
-    (RenderConfig, {"tracer_nice": -21}, "RenderConfig.tracer_nice"),
-    (RenderConfig, {"tracer_session": "yes"}, "RenderConfig.tracer_session"),
-    (RenderConfig, {"volume_nice": -1}, "RenderConfig.volume_nice"),
-    (RenderConfig, {"volume_nice": 20}, "RenderConfig.volume_nice"),
+    (ScheduleConfig, {"tracer_nice": 20}, "ScheduleConfig.tracer_nice"),
+    (ScheduleConfig, {"tracer_nice": -21}, "ScheduleConfig.tracer_nice"),
+    (ScheduleConfig, {"tracer_session": "yes"}, "ScheduleConfig.tracer_session"),
+    (ScheduleConfig, {"volume_nice": -1}, "ScheduleConfig.volume_nice"),
+    (ScheduleConfig, {"volume_nice": 20}, "ScheduleConfig.volume_nice"),
     (SSAOConfig, {"steps": 0}, "SSAOConfig.steps"),
     (SkyConfig, {"window": "box"}, "SkyConfig.window"),
     (SkyConfig, {"rays_per_probe": 0}, "SkyConfig.rays_per_probe"),

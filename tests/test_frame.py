@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from serenity.bench import camera_path, rss_mb, sun_path
-from serenity.config import RenderConfig
+from serenity.config import RenderConfig, ScheduleConfig
 from serenity.errors import ConfigError, SerenityError
 from serenity.frame import LPV_UPDATE_STAGES, SKY_UPDATE_STAGES, STAGES, Renderer
 from serenity.scene import load
@@ -35,7 +35,7 @@ def test_timing_keys_are_the_stages_in_order(courtyard):
     """Every timed stage of a first frame and of a frame with a moved camera and sun is one of
     STAGES (listed in STAGES order), and the LPV update is timed in its named parts."""
     scene = copy.deepcopy(courtyard)
-    r = Renderer(scene, *SIZE, config=RenderConfig(overlap=False))
+    r = Renderer(scene, *SIZE, config=RenderConfig(schedule=ScheduleConfig(overlap=False)))
     try:
         first = r.render(read_back=False)
         assert set(first.timings) <= set(STAGES) and _in_stage_order(first.timings)
@@ -52,7 +52,7 @@ def test_timing_keys_are_the_stages_in_order(courtyard):
 def test_unchanged_scene_renders_identically_and_skips_work(courtyard):
     """Two renders of an unchanged scene give the same image bit for bit, and the second redoes
     no volume update (nothing moved)."""
-    r = Renderer(copy.deepcopy(courtyard), *SIZE, config=RenderConfig(overlap=False))
+    r = Renderer(copy.deepcopy(courtyard), *SIZE, config=RenderConfig(schedule=ScheduleConfig(overlap=False)))
     try:
         r.render(read_back={"hdr"})
         a = r.render(read_back={"hdr"})
@@ -76,7 +76,8 @@ def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
 
     from serenity.kernels.lpv.volume import blend_updates
 
-    fast = RenderConfig.preset("lpv-fast", overlap=False, indirect_history=1.0)  # the volumes, not the image history
+    # the volumes, not the image history
+    fast = RenderConfig.preset("lpv-fast", indirect_history=1.0, schedule=ScheduleConfig(overlap=False))
     every = dataclasses.replace(fast, sky=dataclasses.replace(fast.sky, transfer_layers=0),
                                 lpv=dataclasses.replace(fast.lpv, stagger=False, temporal_blend=1.0))
     scenes = [copy.deepcopy(courtyard), copy.deepcopy(courtyard)]
@@ -116,7 +117,7 @@ def test_memory_does_not_grow_over_frames(courtyard):
     noise; a leak of one 96x54 float image per frame would add ~2.4 MiB per 10 frames, a leak of
     the LPV or the sky volume far more)."""
     scene = copy.deepcopy(courtyard)
-    r = Renderer(scene, *SIZE, config=RenderConfig(overlap=False))
+    r = Renderer(scene, *SIZE, config=RenderConfig(schedule=ScheduleConfig(overlap=False)))
     rss = []
     try:
         for i in range(30):
@@ -136,7 +137,8 @@ def test_overlapped_and_serial_schedules_agree(scene_name, device):
     (max |diff| <= 1e-4 of the image's peak)."""
     images = []
     for overlap in (True, False):
-        r = Renderer(load(scene_name), *SIZE, device=device, config=RenderConfig(overlap=overlap))
+        r = Renderer(load(scene_name), *SIZE, device=device,
+                     config=RenderConfig(schedule=ScheduleConfig(overlap=overlap)))
         try:
             f = r.render(read_back={"hdr"})
             assert f.rays > 0
@@ -157,9 +159,9 @@ def test_overlapped_and_serial_schedules_agree(scene_name, device):
 @pytest.mark.skipif(not hasattr(os, "getpriority"), reason="POSIX priorities")
 @pytest.mark.parametrize("nice", [0, 7])
 def test_tracer_process_runs_at_the_configured_niceness(nice):
-    """``RenderConfig.tracer_nice`` is the tracer process's niceness above this process's own, and
+    """``ScheduleConfig.tracer_nice`` is the tracer process's niceness above this process's own, and
     its frames trace as at any other."""
-    r = Renderer(load("glass"), *SIZE, config=RenderConfig(tracer_nice=nice))
+    r = Renderer(load("glass"), *SIZE, config=RenderConfig(schedule=ScheduleConfig(tracer_nice=nice)))
     try:
         f = r.render(read_back=False)
         assert f.rays > 0 and f.tracer_cpu_ms > 0.0
@@ -172,12 +174,12 @@ def test_tracer_process_runs_at_the_configured_niceness(nice):
 
 @pytest.mark.skipif(not hasattr(os, "getsid"), reason="POSIX sessions")
 def test_tracer_process_in_a_session_of_its_own():
-    """``RenderConfig.tracer_session`` starts the tracer process as the leader of a new session (and so,
+    """``ScheduleConfig.tracer_session`` starts the tracer process as the leader of a new session (and so,
     where Linux has autogroups enabled, in a scheduling group of its own); it traces the frame the
     tracer in the renderer's session traces, bit for bit."""
     images, groups, owns = [], [], []
     for session in (False, True):
-        r = Renderer(load("glass"), *SIZE, config=RenderConfig(tracer_session=session))
+        r = Renderer(load("glass"), *SIZE, config=RenderConfig(schedule=ScheduleConfig(tracer_session=session)))
         try:
             f = r.render(read_back={"hdr"})
             assert f.rays > 0 and f.tracer_cpu_ms > 0.0
@@ -249,13 +251,14 @@ def test_scheduling_group_is_none_where_the_kernel_names_none(monkeypatch, tmp_p
 
 @pytest.mark.skipif(not hasattr(os, "getpriority"), reason="POSIX priorities")
 def test_volume_worker_runs_at_the_configured_niceness(courtyard):
-    """``RenderConfig.volume_nice`` lowers the volume worker's thread only: the worker's niceness is
+    """``ScheduleConfig.volume_nice`` lowers the volume worker's thread only: the worker's niceness is
     the process's plus it, the calling thread's is unchanged, and the frames are those of a worker
     at the frame's priority."""
     own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
     images = []
     for nice in (0, 6):
-        r = Renderer(courtyard, *SIZE, config=RenderConfig.preset("lpv-fast", volume_nice=nice))
+        cfg = RenderConfig.preset("lpv-fast", schedule=ScheduleConfig(volume_nice=nice))
+        r = Renderer(courtyard, *SIZE, config=cfg)
         try:
             assert r._volume_pool is not None
             worker = r._volume_pool.submit(lambda: os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
@@ -274,7 +277,7 @@ def test_sync_modes_give_the_same_frames(courtyard):
     for mode in ("each", "cpu", "none"):
         scene = copy.deepcopy(courtyard)
         base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-        r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast", sync_stages=mode))
+        r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast", schedule=ScheduleConfig(sync_stages=mode)))
         try:
             frames = []
             for i in range(3):
@@ -289,10 +292,10 @@ def test_sync_modes_give_the_same_frames(courtyard):
     for mode in ("cpu", "none"):
         for a, b in zip(images["each"], images[mode], strict=True):
             assert np.array_equal(a, b), mode
-    assert RenderConfig(sync_stages=True).sync_stages == "each"
-    assert RenderConfig(sync_stages=False).sync_stages == "none"
+    assert ScheduleConfig(sync_stages=True).sync_stages == "each"
+    assert ScheduleConfig(sync_stages=False).sync_stages == "none"
     with pytest.raises(ConfigError, match="sync_stages"):
-        RenderConfig(sync_stages="sometimes")
+        ScheduleConfig(sync_stages="sometimes")
 
 
 def test_volume_worker_gives_the_serial_frames(courtyard):
@@ -306,7 +309,8 @@ def test_volume_worker_gives_the_serial_frames(courtyard):
     for worker in (True, False):
         scene = copy.deepcopy(courtyard)
         base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-        r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast", overlap_volumes=worker))
+        cfg = RenderConfig.preset("lpv-fast", schedule=ScheduleConfig(overlap_volumes=worker))
+        r = Renderer(scene, *SIZE, config=cfg)
         try:
             assert (r._volume_pool is not None) == worker
             frames, lanes, stages = [], set(), []
@@ -332,7 +336,7 @@ def test_volume_worker_gives_the_serial_frames(courtyard):
 
 
 def test_tracer_start_moves_sync_1_only(courtyard):
-    """``RenderConfig.tracer_start = "idle"`` reads the ray-casting buffer back and hands the rays to
+    """``ScheduleConfig.tracer_start = "idle"`` reads the ray-casting buffer back and hands the rays to
     the tracer process just before the main thread waits for the volume worker, in a frame where it
     will wait, and right after the G-buffer in a frame with no volume work; "g-buffer" always right
     after it. Only the schedule moves: both render the same frames, bit for bit, while the sun and
@@ -347,7 +351,7 @@ def test_tracer_start_moves_sync_1_only(courtyard):
     for where in ("g-buffer", "idle"):
         scene = copy.deepcopy(courtyard)
         base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-        r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast", tracer_start=where))
+        r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast", schedule=ScheduleConfig(tracer_start=where)))
         try:
             assert r._volume_pool is not None
             frames = []
@@ -373,7 +377,7 @@ def test_tracer_start_moves_sync_1_only(courtyard):
     for f in (early[-1], late[-1]):  # nothing for the worker: right after the G-buffer either way
         assert start(f, "ray casting buffer") < start(f, "shadow maps (CSM)")
     with pytest.raises(ConfigError, match="tracer_start"):
-        RenderConfig(tracer_start="later")
+        ScheduleConfig(tracer_start="later")
 
 
 @pytest.mark.parametrize("own_group", [True, False])
@@ -384,7 +388,7 @@ def test_tracer_start_auto_follows_the_tracers_scheduling_group(courtyard, monke
     from serenity.kernels.tracer_process import TracerProcess
 
     monkeypatch.setattr(TracerProcess, "own_group", property(lambda self: own_group))
-    assert RenderConfig().tracer_start == "auto" and RenderConfig().tracer_session is None
+    assert ScheduleConfig().tracer_start == "auto" and ScheduleConfig().tracer_session is None
     scene = copy.deepcopy(courtyard)
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
     r = Renderer(scene, *SIZE, config=RenderConfig.preset("lpv-fast"))

@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 
 import serenity.frame as frame_module  # noqa: E402
 from serenity.bench import camera_path, sun_path  # noqa: E402
-from serenity.config import QUALITY_PRESETS, RenderConfig  # noqa: E402
+from serenity.config import QUALITY_PRESETS, RenderConfig, ScheduleConfig  # noqa: E402
 from serenity.scene import load  # noqa: E402
 
 
@@ -37,7 +37,8 @@ def main() -> int:
     frame_module.time.perf_counter = time.process_time  # the stages' clock: CPU seconds
     scene = copy.deepcopy(load(args.scene))
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-    renderer = frame_module.Renderer(scene, w, h, config=RenderConfig.preset(args.quality, overlap=False))
+    config = RenderConfig.preset(args.quality, schedule=ScheduleConfig(overlap=False))
+    renderer = frame_module.Renderer(scene, w, h, config=config)
     records = []
     for i in range(args.frames):
         t = i / max(1, args.frames - 1)

@@ -20,7 +20,7 @@ import time
 import moderngl
 
 from serenity.bench import camera_path, sun_path
-from serenity.config import QUALITY_PRESETS, RenderConfig
+from serenity.config import QUALITY_PRESETS, RenderConfig, ScheduleConfig
 from serenity.frame import Renderer
 from serenity.scene import load
 
@@ -62,7 +62,8 @@ def main() -> int:
     instrument(acc)
     scene = copy.deepcopy(load(args.scene))
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
-    renderer = Renderer(scene, w, h, config=RenderConfig.preset(args.quality, overlap=not args.serial))
+    config = RenderConfig.preset(args.quality, schedule=ScheduleConfig(overlap=not args.serial))
+    renderer = Renderer(scene, w, h, config=config)
     warm = 3
     for i in range(args.frames):
         if i == warm:

@@ -7,7 +7,7 @@ main thread draws a fragment-bound fullscreen pass and waits for it, either thro
 ``ctx.finish()`` (which holds the GIL while llvmpipe renders) or through
 ``serenity.raster.context.finish`` (glFinish through ctypes, which releases it). Reported: the
 worker's launches per second in each case and alone, and the pass's milliseconds. This is why the
-frame's volume worker (``RenderConfig.overlap_volumes``) can overlap the GL passes at all.
+frame's volume worker (``ScheduleConfig.overlap_volumes``) can overlap the GL passes at all.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ import sys
 
 import numpy as np
 
-from serenity.config import RenderConfig
+from serenity.config import RenderConfig, ScheduleConfig
 from serenity.eval.metrics import compare
 from serenity.eval.reference import render_reference
 from serenity.frame import Renderer
@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     ref = render_reference(scene, width, height, spp=args.spp, component="full", seed=0)
     rows = []
     for t in (0, 1, 2, 4):
-        r = Renderer(scene, width, height, config=RenderConfig(transmissions=t, overlap=False))
+        r = Renderer(scene, width, height, config=RenderConfig(transmissions=t, schedule=ScheduleConfig(overlap=False)))
         frames = [r.render() for _ in range(max(2, args.frames))]
         f = frames[-1]
         traced = f.aovs["rt_mask"][..., 0] > 0

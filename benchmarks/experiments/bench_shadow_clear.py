@@ -56,14 +56,14 @@ def clear_alone(ctx, context, native, tile: int, reps: int = 25) -> dict:
 
 def in_frame(width: int, height: int, frames: int) -> dict:
     from serenity.bench import camera_path, sun_path
-    from serenity.config import RenderConfig
+    from serenity.config import RenderConfig, ScheduleConfig
     from serenity.frame import Renderer
     from serenity.raster import context
     from serenity.scene import load
 
     scene = load("courtyard")
     cam0, sun0 = scene.camera, np.asarray(scene.sun.direction, np.float64).copy()
-    r = Renderer(scene, width, height, config=RenderConfig.preset("lpv-fast", overlap=False))
+    r = Renderer(scene, width, height, config=RenderConfig.preset("lpv-fast", schedule=ScheduleConfig(overlap=False)))
     native = context._native_clear
     stage = {True: [], False: []}
     wall = {True: [], False: []}

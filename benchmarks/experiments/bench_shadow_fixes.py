@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from serenity.config import RenderConfig, ShadowConfig
+from serenity.config import RenderConfig, ScheduleConfig, ShadowConfig
 from serenity.eval.metrics import compare, rel_mse
 from serenity.eval.reference import render_reference
 from serenity.eval.regions import region_report
@@ -64,7 +64,7 @@ def tracer_cost(scene, w, h, repeats) -> dict | None:
     """The CPU tracer's own time for one frame's rays (the default frame's ray-casting buffer), with
     and without the sun's shadow rays, in this process on one thread, interleaved ``2 * repeats``
     times; None when the scene has no ray-traced pixel."""
-    r = Renderer(scene, w, h, config=RenderConfig(overlap=False))
+    r = Renderer(scene, w, h, config=RenderConfig(schedule=ScheduleConfig(overlap=False)))
     try:
         r.render()
         if r.tracer is None:

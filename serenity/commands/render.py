@@ -58,7 +58,7 @@ def format_report(report: dict) -> str:
 
 
 def run(args) -> int:
-    from serenity.config import RenderConfig
+    from serenity.config import RenderConfig, ScheduleConfig
     from serenity.frame import Renderer
     from serenity.io.exr import write_exr
     from serenity.io.png import write_png
@@ -71,7 +71,8 @@ def run(args) -> int:
     load_ms = (time.perf_counter() - t0) * 1e3
     png = args.output or os.path.join(DEFAULT_OUT_DIR, f"{scene_stem(args.scene)}.png")
     exr = args.exr or os.path.splitext(png)[0] + ".exr"
-    config = RenderConfig.preset(args.quality, exposure=args.exposure, ambient=args.ambient, overlap=not args.serial)
+    config = RenderConfig.preset(args.quality, exposure=args.exposure, ambient=args.ambient,
+                                 schedule=ScheduleConfig(overlap=not args.serial))
     frame = None
     with Renderer(scene, width, height, device=args.device, config=config) as renderer:
         for _ in range(max(1, args.frames)):

@@ -9,9 +9,9 @@ thread); meanwhile the main thread issues the GL work (shadow cascades, G-buffer
 lighting passes) and the volume kernels (LPV, the sky volume); then it joins the tracer (sync 2),
 uploads the ray-traced G-buffers, lights them with the overlapped shadow maps and composites them
 with a Fresnel blend; last the tone map. (With a volume worker the tracer process runs in a session of its own by
-default, ``RenderConfig.tracer_session``, and where that gives it a scheduling group of its own sync
+default, ``ScheduleConfig.tracer_session``, and where that gives it a scheduling group of its own sync
 1 moves to just before the main thread waits for the volume worker, ``tracer_start = "auto"``;
-with ``tracer_nice`` they set how the tracer process shares the cores.) ``RenderConfig.overlap=False``
+with ``tracer_nice`` they set how the tracer process shares the cores.) ``ScheduleConfig.overlap=False``
 (``--serial``) runs the ray tracing inline before the GL work, for comparison. ``STAGES`` names every stage in order;
 each stage of ``Renderer.render`` is one short method (``renderer.py``; the volumes' in ``volumes.py``,
 the ray tracing's in ``tracing.py``; ``record.py`` names the stages and holds the ``Frame``).
@@ -21,7 +21,7 @@ milliseconds (the worker's ``cpu ray tracing`` included); ``Frame.wall_ms`` is t
 duration, less than the sum when the tracer overlaps the GL work; ``Frame.events`` is the
 timeline (lane, stage, start, end in ms from the frame start) that ``serenity bench`` charts.
 
-Stage timing: GL is asynchronous, so with ``RenderConfig.sync_stages`` = "each" (default) each GL
+Stage timing: GL is asynchronous, so with ``ScheduleConfig.sync_stages`` = "each" (default) each GL
 stage ends with ``ctx.finish()`` and is timed by the wall clock; "cpu" waits only before the stages
 that run on the CPU, so a GL stage's time is then what it took to queue and the queued work shows up
 in the next wait (or the frame's final one). GL timer queries would not perturb the

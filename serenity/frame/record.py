@@ -25,7 +25,7 @@ STAGES = (
 ``indirect_scale`` > 1 "sky lighting" and "lpv lighting" run at low resolution before "direct
 lighting", which then includes their upsampling: one full-resolution pass). "rsm" includes the
 read-back of the RSM and of the G-buffer's samples; with the volume worker
-(``RenderConfig.overlap_volumes``) "sky volume update", "lpv inputs", "lpv inject" and "lpv
+(``ScheduleConfig.overlap_volumes``) "sky volume update", "lpv inputs", "lpv inject" and "lpv
 propagate" run on its lane beside the GL stages, and "wait for volumes" is what the main thread
 waited for them. "lpv propagate" includes a step of the LPV's temporal blend; "lpv blend" is that
 step alone, in a frame whose LPV inputs did not change while its light is still blended in

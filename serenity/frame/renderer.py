@@ -120,7 +120,8 @@ class Renderer(VolumeStages, RayTracingStages):
             # already, and beside the GL passes they only slowed both)
             self._sky_in_worker = self.sky_volume is not None and cfg.sky.method != "gather"
             self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix=VOLUME_THREAD,
-                                                    initializer=lower_thread_priority, initargs=(cfg.volume_nice,))
+                                                    initializer=lower_thread_priority,
+                                                    initargs=(cfg.schedule.volume_nice,))
                                  if self._volumes_in_worker() else None)
         self._upload_ms = self._timings.pop("upload")
         self._first = True
@@ -138,7 +139,7 @@ class Renderer(VolumeStages, RayTracingStages):
 
     @contextmanager
     def _stage(self, name: str, gl: bool = True) -> Iterator[None]:
-        sync = self.config.sync_stages
+        sync = self.config.schedule.sync_stages
         if not gl and sync == "cpu":  # the queued GL work first: it would contend with this stage's
             finish(self.ctx)           # CPU work for the cores
         t0 = time.perf_counter()

@@ -64,22 +64,22 @@ class RayTracingStages:
     @property
     def tracer_niceness(self) -> int | None:
         """The tracer process's niceness relative to this process's, as the OS granted
-        ``RenderConfig.tracer_nice`` (None before the first traced frame, or without the process)."""
+        ``ScheduleConfig.tracer_nice`` (None before the first traced frame, or without the process)."""
         return None if self._tracer_proc is None else self._tracer_proc.niceness
 
     def _tracer_starts_idle(self) -> bool:
-        """Whether sync 1 waits for the main thread's idle point (``RenderConfig.tracer_start``):
+        """Whether sync 1 waits for the main thread's idle point (``ScheduleConfig.tracer_start``):
         "auto" does once the tracer process is known to run in a scheduling group of its own
         (``TracerProcess.own_group``); a tracer sharing the renderer's group at nice 19 would only
         start later and still wait for a core."""
-        where = self.config.tracer_start
+        where = self.config.schedule.tracer_start
         if where == "auto":
             return self._tracer_proc is not None and self._tracer_proc.own_group
         return where == "idle"
 
     def _tracer_in_process(self) -> bool:
         """Whether the tracer runs in a process of its own (the overlapped schedule on the CPU)."""
-        return self.config.overlap and str(self.device).startswith("cpu")
+        return self.config.schedule.overlap and str(self.device).startswith("cpu")
 
     def _ensure_tracer(self) -> RestartingTracer:
         """The ray tracer (``kernels/tracers``), restarted once where it stops or hangs: for the
@@ -91,13 +91,13 @@ class RayTracingStages:
         if self._tracing is None:
             cfg, scene, device = self.config, self.scene, self.device
             if self._tracer_in_process():
-                session = cfg.tracer_session
+                session = cfg.schedule.tracer_session
                 if session is None:  # a group of its own where the main thread will wait for a volume worker
                     session = self._volumes_in_worker()
 
                 def make():
-                    return TracerProcess(scene, device, nice=cfg.tracer_nice, session=session)
-            elif cfg.overlap:
+                    return TracerProcess(scene, device, nice=cfg.schedule.tracer_nice, session=session)
+            elif cfg.schedule.overlap:
                 def make():
                     return ThreadTracer(scene, device)
             else:

@@ -258,5 +258,5 @@ class VolumeStages:
         """Whether the volumes' kernels run on a worker thread (``_volume_pool``), known from the
         config alone (the tracer process, started before the volumes exist, asks it too)."""
         cfg = self.config
-        return (cfg.overlap and cfg.overlap_volumes and str(self.device).startswith("cpu")
+        return (cfg.schedule.overlap and cfg.schedule.overlap_volumes and str(self.device).startswith("cpu")
                 and ((cfg.sky.enabled and cfg.sky.method != "gather") or cfg.lpv.enabled))

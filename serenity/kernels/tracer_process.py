@@ -10,7 +10,7 @@ the lowest priority (``NICE``), in the cores' idle gaps, and its pipes are widen
 so that neither side blocks halfway through a frame's message. With ``session=True`` the child starts a
 session of its own (``setsid``): where Linux schedules by autogroup (one group per session), it
 then competes with the renderer's process as a whole rather than with each of its threads, and its
-niceness, alone in its group, orders nothing (``RenderConfig.tracer_session``).
+niceness, alone in its group, orders nothing (``ScheduleConfig.tracer_session``).
 
 Protocol (private): the child is ``python -m serenity.kernels.tracer_process IN OUT NICE`` with two pipe
 file descriptors and its niceness; messages are length-prefixed pickles. First message in: (path, device), path a
@@ -69,7 +69,7 @@ SCENE_DIR = "/dev/shm" if os.path.isdir("/dev/shm") and os.access("/dev/shm", os
 #: they would keep busy. Measured on the 2-core machine (``serenity bench courtyard --size
 #: 640x360``, the schedules interleaved, wide pipes, 3 runs each): overlapped / serial 0.96-0.99 at
 #: nice 19 (0.95-1.00 with the tracer on one thread), 1.01-1.02 at nice 0 (one thread). The wait
-#: at sync 2 stays short: there the main thread waits and a core is free. ``RenderConfig.tracer_nice``
+#: at sync 2 stays short: there the main thread waits and a core is free. ``ScheduleConfig.tracer_nice``
 #: overrides it; ``benchmarks/bench_tracer_nice.py`` sweeps it (results/tracer_nice.json).
 NICE = 19
 
@@ -187,7 +187,7 @@ class TracerProcess:
 
     @property
     def niceness(self) -> int | None:
-        """The child's niceness now, relative to this process's (``RenderConfig.tracer_nice`` when the
+        """The child's niceness now, relative to this process's (``ScheduleConfig.tracer_nice`` when the
         OS allowed it: a negative one needs CAP_SYS_NICE, e.g. root); None where unknown."""
         try:
             return os.getpriority(os.PRIO_PROCESS, self._proc.pid) - os.getpriority(os.PRIO_PROCESS, 0)

@@ -164,7 +164,7 @@ class Settings:
         if self.shadow_filter not in SHADOW_FILTERS:
             raise SerenityError(f"shadow filter must be one of {', '.join(SHADOW_FILTERS)}, got {self.shadow_filter!r}")
         return dataclasses.replace(
-            base, exposure=float(self.exposure), overlap=self.overlap,
+            base, exposure=float(self.exposure), schedule=dataclasses.replace(base.schedule, overlap=self.overlap),
             ssao=dataclasses.replace(base.ssao, enabled=bool(self.ssao) and base.ssao.enabled),
             shadow=dataclasses.replace(base.shadow, filter=self.shadow_filter),
             sky=dataclasses.replace(base.sky, enabled=bool(self.sky_lighting) and base.sky.enabled),

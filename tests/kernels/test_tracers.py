@@ -10,7 +10,7 @@ import signal
 import numpy as np
 import pytest
 
-from serenity.config import RenderConfig
+from serenity.config import RenderConfig, ScheduleConfig
 from serenity.errors import SerenityError
 from serenity.frame import Renderer
 from serenity.kernels.raytrace import RayTracer
@@ -109,7 +109,7 @@ def _traced_pixels(frame):
 
 
 def test_the_renderer_recovers_from_a_tracer_process_killed_mid_frame(glass):
-    with Renderer(glass, *SIZE, config=RenderConfig(overlap=True)) as r:
+    with Renderer(glass, *SIZE, config=RenderConfig(schedule=ScheduleConfig(overlap=True))) as r:
         first = r.render()
         assert first.rays > 0 and r._tracer_proc is not None
         proc = r._tracer_proc
@@ -130,7 +130,7 @@ def test_the_renderer_recovers_from_a_tracer_process_killed_mid_frame(glass):
 def test_the_renderer_renders_after_a_stage_raised(glass, monkeypatch, overlap):
     """An exception in a stage after sync 1 (the tracer has the frame's rays) reaches the caller; the
     next frame renders as any other."""
-    with Renderer(glass, *SIZE, config=RenderConfig(overlap=overlap)) as r:
+    with Renderer(glass, *SIZE, config=RenderConfig(schedule=ScheduleConfig(overlap=overlap))) as r:
         first = r.render()
         real = r.shadow_pass.render
         calls = {"n": 0}
@@ -150,7 +150,7 @@ def test_the_renderer_renders_after_a_stage_raised(glass, monkeypatch, overlap):
 
 
 def test_with_renderer_leaves_no_child_process(glass):
-    with Renderer(glass, *SIZE, config=RenderConfig(overlap=True)) as r:
+    with Renderer(glass, *SIZE, config=RenderConfig(schedule=ScheduleConfig(overlap=True))) as r:
         r.render(read_back=False)
         child = r._tracer_proc._proc
         assert child.poll() is None

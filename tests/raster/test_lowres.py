@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from serenity.config import RenderConfig
+from serenity.config import RenderConfig, ScheduleConfig
 from serenity.frame import Renderer
 from serenity.raster.context import RASTER_TILE, LowResLayout, low_res_layout, low_res_size
 from serenity.raster.interop import read_texture
@@ -106,7 +106,8 @@ def test_padded_layout_changes_no_pixel(gl_ctx, preset):
     images = {}
     for balance in (True, False):
         r = Renderer(load("courtyard"), 320, 180,
-                     config=RenderConfig.preset(preset, overlap=False, ray_tracing=False, lowres_tile_balance=balance))
+                     config=RenderConfig.preset(preset, ray_tracing=False, lowres_tile_balance=balance,
+                                                schedule=ScheduleConfig(overlap=False)))
         try:
             r.render(read_back=False)
             f = r.render(read_back=("hdr", "aovs"))

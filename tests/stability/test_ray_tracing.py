@@ -81,12 +81,13 @@ def test_degenerate_triangles_and_glass_render_finite(gl_ctx):
     frame is finite and non-negative (exact: degenerate triangles cover no area, so the image equals
     the one without them up to rasterisation of zero-area primitives, which draws nothing) — bound:
     identical to the frame without them within 1e-3 relative mean."""
-    from serenity.config import LPVConfig, RenderConfig, SSAOConfig
+    from serenity.config import LPVConfig, RenderConfig, ScheduleConfig, SSAOConfig
     from serenity.frame import Renderer
     from serenity.scene import load
     from serenity.scene.model import Mesh
 
-    cfg = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False), overlap=False)
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False),
+                       schedule=ScheduleConfig(overlap=False))
     clean = load("glass")
     ref = Renderer(clean, 64, 36, config=cfg).render().hdr
     scene = load("glass")

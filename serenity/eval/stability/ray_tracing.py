@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
+from serenity.config import LPVConfig, RenderConfig, ScheduleConfig, SkyConfig, SSAOConfig
 from serenity.eval.exact import exact_sun_visibility
 from serenity.eval.stability.harness import Case, timed
 from serenity.frame import Renderer
@@ -86,7 +86,7 @@ def mirror_shadow_case(size=(160, 90), device=None, rt_sun_shadows: str = "trace
     visibility < 0.5) differs; "without" lights every hit as unshadowed."""
     scene = load("mirror-box")
     cfg = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ssao=SSAOConfig(enabled=False),
-                       overlap=False, rt_sun_shadows=rt_sun_shadows)
+                       schedule=ScheduleConfig(overlap=False), rt_sun_shadows=rt_sun_shadows)
     r = Renderer(scene, *size, device=device, config=cfg)
     r.render()
     f, ms = timed(r.render)
