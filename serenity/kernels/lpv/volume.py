@@ -344,33 +344,19 @@ class LightPropagationVolume:
             done = self._done_dev.numpy()
             for lv in np.flatnonzero(on):
                 self._done[lv] = int(done[lv])
-        elif not str(self.device).startswith("cpu") or self._device_stop:
-            # which cascades go on is decided on the device (lpv/early_stop.py): no copy per iteration
-            self._level_on.assign(on)
-            self._iters.assign(iters.astype(np.int32))
-            self._done_dev.zero_()
-            for k in range(n_iter):
-                active = [self._levels[lv] for lv in np.flatnonzero(on & (iters > k))]
-                if not active:
-                    break
-                lo = min(v.cell_base for v in active)
-                dim = max(v.cell_base + v.res**3 for v in active) - lo
-                self._launch_cells(self._propagate, dim,
-                                   [inj if k == 0 else bufs[(k - 1) % 2], self._accum, self._trans_pos,
-                                    self._trans_neg, self._level_table, nl, self._level_on, self._far_from, k + 1,
-                                    bufs[k % 2], self._accum, self._far, self._change, self._total], start=lo)
-                wp.launch(level_stop, dim=nl, inputs=[self._change, self._total, self._level_table, self._iters, k,
-                                                      float(thresh), self._level_on, self._done_dev],
-                          device=self.device)
-            done = self._done_dev.numpy()
-            for lv in np.flatnonzero(on):
-                self._done[lv] = int(done[lv])
         else:
+            on_device = not str(self.device).startswith("cpu") or self._device_stop
+            started = on.copy()
+            if on_device:  # which cascades go on is decided on the device (lpv/early_stop.py): no copy per iteration
+                self._level_on.assign(on)
+                self._iters.assign(iters.astype(np.int32))
+                self._done_dev.zero_()
             for k in range(n_iter):
-                on = on & (iters > k)
+                on = on & (iters > k)  # on the device: the cascades that may still run (level_on says which do)
                 if not on.any():
                     break
-                self._level_on.assign(on)
+                if not on_device:
+                    self._level_on.assign(on)
                 # threads only for the cells of the cascades still iterating (the coarsest may run on alone)
                 active = [self._levels[lv] for lv in np.flatnonzero(on)]
                 lo = min(v.cell_base for v in active)
@@ -379,11 +365,20 @@ class LightPropagationVolume:
                                    [inj if k == 0 else bufs[(k - 1) % 2], self._accum, self._trans_pos,
                                     self._trans_neg, self._level_table, nl, self._level_on, self._far_from, k + 1,
                                     bufs[k % 2], self._accum, self._far, self._change, self._total], start=lo)
+                if on_device:
+                    wp.launch(level_stop, dim=nl, inputs=[self._change, self._total, self._level_table, self._iters,
+                                                          k, float(thresh), self._level_on, self._done_dev],
+                              device=self.device)
+                    continue
                 self._done[np.flatnonzero(on)] += 1
                 if thresh > 0.0:
                     live = set(np.flatnonzero(on).tolist())
                     change, total = self._level_sums(self._change, live), self._level_sums(self._total, live)
                     on = on & ~((change <= thresh * total) | (total <= 0.0))
+            if on_device:
+                done = self._done_dev.numpy()
+                for lv in np.flatnonzero(started):
+                    self._done[lv] = int(done[lv])
         # what lookups read: each level's own light plus the far light of every coarser one
         wp.copy(self._lookup, self._accum)
         if hand_over:
