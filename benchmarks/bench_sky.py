@@ -136,8 +136,8 @@ def main(argv=None):
     inside = (np.abs(pos[:, 0]) < 13) & (np.abs(pos[:, 2]) < 13) & (pos[:, 1] > 0.3) & (pos[:, 1] < 9)
     probes = pos[np.random.default_rng(5).choice(np.nonzero(inside)[0], 24, replace=False)]
     sky_map_wp = vol.sky.sky_map_wp
-    full_ms = _median_ms(lambda: vol._integrate(sky_map_wp, 0, vol.resolution[1]), args.reps)
-    layer_ms = _median_ms(lambda: vol._integrate(sky_map_wp, 0, 1), args.reps * 3)
+    full_ms = _median_ms(lambda: vol.method.integrate(sky_map_wp, 0, vol.resolution[1]), args.reps)
+    layer_ms = _median_ms(lambda: vol.method.integrate(sky_map_wp, 0, 1), args.reps * 3)
     quad_mean, quad_worst = quad_accuracy(vol, probes)
 
     rays_sweep = []
@@ -145,7 +145,7 @@ def main(argv=None):
         v = SkyVolume(scene, SkyConfig(resolution=PAPER_RESOLUTION, normal_offset=0.0, rays_per_probe=rays,
                                        method="layers"), device=device)
         v.rebuild()
-        ms = _median_ms(lambda v=v: v._integrate(v.sky.sky_map_wp, 0, v.resolution[1]), max(1, args.reps // 2))
+        ms = _median_ms(lambda v=v: v.method.integrate(v.sky.sky_map_wp, 0, v.resolution[1]), max(1, args.reps // 2))
         m, w = quad_accuracy(v, probes)
         rays_sweep.append({"rays_per_probe": rays, "full_ms": ms, "mean_rel_error": m, "worst_rel_error": w})
 
@@ -157,8 +157,8 @@ def main(argv=None):
     transfer_build_ms = (time.perf_counter() - t0) * 1e3
 
     def relight():  # after a sky change: the sky's projection, then every probe
-        tv._projected = None
-        tv._apply_transfer()
+        tv.method.projected = None
+        tv.method.apply()
 
     transfer_apply_ms = _median_ms(relight, args.reps)
     transfer_mean, transfer_worst = quad_accuracy(tv, probes)

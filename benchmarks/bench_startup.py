@@ -110,7 +110,7 @@ def child(path: str, argv: list[str]) -> None:
     import serenity.io.png
     import serenity.kernels.probegather as pg
     import serenity.kernels.raytrace as rt
-    import serenity.kernels.skyvolume as sv
+    import serenity.kernels.skygather as sg
     import serenity.kernels.tracer_process as tp
     import serenity.scene
 
@@ -142,7 +142,7 @@ def child(path: str, argv: list[str]) -> None:
     timed(pg.ProbeGather, "gather", "probe gathers")
     timed(pg.ProbeGather, "update_surfels", "surfel updates")
     timed(pg.ProbeGather, "update_visibility", "surfel shadow rays")
-    timed(sv.SkyVolume, "_update_gather", "sky volume (gather)")
+    timed(sg.GatherMethod, "_update", "sky volume (gather)")
     timed(serenity.frame.Renderer, "render", "frame")
     timed(serenity.frame.Renderer, "close", "close (tracer process stops)")
     timed(serenity.io.png, "write_png", "write PNG")

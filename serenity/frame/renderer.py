@@ -116,9 +116,8 @@ class Renderer(VolumeStages, RayTracingStages):
             self._init_gi()
             # the volumes' kernels beside the GL passes (``_render``): on the CPU only, where the GL
             # passes are llvmpipe's threads and the kernels would otherwise wait for them in turn
-            # ("gather" sky volumes stay on the main thread: their passes are split over every core
-            # already, and beside the GL passes they only slowed both)
-            self._sky_in_worker = self.sky_volume is not None and cfg.sky.method != "gather"
+            # (where the sky volume's method allows: ``SkyVolumeMethod.on_volume_worker``)
+            self._sky_in_worker = self.sky_volume is not None and self.sky_volume.method.on_volume_worker
             self._volume_pool = (ThreadPoolExecutor(max_workers=1, thread_name_prefix=VOLUME_THREAD,
                                                     initializer=lower_thread_priority,
                                                     initargs=(cfg.schedule.volume_nice,))
@@ -239,7 +238,7 @@ class Renderer(VolumeStages, RayTracingStages):
             self._update_volumes(gbuf, light)
             shadow, ao, guide = self._main_view(view_proj, gbuf)
         else:  # the LPV's kernels in the worker too, after the sky's; the main view's GL passes beside them
-            if self.sky_volume is not None and sky_job is None:  # a "gather" sky volume: here, in turn
+            if self.sky_volume is not None and sky_job is None:  # a main-thread sky volume: here, in turn
                 self._upload_sky(self._compute_sky())
             lpv_job = self._start_lpv(gbuf, lpv_plan)
             shadow, ao, guide = self._main_view(view_proj, gbuf)

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from serenity.frame.record import RT_LANE
-from serenity.kernels.tracers import InlineTracer, RestartingTracer, ThreadTracer, TracerProcess
+from serenity.kernels.tracers import InlineTracer, RestartingTracer, SharedRayTracer, ThreadTracer, TracerProcess
 from serenity.raster.deferred import LightingInputs
 from serenity.raster.raycast import RayCastingBuffer
 from serenity.raster.shadow import STAGGER_PAD, fit_overlapped
@@ -99,12 +101,19 @@ class RayTracingStages:
                     return TracerProcess(scene, device, nice=cfg.schedule.tracer_nice, session=session)
             elif cfg.schedule.overlap:
                 def make():
-                    return ThreadTracer(scene, device)
+                    return ThreadTracer(scene, device, self.shared_ray_tracer)
             else:
                 def make():
-                    return InlineTracer(scene, device)
+                    return InlineTracer(scene, device, self.shared_ray_tracer)
             self._tracing = RestartingTracer(make)
         return self._tracing
+
+    @cached_property
+    def shared_ray_tracer(self) -> SharedRayTracer:
+        """The process's one :class:`~serenity.kernels.raytrace.RayTracer` of the scene, built by its
+        first user: the in-process tracer and the sky volume's traced probes share it (the tracer
+        process builds its own)."""
+        return SharedRayTracer(self.scene, self.device)
 
     @property
     def _tracer_proc(self) -> TracerProcess | None:

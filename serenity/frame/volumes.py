@@ -14,7 +14,7 @@ from serenity.kernels.lpv import (
     sky_vpls_from_samples,
     surfels_from_samples,
 )
-from serenity.kernels.skyvolume import SkyVolume
+from serenity.kernels.skyvolume import SkyVolume, sky_method
 from serenity.raster.deferred import LightingInputs
 from serenity.raster.indirect import IndirectPass, LowResIndirect
 from serenity.raster.lowres import GBufferSamples, IndirectRefinement
@@ -49,10 +49,9 @@ class VolumeStages:
         self._sky_map_version = -1
         self._sky_volume_version = 0  # counts the sky volume's updates (the sky-light VPLs read it)
         if cfg.sky.enabled:
-            self.sky_volume = SkyVolume(self.scene, cfg.sky, self.device)
+            self.sky_volume = SkyVolume(self.scene, cfg.sky, self.device, tracer=self.shared_ray_tracer)
             self.sky_gl = SkyTexturesGL(ctx)
-            sky_defines = {"SKY_GLOSSY": int(cfg.sky.glossy),
-                           "SKY_VISIBILITY": int(cfg.sky.method == "gather" and cfg.sky.gather_visibility)}
+            sky_defines = {"SKY_GLOSSY": int(cfg.sky.glossy), **self.sky_volume.lookup_defines()}
             self.sky_pass = IndirectPass(ctx, "sky", defines=sky_defines)
             self.sky_pass_lo = IndirectPass(ctx, "sky", lowres=True, defines=sky_defines) if self.lowres else None
             self._sky_built = False
@@ -259,4 +258,4 @@ class VolumeStages:
         config alone (the tracer process, started before the volumes exist, asks it too)."""
         cfg = self.config
         return (cfg.schedule.overlap and cfg.schedule.overlap_volumes and str(self.device).startswith("cpu")
-                and ((cfg.sky.enabled and cfg.sky.method != "gather") or cfg.lpv.enabled))
+                and ((cfg.sky.enabled and sky_method(cfg.sky).on_volume_worker) or cfg.lpv.enabled))

@@ -1,5 +1,7 @@
 """Ray-traced irradiance probes: the sky volume's probes lit by the sky *and* by the light the scene
-bounces, through the real geometry (``SkyConfig.method = "gather"``; beyond the paper, §7–§8).
+bounces, through the real geometry (``SkyConfig.method = "gather"``; beyond the paper, §7–§8). The
+sky volume's method that drives them is ``serenity.kernels.skygather.GatherMethod``; the surfels'
+and depth moments' host work is ``serenity.kernels.probesurfels``'s.
 
 Why: the paper lights its probes with the sky through occlusion quads and leaves all bounced light
 to the light propagation volumes. Measured against path-traced references, the LPV is where the
@@ -46,7 +48,7 @@ quantisation of one set does not line up across the volume).
 Probes no lookup reads (DDGI's probe classification, Majercik et al. 2021): a lookup at a surface
 point reads the 8 probes around it, moved by the normal offset, so a probe whose cells no triangle
 comes within that offset of (the air in the middle of a room, 60 % of the breakfast room's probes)
-is never read. Those probes are not traced or gathered (``reachable_probes``; their coefficients are
+is never read. Those probes are not traced or gathered (``skylookup.reachable_probes``; their coefficients are
 zeros); a surfel's own lookup, from its mean position, is checked too.
 
 Costs (``benchmarks/``): the rays are traced once per scene (``ProbeGather._build``), in chunks that
@@ -70,12 +72,24 @@ from tqdm import tqdm
 from serenity.kernels.atmosphere_ref import sample_sky_map_np
 from serenity.kernels.kdtree_build import cache_dir
 from serenity.kernels.launch import launch
-from serenity.kernels.sh import eval_sh9, sh_basis, vec9
+from serenity.kernels.probesurfels import MomentWeights, SurfelMerge, hit_distances
+from serenity.kernels.sh import sh_basis, vec9
+from serenity.kernels.skylookup import (
+    REACH_PLANE_PROBES,
+    VIS_OCT,
+    ProbeGrid,
+    ProbeVolume,
+    lookup_probes,
+    volume_irradiance,
+)
 from serenity.memory import mapped_large_blocks
 from serenity.scene.model import IDENTITY_UV
 from serenity.threads import single_threaded_blas
 
 wp.set_module_options({"enable_backward": False})
+
+# ---------------------------------------------------------------------------------------------
+# constants
 
 #: rotated direction sets the probes cycle through (probe index mod this)
 DIRECTION_SETS = 8
@@ -86,157 +100,26 @@ RELOCATION_STRIDE = 8
 #: relocation offsets tried for such a probe, in cells (first the one up: probes under a floor)
 RELOCATIONS = ((0.0, 0.45, 0.0), (0.45, 0.0, 0.0), (-0.45, 0.0, 0.0), (0.0, 0.0, 0.45), (0.0, 0.0, -0.45),
                (0.0, -0.45, 0.0), (0.3, 0.3, 0.3), (-0.3, 0.3, -0.3))
-
 _INV_PI = wp.constant(1.0 / math.pi)
-
-
 #: bump when the traced data or its cached layout changes
 FORMAT_VERSION = 5
-#: host work over every probe ray (millions) runs in slices of this many, so that no temporary
-#: spans them all
-_SLICE = 1 << 20
-SURFEL_SHADOW_SPREAD = 0.5
-"""Where in its square a surfel's shadow ray may start (``shadow_origins``), as a fraction of the
-square's side around its mean position: far enough apart that a straight shadow edge crosses a row of
-surfels one at a time, near enough the mean that the one ray stands for the surfel (FLIP of
-``traced-probes`` at 320×180: the full square 0.0571 courtyard / 0.0433 Cornell box, half 0.0565 /
-0.0430, the mean itself 0.0560 / 0.0426)."""
 #: traces of at least this many rays are cached on disk (``cache_dir()/probegather-<key>.npz``)
 CACHE_MIN_RAYS = 1_000_000
 #: rays the probes' trace hands the tracer per call (its G-buffer for those rays is the memory peak)
 TRACE_CHUNK_RAYS = 1 << 18
 #: a trace of at least this many rays shows a progress bar
 PROGRESS_RAYS = 4_000_000
-
-#: the probes' depth moments (visibility): an octahedral map of VIS_OCT² texels per probe, stored with a
-#: one-texel border as a VIS_TILE² tile; each texel averages the rays' hit distances d and d² weighted
-#: by max(0, cos)^VIS_POWER around its direction; a miss (or a hit farther) counts as VIS_MAX_CELLS cells
-VIS_OCT = 8
-VIS_TILE = VIS_OCT + 2
-VIS_POWER = 16.0
+#: a probe ray's distance in the depth moments is capped at VIS_MAX_CELLS cell diagonals (a miss counts as that)
 VIS_MAX_CELLS = 2.0
-#: a probe's weight below this is crushed (w³/VIS_CRUSH²), as DDGI does, so that a probe the point
-#: cannot see adds next to nothing
-VIS_CRUSH = 0.2
-#: the visibility test looks from the probe at p + VIS_BIAS_CELLS·(smallest cell edge)·n, however small
-#: the lookup's own normal offset: a point on the surface itself sits at the probe's mean depth there
-VIS_BIAS_CELLS = 0.5
-
-#: beyond the grid's sides and top, the lookup fades to the open sky's coefficients over this many cells
-OPEN_FADE_CELLS = 2.0
-#: the probes the lookups can read (``reachable_probes``) are found around the triangles within the
+#: the probes the lookups can read (``skylookup.reachable_probes``) are found around the triangles within the
 #: lookup's normal offset and this many cells more (rasterised positions, normal-mapped normals)
 REACH_MARGIN_CELLS = 0.02
-#: a triangle whose reach spans more probes than this is tested against each one's distance to its plane
-_REACH_PLANE_PROBES = 64
 #: rounds of tracing the probes that the surfels' own lookups read beyond the active ones (``ProbeGather``)
 _REACH_ROUNDS = 3
 
 
-@wp.func
-def oct_encode(d: wp.vec3) -> wp.vec2:
-    """Octahedral map of a unit direction (y up) onto [-1, 1]²: (x, z) / (|x| + |y| + |z|), the
-    lower half folded over the diagonals."""
-    s = wp.abs(d[0]) + wp.abs(d[1]) + wp.abs(d[2])
-    x = d[0] / s
-    z = d[2] / s
-    if d[1] < 0.0:
-        fx = (1.0 - wp.abs(z)) * wp.where(x >= 0.0, 1.0, -1.0)
-        fz = (1.0 - wp.abs(x)) * wp.where(z >= 0.0, 1.0, -1.0)
-        x = fx
-        z = fz
-    return wp.vec2(x, z)
-
-
-@wp.func
-def probe_visibility(vis: wp.array3d(dtype=wp.vec2), offsets: wp.array(dtype=wp.vec3), probe: int, xi: int,
-                     yi: int, zi: int, grid_pos: wp.vec3, p: wp.vec3, x: wp.vec3, n: wp.vec3) -> float:
-    """DDGI's weight of probe ``probe`` (grid cell xi, yi, zi at ``grid_pos``, moved by its relocation
-    offset) for surface point p with normal n, looked up at x: the smooth back-face weight
-    ((n·ω_p + 1)/2)² + 0.2 towards the probe, times the Chebyshev bound that the probe sees x (its
-    depth moments bilinear at the direction probe → x), crushed below VIS_CRUSH (module docstring)."""
-    q = grid_pos + offsets[probe]
-    to_probe = wp.normalize(q - p)
-    b = (wp.dot(to_probe, n) + 1.0) * 0.5
-    w = b * b + 0.2
-    d = x - q
-    dist = wp.length(d)
-    uv = oct_encode(d / wp.max(dist, 1.0e-9))
-    tu = float(xi * VIS_TILE + 1) + (uv[0] * 0.5 + 0.5) * float(VIS_OCT) - 0.5
-    tv = float(zi * VIS_TILE + 1) + (uv[1] * 0.5 + 0.5) * float(VIS_OCT) - 0.5
-    u0 = int(wp.floor(tu))
-    v0 = int(wp.floor(tv))
-    fu = tu - float(u0)
-    fv = tv - float(v0)
-    lo_u = xi * VIS_TILE
-    lo_v = zi * VIS_TILE
-    ua = wp.clamp(u0, lo_u, lo_u + VIS_TILE - 1)
-    ub = wp.clamp(u0 + 1, lo_u, lo_u + VIS_TILE - 1)
-    va = wp.clamp(v0, lo_v, lo_v + VIS_TILE - 1)
-    vb = wp.clamp(v0 + 1, lo_v, lo_v + VIS_TILE - 1)
-    m = (vis[va, yi, ua] * (1.0 - fu) + vis[va, yi, ub] * fu) * (1.0 - fv) \
-        + (vis[vb, yi, ua] * (1.0 - fu) + vis[vb, yi, ub] * fu) * fv
-    if dist > m[0]:
-        var = wp.abs(m[1] - m[0] * m[0])
-        t = dist - m[0]
-        c = var / (var + t * t + 1.0e-12)
-        w = w * wp.max(c * c * c, 0.0)
-    w = wp.max(w, 1.0e-6)
-    if w < VIS_CRUSH:
-        w = w * w * w / (VIS_CRUSH * VIS_CRUSH)
-    return w
-
-
-@wp.func
-def volume_irradiance(coeffs: wp.array2d(dtype=float), open_sky: wp.array(dtype=float),
-                      vis: wp.array3d(dtype=wp.vec2), offsets: wp.array(dtype=wp.vec3), origin: wp.vec3,
-                      cell: wp.vec3, res_x: int, res_y: int, res_z: int, normal_offset: float, p: wp.vec3,
-                      n: wp.vec3) -> wp.vec3:
-    """Irradiance of the volume at a surface point (sky.glsl's arithmetic): trilinear coefficients
-    at p + offset·n — each probe's weight also times its visibility (:func:`probe_visibility`) when
-    ``vis`` holds the probes' depth moments (an empty array: plain trilinear) — faded to ``open_sky``
-    (27, the open sky's) beyond the grid's sides and top, evaluated at n, clamped at 0."""
-    x = p + n * normal_offset
-    gr = wp.cw_div(x - origin, cell)
-    beyond = wp.max(wp.max(wp.max(-gr[0], gr[0] - float(res_x - 1)), wp.max(-gr[2], gr[2] - float(res_z - 1))),
-                    gr[1] - float(res_y - 1))
-    w_open = wp.clamp(beyond / OPEN_FADE_CELLS, 0.0, 1.0)
-    g = wp.vec3(wp.clamp(gr[0], 0.0, float(res_x - 1)), wp.clamp(gr[1], 0.0, float(res_y - 1)),
-                wp.clamp(gr[2], 0.0, float(res_z - 1)))
-    x0 = int(wp.floor(g[0]))
-    y0 = int(wp.floor(g[1]))
-    z0 = int(wp.floor(g[2]))
-    ax = g[0] - float(x0)
-    ay = g[1] - float(y0)
-    az = g[2] - float(z0)
-    y = eval_sh9(n)
-    e = wp.vec3()
-    wsum = float(0.0)
-    use_vis = vis.shape[0] > 0
-    x_vis = p + n * (VIS_BIAS_CELLS * wp.min(wp.min(cell[0], cell[1]), cell[2]))
-    for corner in range(8):
-        dx = corner & 1
-        dy = (corner >> 1) & 1
-        dz = corner >> 2
-        xi = wp.min(x0 + dx, res_x - 1)
-        yi = wp.min(y0 + dy, res_y - 1)
-        zi = wp.min(z0 + dz, res_z - 1)
-        w = wp.where(dx == 1, ax, 1.0 - ax) * wp.where(dy == 1, ay, 1.0 - ay) * wp.where(dz == 1, az, 1.0 - az)
-        probe = (zi * res_y + yi) * res_x + xi
-        if use_vis:
-            q = origin + wp.cw_mul(wp.vec3(float(xi), float(yi), float(zi)), cell)
-            w = w * probe_visibility(vis, offsets, probe, xi, yi, zi, q, p, x_vis, n)
-        wsum += w
-        for k in range(9):
-            wk = w * y[k]
-            e += wp.vec3(coeffs[probe, 3 * k], coeffs[probe, 3 * k + 1], coeffs[probe, 3 * k + 2]) * wk
-    if use_vis:
-        e = e / wp.max(wsum, 1.0e-30)
-    e_open = wp.vec3()
-    for k in range(9):
-        e_open += wp.vec3(open_sky[3 * k], open_sky[3 * k + 1], open_sky[3 * k + 2]) * y[k]
-    e = e * (1.0 - w_open) + e_open * w_open
-    return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
+# ---------------------------------------------------------------------------------------------
+# kernels
 
 
 @wp.kernel
@@ -248,16 +131,7 @@ def surfel_radiance(
     sun_visible: wp.array(dtype=float),
     sun_dir: wp.vec3,
     sun_irradiance: wp.vec3,
-    coeffs: wp.array2d(dtype=float),
-    open_sky: wp.array(dtype=float),
-    vis: wp.array3d(dtype=wp.vec2),
-    offsets: wp.array(dtype=wp.vec3),
-    origin: wp.vec3,
-    cell: wp.vec3,
-    res_x: int,
-    res_y: int,
-    res_z: int,
-    normal_offset: float,
+    vol: ProbeVolume,
     # outputs
     radiance: wp.array(dtype=wp.vec3),
     offset: int,
@@ -265,8 +139,7 @@ def surfel_radiance(
     """B_s = ρ_s/π·(E_sun·max(0, n·l)·V_s + E_volume(p_s, n_s)) (module docstring)."""
     i = wp.tid() + offset
     n = normals[i]
-    e = volume_irradiance(coeffs, open_sky, vis, offsets, origin, cell, res_x, res_y, res_z, normal_offset,
-                          positions[i], n)
+    e = volume_irradiance(vol, positions[i], n)
     e += sun_irradiance * (wp.max(wp.dot(n, sun_dir), 0.0) * sun_visible[i])
     radiance[i] = wp.cw_mul(albedo[i], e) * _INV_PI
 
@@ -274,8 +147,7 @@ def surfel_radiance(
 @wp.kernel
 def gather_probes(
     # inputs
-    res_x: int,
-    res_y: int,
+    grid: ProbeGrid,
     first_layer: int,
     rays: int,
     active: wp.array(dtype=wp.int32),
@@ -291,9 +163,11 @@ def gather_probes(
     """The i-th probe of the y-layers from ``first_layer`` on (x fastest, then z; stored (z, y, x)):
     E_k = scale_k·4π/R·Σ_r L_r·Y_k(ω_r), L_r the radiance of the surfel ray r hit (surfel[p, r] ≥ 0),
     the miss radiance of the probe's direction set (−1), or 0 (−2: a back face); zeros for a probe
-    that is not ``active`` (no lookup reads it: :func:`reachable_probes`)."""
+    that is not ``active`` (no lookup reads it: ``skylookup.reachable_probes``)."""
     t = wp.tid() + offset
-    res_z = surfel.shape[0] // (res_x * res_y)
+    res_x = grid.res[0]
+    res_y = grid.res[1]
+    res_z = grid.res[2]
     slab = res_x * res_z
     y = first_layer + t // slab
     rem = t - (t // slab) * slab
@@ -327,223 +201,8 @@ def gather_probes(
         coeffs[probe, 3 * k + 2] = acc_b[k] * sk
 
 
-def oct_decode_np(uv: np.ndarray) -> np.ndarray:
-    """(N, 3) unit directions of octahedral coordinates (N, 2) in [-1, 1]² (inverse of oct_encode)."""
-    u, v = uv[:, 0].astype(np.float64), uv[:, 1].astype(np.float64)
-    y = 1.0 - np.abs(u) - np.abs(v)
-    x, z = u.copy(), v.copy()
-    low = y < 0
-    x[low] = (1.0 - np.abs(v[low])) * np.where(u[low] >= 0, 1.0, -1.0)
-    z[low] = (1.0 - np.abs(u[low])) * np.where(v[low] >= 0, 1.0, -1.0)
-    d = np.stack([x, y, z], axis=1)
-    return d / np.linalg.norm(d, axis=1, keepdims=True)
-
-
-def oct_encode_np(d: np.ndarray) -> np.ndarray:
-    """(N, 2) octahedral coordinates of unit directions (N, 3): the host twin of oct_encode."""
-    d = np.asarray(d, np.float64)
-    s = np.abs(d).sum(axis=1)
-    x, z = d[:, 0] / s, d[:, 2] / s
-    low = d[:, 1] < 0
-    fx = (1.0 - np.abs(z)) * np.where(x >= 0, 1.0, -1.0)
-    fz = (1.0 - np.abs(x)) * np.where(z >= 0, 1.0, -1.0)
-    return np.stack([np.where(low, fx, x), np.where(low, fz, z)], axis=1)
-
-
-def oct_texel_directions(size: int) -> np.ndarray:
-    """(size², 3) the directions of an octahedral map's texel centres, row-major (v, u)."""
-    c = (np.arange(size) + 0.5) / size * 2.0 - 1.0
-    v, u = np.meshgrid(c, c, indexing="ij")
-    return oct_decode_np(np.stack([u.ravel(), v.ravel()], axis=1))
-
-
-def shadow_ray_offsets(normals: np.ndarray, size: float) -> np.ndarray:
-    """(S, 3) float64: where in its square each surfel's shadow ray starts, relative to its mean
-    position: surfel i's point of the R2 low-discrepancy sequence (Roberts 2018), frac(½ + i·(1/g, 1/g²))
-    with g the plastic number, on the size × size square across its normal. The surfels' centres lie
-    on a grid; from the centres, a roof's straight shadow edge moving with the sun crossed a whole row
-    of them in one frame and the gathered light popped (``docs/stability.md``). Surfels are numbered
-    along the grid's z, then y, then x (``_make_surfels``), so the surfels of a row get points spread
-    evenly across the square, and the edge crosses them one at a time."""
-    n = np.asarray(normals, np.float64).reshape(-1, 3)
-    g = 1.32471795724474602596
-    i = np.arange(len(n), dtype=np.float64)[:, None]
-    uv = ((0.5 + i * np.array([[1.0 / g, 1.0 / (g * g)]])) % 1.0 - 0.5) * float(size)
-    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(n, helper)
-    t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-12)
-    t2 = np.cross(n, t1)
-    return uv[:, :1] * t1 + uv[:, 1:] * t2
-
-
-def shadow_origins(positions: np.ndarray, surfel: np.ndarray, means: np.ndarray, normals: np.ndarray,
-                   size: float) -> np.ndarray:
-    """(S, 3) float64: where each surfel's shadow ray starts: of the hits ``positions`` (N, 3) that
-    make surfel ``surfel`` (N,), the one nearest the surfel's point (``means`` + ``SURFEL_SHADOW_SPREAD``
-    × :func:`shadow_ray_offsets`). A hit lies on the surface, where a point of the square may not: at
-    a corner or an edge it lies inside the wall beside the surfel or beyond the edge."""
-    pos = np.asarray(positions).reshape(-1, 3)
-    inv = np.asarray(surfel).reshape(-1)
-    means = np.asarray(means, np.float64)
-    target = (means + SURFEL_SHADOW_SPREAD * shadow_ray_offsets(normals, size)).astype(np.float32)
-
-    def d2(a):  # the squared distances of hits a .. a + _SLICE to their surfel's point
-        diff = pos[a:a + _SLICE].astype(np.float32) - target[inv[a:a + _SLICE]]
-        return np.einsum("ij,ij->i", diff, diff)
-
-    # in slices, twice (the nearest, then which hit it is): millions of hits as float64 (N, 3) cost
-    # a GB, and even one float per hit is tens of MB
-    nearest = np.full(len(means), np.inf, np.float32)
-    for a in range(0, len(pos), _SLICE):
-        np.minimum.at(nearest, inv[a:a + _SLICE], d2(a))  # O(N): a sort of millions of hits cost seconds
-    idx = np.concatenate([np.flatnonzero(d2(a) == nearest[inv[a:a + _SLICE]]) + a
-                          for a in range(0, len(pos), _SLICE)] or [np.zeros(0, np.int64)])
-    # (a tie keeps the last of its hits)
-    out = means.copy()
-    out[inv[idx]] = pos[idx]
-    return out
-
-
-
-def _hit_distances(hits: dict, origins: np.ndarray, rays: int, cap: float) -> np.ndarray:
-    """(P, R) float32 the distance of each ray's hit (front or back face) in ``hits`` (P·R rays,
-    probe-major) from its probe at ``origins`` (P, 3); a miss or a hit beyond ``cap`` at ``cap``."""
-    diff = hits["position"].reshape(-1, rays, 3) - origins[:, None, :].astype(np.float32)
-    d = np.sqrt(np.einsum("prc,prc->pr", diff, diff))
-    any_hit = (hits["hit"] | hits["back"]).reshape(-1, rays)
-    return np.where(any_hit, np.minimum(d, np.float32(cap)), np.float32(cap)).astype(np.float32)
-
-
-class _MomentWeights:
-    """The probes' depth moments (module constants) as a matrix product per direction set: texel t of
-    a probe of set s is Σ_r W[s, t, r]·(d_r, d_r²) / Σ_r W[s, t, r], W = max(0, ω_t·ω_r)^VIS_POWER,
-    the same for every probe of the set."""
-
-    def __init__(self, dirs: np.ndarray):
-        texels = oct_texel_directions(VIS_OCT).astype(np.float32).astype(np.float64)
-        c = np.einsum("tc,src->str", texels, np.asarray(dirs, np.float64))
-        self.weights = np.where(c > 0.0, np.maximum(c, 0.0) ** VIS_POWER, 0.0).astype(np.float32)  # (S, T, R)
-        self.norm = np.maximum(self.weights.sum(axis=2, dtype=np.float64), 1e-12).astype(np.float32)  # (S, T)
-
-    def moments(self, dist: np.ndarray, sets: np.ndarray) -> np.ndarray:
-        """(P, T, 2) float32 the moments of P probes' ray distances ``dist`` (P, R) of sets ``sets`` (P,)."""
-        out = np.empty((len(dist), self.weights.shape[1], 2), np.float32)
-        for k in np.unique(sets):
-            i = np.flatnonzero(sets == k)
-            d = dist[i]
-            w = self.weights[k].T
-            out[i, :, 0] = (d @ w) / self.norm[k]
-            out[i, :, 1] = ((d * d) @ w) / self.norm[k]
-        return out
-
-
-def surfel_keys(positions: np.ndarray, normals: np.ndarray, anchor: np.ndarray, size: float) -> np.ndarray:
-    """(N,) int64 the surfel of each hit: its cube of ``size`` metres counted from ``anchor`` and the
-    dominant axis and sign of its normal (sorted by key: along z, then y, then x)."""
-    axis = np.argmax(np.abs(normals), axis=1)
-    side = normals[np.arange(len(normals)), axis] > 0
-    key = axis.astype(np.int64) * 2 + side
-    for c, prime in ((2, 1), (1, 1_000_033), (0, 1_000_033 * 1_000_003)):
-        key += np.floor((positions[:, c] - anchor[c]) / size).astype(np.int64) * (6 * prime)
-    return key
-
-
-class _SurfelMerge:
-    """Ray hits merged into surfels chunk by chunk (``surfel_keys``): each chunk's hits are summed
-    per surfel as they come, ``finish`` merges the chunks' sums; only the hits' positions (for the
-    shadow rays' origins) and each ray's surfel outlive their chunk."""
-
-    def __init__(self, rays: int, anchor: np.ndarray, size: float):
-        if rays >= 2**31:
-            raise ValueError(f"{rays} probe rays: at most 2**31 - 1")
-        self.anchor, self.size = np.asarray(anchor, np.float64), float(size)
-        self.surfel = np.full(rays, -1, np.int32)  # per ray: a chunk's surfel (``merged``), -2 a back face
-        self.keys, self.sums = np.zeros(0, np.int64), np.zeros((0, 10))  # the surfels so far, sorted by key
-        self.merged = np.zeros(0, np.int32)  # each chunk's surfel (numbered across chunks): its index in keys
-        self.hit_positions = np.empty((rays, 3), np.float32)  # filled from the front (pages as written)
-        self.hit_surfel = np.empty(rays, np.int32)
-        self.hits = 0
-
-    def add(self, rows, hit, back, positions, normals, albedo) -> None:
-        """The rays ``rows`` (a slice or indices, probe-major) with their hit and back-face masks and hits;
-        the rays of neither mask are left as they are."""
-        idx = np.flatnonzero(hit)
-        p, n = positions[idx], normals[idx]
-        keys, inv = np.unique(surfel_keys(p, n, self.anchor, self.size), return_inverse=True)
-        inv = inv.reshape(-1)
-        m = len(keys)
-        sums = np.empty((m, 10))
-        sums[:, 0] = np.bincount(inv, minlength=m)
-        for j, a in enumerate((p, n, albedo[idx])):
-            for c in range(3):
-                sums[:, 1 + 3 * j + c] = np.bincount(inv, a[:, c], m)
-        # merged into the surfels so far (tens of thousands): their sums, and where each moved
-        old = len(self.keys)
-        self.keys, both = np.unique(np.concatenate([self.keys, keys]), return_inverse=True)
-        both = both.reshape(-1).astype(np.int32)
-        every = np.concatenate([self.sums, sums])
-        self.sums = np.stack([np.bincount(both, every[:, c], len(self.keys)) for c in range(10)], axis=1)
-        local = (inv + len(self.merged)).astype(np.int32)
-        self.merged = np.concatenate([both[:old][self.merged], both[old:]])
-        rays = self.surfel[rows]
-        if isinstance(rows, slice):  # a view: written in place
-            rays[idx] = local
-            rays[back] = -2
-        else:
-            rays[idx] = local
-            rays[back] = -2
-            self.surfel[rows] = rays
-        h = self.hits
-        self.hit_positions[h:h + len(idx)] = p
-        self.hit_surfel[h:h + len(idx)] = local
-        self.hits += len(idx)
-
-    def means(self) -> tuple[np.ndarray, np.ndarray]:
-        """The surfels so far: mean positions and (unit) mean normals, float64 (S, 3) each."""
-        cnt = np.maximum(self.sums[:, :1], 1.0)
-        sn = self.sums[:, 4:7] / cnt
-        sn /= np.maximum(np.linalg.norm(sn, axis=1, keepdims=True), 1e-12)
-        return self.sums[:, 1:4] / cnt, sn
-
-    def finish(self):
-        """(surfel per ray (N,) int32: ≥ 0, −1 a miss, −2 a back face; the surfels' mean positions,
-        normals and albedo, float64 (S, 3) each; their shadow rays' origins, ``shadow_origins``)."""
-        total, inv = self.sums, self.merged
-        sp, sn = self.means()
-        sa = total[:, 7:10] / np.maximum(total[:, :1], 1.0)
-        surfel, hit_surfel = self.surfel, self.hit_surfel[:self.hits]
-        for a in range(0, len(surfel), _SLICE):  # in place, in slices: no temporaries of every ray
-            s = surfel[a:a + _SLICE]
-            hit = s >= 0
-            s[hit] = inv[s[hit]]
-            h = hit_surfel[a:a + _SLICE]
-            h[:] = inv[h]
-        origins = shadow_origins(self.hit_positions[:self.hits], hit_surfel, sp, sn, self.size)
-        self.surfel = self.hit_positions = self.hit_surfel = None
-        return surfel, sp, sn, sa, origins
-
-
-def visibility_atlas(moments: np.ndarray, resolution) -> np.ndarray:
-    """The probes' depth moments ((P, VIS_OCT², 2), storage order z, y, x) as one (Z·T, Y, X·T, 2)
-    float32 array (T = VIS_TILE): probe (x, y, z)'s tile at [z·T : z·T + T, y, x·T : x·T + T], its map
-    inside a one-texel border copied by the octahedral map's wrap (an edge texel's neighbour across
-    the edge is the mirrored texel of the same edge; a corner's is the opposite corner), so that a
-    bilinear tap inside the tile filters across the map's seams."""
-    x, y, z = (int(a) for a in resolution)
-    o, t = VIS_OCT, VIS_TILE
-    m = np.asarray(moments, np.float32).reshape(z, y, x, o, o, 2)  # (..., v, u)
-    tile = np.empty((z, y, x, t, t, 2), np.float32)
-    tile[:, :, :, 1:-1, 1:-1] = m
-    tile[:, :, :, 0, 1:-1] = m[:, :, :, 0, ::-1]
-    tile[:, :, :, -1, 1:-1] = m[:, :, :, -1, ::-1]
-    tile[:, :, :, 1:-1, 0] = m[:, :, :, ::-1, 0]
-    tile[:, :, :, 1:-1, -1] = m[:, :, :, ::-1, -1]
-    tile[:, :, :, 0, 0] = m[:, :, :, -1, -1]
-    tile[:, :, :, 0, -1] = m[:, :, :, -1, 0]
-    tile[:, :, :, -1, 0] = m[:, :, :, 0, -1]
-    tile[:, :, :, -1, -1] = m[:, :, :, 0, 0]
-    # (z, y, x, v, u) -> (z, v, y, x, u) -> (Z·T, Y, X·T)
-    return np.ascontiguousarray(tile.transpose(0, 3, 1, 2, 4, 5).reshape(z * t, y, x * t, 2))
+# ---------------------------------------------------------------------------------------------
+# host
 
 
 def scene_key(scene) -> str:
@@ -567,69 +226,11 @@ def scene_key(scene) -> str:
     return h.hexdigest()
 
 
-def lookup_probes(points: np.ndarray, origin, cell, resolution) -> np.ndarray:
-    """(N, 8) int64: the probes (storage order z, y, x) the lookup at ``points`` (N, 3), already moved
-    by the normal offset, reads: the corners of its cell, clamped to the grid (:func:`volume_irradiance`)."""
-    res = np.asarray(resolution, np.int64)
-    g = np.clip((np.asarray(points, np.float64).reshape(-1, 3) - np.asarray(origin, np.float64))
-                / np.asarray(cell, np.float64), 0.0, res - 1)
-    i0 = np.floor(g).astype(np.int64)
-    i1 = np.minimum(i0 + 1, res - 1)
-    out = np.empty((len(g), 8), np.int64)
-    for corner in range(8):
-        c = np.where([(corner >> k) & 1 for k in range(3)], i1, i0)
-        out[:, corner] = (c[:, 2] * res[1] + c[:, 1]) * res[0] + c[:, 0]
-    return out
-
-
 def reach_key(reach: float, resolution) -> str:
-    """What :func:`reachable_probes` (and the surfels' check, ``ProbeGather``) depend on beyond the scene
-    and the probes' positions: the cache key of a trace whose active probes are made on demand."""
+    """What ``skylookup.reachable_probes`` (and the surfels' check, ``ProbeGather``) depend on beyond the
+    scene and the probes' positions: the cache key of a trace whose active probes are made on demand."""
     return f"reach {float(reach)!r} {tuple(int(r) for r in resolution)} {REACH_MARGIN_CELLS!r} " \
-           f"{_REACH_PLANE_PROBES} {_REACH_ROUNDS}"
-
-
-def reachable_probes(vertices: np.ndarray, faces: np.ndarray, origin, cell, resolution, reach: float) -> np.ndarray:
-    """(P,) bool in storage order (z, y, x): the probes a lookup at a point of the triangles
-    ``vertices[faces]`` can read. The lookup at surface point p with unit normal n reads the 8 probes
-    around x = p + offset·n (:func:`volume_irradiance`, sky.glsl), in grid units clamped to the grid;
-    x lies within ``reach`` (the offset and a margin) of a triangle, so the triangles' boxes grown by
-    ``reach``, clamped to the grid, hold every such x, and the probes around them are all a lookup can
-    read. A triangle whose grown box spans more than ``_REACH_PLANE_PROBES`` probes and lies inside the
-    grid keeps only the probes within one cell (each axis) and ``reach`` of its plane."""
-    x, y, z = (int(a) for a in resolution)
-    res = np.array([x, y, z])
-    origin, cell = np.asarray(origin, np.float64), np.asarray(cell, np.float64)
-    out = np.zeros(x * y * z, bool)
-    faces = np.asarray(faces).reshape(-1, 3)
-    if not len(faces):
-        return out
-    for a in range(0, len(faces), _SLICE // 4):  # (N, 3, 3) float64 of every triangle at once: 18 MB per 262k
-        tri = np.asarray(vertices)[faces[a:a + _SLICE // 4]].astype(np.float64)
-        glo = (tri.min(axis=1) - reach - origin) / cell
-        ghi = (tri.max(axis=1) + reach - origin) / cell
-        lo = np.floor(np.clip(glo, 0.0, res - 1)).astype(np.int64)
-        hi = np.minimum(np.floor(np.clip(ghi, 0.0, res - 1)).astype(np.int64) + 1, res - 1)
-        span = hi - lo + 1
-        big = (span.prod(axis=1) > _REACH_PLANE_PROBES) & np.all(glo >= 0.0, axis=1) & np.all(ghi <= res - 1, axis=1)
-        small = ~big
-        # the small boxes as a 3D difference array: +-1 at their 8 corners, summed along each axis
-        diff = np.zeros((z + 1, y + 1, x + 1), np.int64)
-        lo_s, hi_s = lo[small], hi[small] + 1
-        for corner in range(8):
-            c = np.where([(corner >> k) & 1 for k in range(3)], hi_s, lo_s)
-            sign = -1 if bin(corner).count("1") % 2 else 1
-            flat = (c[:, 2] * (y + 1) + c[:, 1]) * (x + 1) + c[:, 0]
-            diff.reshape(-1)[:] += sign * np.bincount(flat, minlength=diff.size)
-        out |= (diff.cumsum(0).cumsum(1).cumsum(2)[:z, :y, :x] > 0).reshape(-1)
-        for t in np.flatnonzero(big):
-            n = np.cross(tri[t, 1] - tri[t, 0], tri[t, 2] - tri[t, 0])
-            n /= max(float(np.linalg.norm(n)), 1e-30)
-            kz, ky, kx = np.meshgrid(*(np.arange(lo[t, k], hi[t, k] + 1) for k in (2, 1, 0)), indexing="ij")
-            q = origin + np.stack([kx, ky, kz], axis=-1).reshape(-1, 3) * cell
-            near = np.abs((q - tri[t, 0]) @ n) <= float(np.abs(n) @ cell) + reach
-            out[((kz.reshape(-1) * y + ky.reshape(-1)) * x + kx.reshape(-1))[near]] = True
-    return out
+           f"{REACH_PLANE_PROBES} {_REACH_ROUNDS}"
 
 
 def direction_sets(rays: int, sets: int = DIRECTION_SETS, seed: int = 0) -> np.ndarray:
@@ -665,7 +266,7 @@ class ProbeGather:
         tracer's scene (geometry and materials), with which a big trace is cached on disk (like the
         kd-tree: ``$SERENITY_CACHE`` or ``~/.cache/serenity``) and read back by the next renderer of
         the same scene and grid; None: no cache. ``active``: (P,) bool, the probes a lookup can read
-        (:func:`reachable_probes`); only they are traced and gathered, the others hold zeros; None:
+        (``skylookup.reachable_probes``); only they are traced and gathered, the others hold zeros; None:
         every probe; or a function that returns them, called only when the probes are traced (not
         when they are read from the disk cache), with ``active_key`` a string of everything they
         depend on beyond the scene and the grid (:func:`reach_key`), which the cache key takes
@@ -762,9 +363,9 @@ class ProbeGather:
         cap = VIS_MAX_CELLS * float(np.linalg.norm(cell))
         self.moments = np.empty((n_probes, VIS_OCT * VIS_OCT, 2), np.float32)
         self.moments[~self.active] = (cap, cap * cap)  # no lookup reads them: as if every ray missed
-        merge = _SurfelMerge(n_probes * r, self._surfel_anchor(), surfel_size)
+        merge = SurfelMerge(n_probes * r, self._surfel_anchor(), surfel_size)
         merge.surfel.reshape(n_probes, r)[~self.active] = -2  # not traced: no light (the gather skips them)
-        weights = _MomentWeights(self.dirs32)
+        weights = MomentWeights(self.dirs32)
         bad = np.zeros(n_probes, bool)  # probes with too many back faces: merged once their place is settled
         self.relocated = 0
 
@@ -772,7 +373,7 @@ class ProbeGather:
             hits = {k: v[rays] for k, v in hits.items()}
             rows = (probes[:, None] * r + np.arange(r)).reshape(-1)
             merge.add(rows, *(hits[k] for k in ("hit", "back", "position", "normal", "albedo")))
-            self.moments[probes] = weights.moments(_hit_distances(hits, origins[probes], r, cap), s[probes])
+            self.moments[probes] = weights.moments(hit_distances(hits, origins[probes], r, cap), s[probes])
 
         def trace(act):  # the probes ``act`` (sorted indices) traced, relocated where needed, merged
             # first judged on every RELOCATION_STRIDE-th ray, as a relocation spot is: a probe inside
@@ -791,7 +392,7 @@ class ProbeGather:
                 rows = slice(probes[0] * r, (probes[-1] + 1) * r) if probes[-1] - probes[0] == b - a - 1 else \
                     (probes[:, None] * r + np.arange(r)).reshape(-1)
                 merge.add(rows, *(hits[k] for k in ("hit", "back", "position", "normal", "albedo")))
-                self.moments[probes] = weights.moments(_hit_distances(hits, origins[probes], r, cap), s[probes])
+                self.moments[probes] = weights.moments(hit_distances(hits, origins[probes], r, cap), s[probes])
                 del hits
             for off in RELOCATIONS:  # probes inside geometry: try a free spot nearby
                 if not bad.any():
@@ -1011,25 +612,21 @@ class ProbeGather:
         out[~up] = np.asarray(ground, np.float64)
         self._miss.assign(out.reshape(DIRECTION_SETS, self.rays, 3).astype(np.float32))
 
-    def update_surfels(self, coeffs, open_sky, visibility, grid, sun_direction, sun_irradiance) -> None:
-        """B_s of every surfel from the volume as it is now (one more bounce); ``open_sky``: the (27,)
-        Warp array of the open sky's coefficients beyond the grid; ``visibility``: (atlas, offsets) Warp
-        arrays of the lookup's probe visibility (empty arrays: plain trilinear)."""
-        origin, cell, res, offset = grid
+    def update_surfels(self, volume: ProbeVolume, sun_direction, sun_irradiance) -> None:
+        """B_s of every surfel from the volume as it is now (one more bounce): ``volume`` the lookup's
+        data (``skylookup.ProbeVolume``), the sun's direction and irradiance (3,) W·m⁻²."""
         if self.surfel_count == 0:
             return
         sun = np.asarray(sun_direction, np.float64)
         sun = sun / max(np.linalg.norm(sun), 1e-12)
         launch(surfel_radiance, self.surfel_count,
                [self._sp, self._sn, self._sa, self._visible, wp.vec3(*sun.astype(np.float32)),
-                wp.vec3(*np.asarray(sun_irradiance, np.float32)), coeffs, open_sky, *visibility,
-                wp.vec3(*origin.astype(np.float32)),
-                wp.vec3(*cell.astype(np.float32)), int(res[0]), int(res[1]), int(res[2]), float(offset),
-                self._radiance], device=self.device)
+                wp.vec3(*np.asarray(sun_irradiance, np.float32)), volume, self._radiance], device=self.device)
 
-    def gather(self, coeffs, scale, resolution, first_layer: int, layers: int) -> None:
-        """The probes of y-layers ``first_layer .. first_layer + layers - 1`` gathered into ``coeffs``."""
-        x, y, z = resolution
-        launch(gather_probes, layers * x * z,
-               [int(x), int(y), int(first_layer), self.rays, self._active, self._surfel, self._radiance, self._miss,
+    def gather(self, grid: ProbeGrid, coeffs, scale, first_layer: int, layers: int) -> None:
+        """The probes of y-layers ``first_layer .. first_layer + layers - 1`` of ``grid`` gathered into
+        ``coeffs`` (P, 27), each coefficient times ``scale`` (the volume's window)."""
+        x, _, z = grid.res
+        launch(gather_probes, layers * int(x) * int(z),
+               [grid, int(first_layer), self.rays, self._active, self._surfel, self._radiance, self._miss,
                 self._basis, scale, coeffs], device=self.device)

@@ -20,8 +20,13 @@ that residual small. Exact when L̃ lies in the span of the S_j.
 Shapes and units: ``transfer`` (P, B² + 1) of vec9 (over k), sr (SH products integrated over
 solid angle; the last column is G); ``f`` (B² + 1, 3) W·m⁻²·sr⁻¹·sr (the last row is L_g, per sr of
 G); output coefficients (P, 27) W·m⁻², the layout of
-``skyvolume.integrate_sky_layer``. Probe order, ray directions (the same QMC set and per-probe
-decorrelation) and the occlusion test are those of ``skyvolume`` (the quads: ``occlusion``).
+``skylayers.integrate_sky_layer``. Probe order, ray directions (the same QMC set and per-probe
+decorrelation) and the occlusion test are those of ``skylayers`` (the quads: ``occlusion``).
+
+``TransferMethod`` is the sky volume's ``"transfer"`` method (``serenity.kernels.skymethod``): after a
+rebake of the sky map the probes are re-lit from the new sky — every probe at once with
+``SkyConfig.transfer_layers`` = 0, else that many layers per update in a continuous cycle (a volume
+never lit is lit whole); nothing to do while every layer is current.
 
 Cost on the 2-core CPU machine (courtyard, 15 000 probes, B = 4): the transfer is built once
 per scene (about the cost of one full per-ray rebuild), then a sky change costs one matrix-vector
@@ -36,13 +41,15 @@ import functools
 import numpy as np
 import warp as wp
 
-from serenity.config import SKY_TRANSFER_MAX_BANDS
+from serenity.config import SKY_SEQUENCES, SKY_TRANSFER_MAX_BANDS
 from serenity.kernels.atmosphere_ref import sky_map_directions, sky_map_solid_angles
 from serenity.kernels.factory import kernel_factory
 from serenity.kernels.launch import launch
 from serenity.kernels.occlusion import intersect_quads
 from serenity.kernels.sampling import cp_rotation, hash_u32, sample_probe_direction
 from serenity.kernels.sh import eval_sh9, sh_basis, vec9
+from serenity.kernels.skylookup import ProbeGrid, probe_grid
+from serenity.kernels.skymethod import SkyVolumeMethod
 
 wp.set_module_options({"enable_backward": False})
 
@@ -99,10 +106,7 @@ def _integrate_transfer_kernel(sequence: int):
     @wp.kernel(enable_backward=False, module="unique")
     def integrate_transfer(
         # inputs
-        origin: wp.vec3,
-        cell: wp.vec3,
-        res_x: int,
-        res_y: int,
+        grid: ProbeGrid,
         centers: wp.array(dtype=wp.vec3),
         ups: wp.array(dtype=wp.vec3),
         rights: wp.array(dtype=wp.vec3),
@@ -117,10 +121,13 @@ def _integrate_transfer_kernel(sequence: int):
         offset: int,
     ):
         probe = wp.tid() + offset
+        res_x = grid.res[0]
+        res_y = grid.res[1]
+        cell = grid.cell
         x = probe % res_x
         y = (probe // res_x) % res_y
         z = probe // (res_x * res_y)
-        p = origin + wp.vec3(float(x) * cell[0], float(y) * cell[1], float(z) * cell[2])
+        p = grid.origin + wp.vec3(float(x) * cell[0], float(y) * cell[1], float(z) * cell[2])
         seed = hash_u32(wp.uint32(probe) ^ salt)
         rot = cp_rotation(seed)
         w = 4.0 * wp.pi / float(rays)
@@ -145,8 +152,7 @@ def apply_transfer(
     transfer: wp.array2d(dtype=vec9),
     sky_sh: wp.array(dtype=wp.vec3),
     scale: vec9,
-    x: int,
-    y: int,
+    grid: ProbeGrid,
     first_layer: int,
     layers: int,
     # outputs
@@ -156,6 +162,8 @@ def apply_transfer(
     """Re-light the probes of ``layers`` consecutive y-layers from ``first_layer`` (probes in
     (z, y, x) storage order; one item per probe of the slab)."""
     i = wp.tid() + offset
+    x = grid.res[0]
+    y = grid.res[1]
     slab = layers * x
     z = i // slab
     rest = i - z * slab
@@ -219,7 +227,7 @@ def project_sky(sky_map: np.ndarray, ground_radiance, functions: int) -> np.ndar
 
 class SkyTransfer:
     """Per-probe transfer matrices of a sky volume's grid (built once), and their application to a
-    sky. ``quads_wp``: the four arrays of ``skyvolume.quads_arrays`` as Warp arrays, and their
+    sky. ``quads_wp``: the four arrays of ``occlusion.quads_arrays`` as Warp arrays, and their
     count; ``base``: the Hammersley base points; ``bands`` B (1–5)."""
 
     def __init__(self, quads_wp, quad_count: int, base, rays: int, sequence: int, seed: int, bands: int,
@@ -243,8 +251,8 @@ class SkyTransfer:
             self.transfer = wp.zeros((probes, self.functions + 1), dtype=vec9, device=self.device)
         else:
             self.transfer.zero_()
-        launch(self._kernel, probes, [wp.vec3(*np.asarray(origin, np.float32)), wp.vec3(*np.asarray(cell, np.float32)),
-                                      x, y, *self._args, self.transfer], device=self.device)
+        launch(self._kernel, probes, [probe_grid(origin, cell, resolution), *self._args, self.transfer],
+               device=self.device)
         self.grid = (tuple(np.asarray(origin, np.float64)), tuple(np.asarray(cell, np.float64)), tuple(resolution))
 
     def apply(self, origin, cell, resolution, sky_sh: np.ndarray, scale, coeffs, first_layer: int = 0,
@@ -260,5 +268,46 @@ class SkyTransfer:
         if not (0 <= first_layer and layers >= 0 and first_layer + layers <= y):
             raise ValueError(f"layers {first_layer}..{first_layer + layers - 1} outside the grid's {y}")
         self._sky.assign(np.ascontiguousarray(sky_sh, np.float32))
+        grid = probe_grid(origin, cell, resolution)
         launch(apply_transfer, z * layers * x,
-               [self.transfer, self._sky, scale, x, y, int(first_layer), layers, coeffs], device=self.device)
+               [self.transfer, self._sky, scale, grid, int(first_layer), layers, coeffs], device=self.device)
+
+
+class TransferMethod(SkyVolumeMethod):
+    """``"transfer"``: the sky volume's probes re-lit through their transfer matrices (module docstring)."""
+
+    def __init__(self, volume):
+        super().__init__(volume)
+        cfg = volume.config
+        self.transfer = SkyTransfer(volume.quads_wp, len(volume.quads), volume.base_points, cfg.rays_per_probe,
+                                    SKY_SEQUENCES.index(cfg.sequence), cfg.seed, cfg.transfer_bands, volume.device)
+        #: (sky version, :func:`project_sky`'s result) of the sky the probes were last re-lit from
+        self.projected: tuple[int, np.ndarray] | None = None
+
+    def apply(self, first: int = 0, count: int | None = None) -> None:
+        """Re-light y-layers ``first`` .. ``first + count - 1`` (default: all) from the current sky."""
+        v = self.volume
+        count = v.resolution[1] - first if count is None else count
+        if self.projected is None or self.projected[0] != v.sky_version:
+            sky = v.sky_map()
+            if v.constant_sky:  # the 2×2 map is too coarse a quadrature for the projection
+                sky = np.broadcast_to(sky[:1, :1], (64, 64, 3))
+            self.projected = (v.sky_version, project_sky(sky, v.ground_radiance, self.transfer.functions))
+        self.transfer.apply(v.grid_origin, v.cell_size, v.resolution, self.projected[1], v.scale, v.coeffs_wp,
+                            first, count)
+        v.mark_lit(first, count)
+
+    def update(self, sun, sky_map, layers: int) -> bool:
+        v = self.volume
+        if not v.pending_layers:
+            return False
+        per_update = v.config.transfer_layers
+        if per_update <= 0 or np.any(v.layer_versions < 0):  # all at once, or never lit
+            self.apply()
+            return True
+        for start, n in v.next_slabs(per_update):
+            self.apply(start, n)
+        return True
+
+    def rebuild(self, sun, sky_map) -> None:
+        self.apply()

@@ -16,6 +16,10 @@ sun_direction)`` or None (``Renderer._ray_batches``: the reflected and the refra
   passes go on).
 - :class:`~serenity.kernels.tracer_process.TracerProcess`: a child process (the overlapped schedule
   on the CPU, where a thread would wait for the GIL the GL calls hold).
+- :class:`SharedRayTracer`: the one :class:`RayTracer` of a scene in this process, built by whichever
+  of its users asks first — the in-process tracers above and the sky volume's traced probes
+  (``SkyVolume(tracer=...)``): a renderer holds one kd-tree and one copy of the textures in its
+  process (the tracer process keeps its own).
 - :class:`RestartingTracer` wraps any of them: a tracer that stops or hangs
   (:class:`~serenity.kernels.tracer_process.TracerStopped`) is closed, made anew once and given the
   frame's rays again; a second failure in the same frame is a one-line :class:`SerenityError`.
@@ -24,6 +28,7 @@ sun_direction)`` or None (``Renderer._ray_batches``: the reflected and the refra
 from __future__ import annotations
 
 import concurrent.futures
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 
@@ -31,7 +36,8 @@ from serenity.errors import SerenityError
 from serenity.kernels.raytrace import RayTracer
 from serenity.kernels.tracer_process import RESULT_TIMEOUT, TracerProcess, TracerStopped
 
-__all__ = ["InlineTracer", "RestartingTracer", "ThreadTracer", "TracerProcess", "TracerStopped", "trace_batches"]
+__all__ = ["InlineTracer", "RestartingTracer", "SharedRayTracer", "ThreadTracer", "TracerProcess", "TracerStopped",
+           "trace_batches"]
 
 
 def trace_batches(tracer: RayTracer, batches: list) -> list:
@@ -39,23 +45,47 @@ def trace_batches(tracer: RayTracer, batches: list) -> list:
     return [None if b is None else tracer.trace(*b[:4], transmissions=b[4], sun_direction=b[5]) for b in batches]
 
 
-class _InProcess:
-    """The tracers in this process: a :class:`RayTracer` built on the first ``submit`` (a frame that
-    shows no traced pixel never builds it), exposed as ``ray_tracer``."""
+class SharedRayTracer:
+    """The :class:`RayTracer` of ``scene`` that every user in this process shares: ``shared()`` builds
+    it on the first call (one build, however many threads ask) and returns it; ``ray_tracer`` is it,
+    or None before."""
 
-    def __init__(self, scene, device: str):
+    def __init__(self, scene, device: str = "cpu"):
         self.scene, self.device = scene, device
         self.ray_tracer: RayTracer | None = None
+        self._lock = threading.Lock()
+
+    def __call__(self) -> RayTracer:
+        if self.ray_tracer is None:
+            with self._lock:
+                if self.ray_tracer is None:
+                    self.ray_tracer = RayTracer(self.scene, device=self.device)
+        return self.ray_tracer
+
+
+class _InProcess:
+    """The tracers in this process: the :class:`RayTracer` of ``shared`` (a :class:`SharedRayTracer`;
+    None: one of their own), built on the first ``submit`` unless another of its users built it
+    before (a frame that shows no traced pixel never builds it), exposed as ``ray_tracer``;
+    ``build_seconds`` is the time the first ``submit`` spent on it (0 where it was built already)."""
+
+    def __init__(self, scene, device: str, shared: SharedRayTracer | None = None):
+        self.scene, self.device = scene, device
+        self.shared = shared if shared is not None else SharedRayTracer(scene, device)
         self.build_seconds: float | None = None
         self.cpu_seconds = 0.0
         self._handles = 0
 
+    @property
+    def ray_tracer(self) -> RayTracer | None:
+        return self.shared.ray_tracer
+
     def _ensure(self) -> RayTracer:
-        if self.ray_tracer is None:
+        if self.build_seconds is None:
             t0 = time.perf_counter()
-            self.ray_tracer = RayTracer(self.scene, device=self.device)
+            self.shared()
             self.build_seconds = time.perf_counter() - t0
-        return self.ray_tracer
+        return self.shared()
 
     def _timed(self, batches: list):
         tracer = self._ensure()
@@ -70,8 +100,8 @@ class _InProcess:
 class InlineTracer(_InProcess):
     """Traces in ``submit``, on the calling thread; ``result`` hands the hits over."""
 
-    def __init__(self, scene, device: str = "cpu"):
-        super().__init__(scene, device)
+    def __init__(self, scene, device: str = "cpu", shared: SharedRayTracer | None = None):
+        super().__init__(scene, device, shared)
         self._done: dict[int, tuple] = {}
 
     def submit(self, batches: list) -> int:
@@ -91,8 +121,8 @@ class InlineTracer(_InProcess):
 class ThreadTracer(_InProcess):
     """Traces on a worker thread of its own; ``result`` waits for it, up to ``timeout`` seconds."""
 
-    def __init__(self, scene, device: str = "cpu"):
-        super().__init__(scene, device)
+    def __init__(self, scene, device: str = "cpu", shared: SharedRayTracer | None = None):
+        super().__init__(scene, device, shared)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="serenity-rt")
         self._futures: dict[int, concurrent.futures.Future] = {}
 

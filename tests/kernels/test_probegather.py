@@ -75,7 +75,7 @@ def test_probe_under_the_plane_is_moved_out(device):
     scene = _plane()
     under = _volume(device, scene, (0.0, -0.01, 0.0))
     over = _volume(device, scene, (0.0, 0.89, 0.0))
-    assert under._gather.relocated == 1 and under._gather.inside == 0
+    assert under.method.probes.relocated == 1 and under.method.probes.inside == 0
     n = np.array([[0.0, -1.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
     a = under.irradiance(np.repeat(under.probe_positions()[:1], 3, axis=0), n)
     b = over.irradiance(np.repeat(over.probe_positions()[:1], 3, axis=0), n)
@@ -88,7 +88,7 @@ def test_passes_follow_a_sun_change_layer_by_layer(device):
     vol = SkyVolume(scene, cfg, device=device)
     vol.grid_origin, vol.cell_size = np.array([-5.0, 0.5, -5.0]), np.full(3, 2.0)  # over the plane
     assert vol.update() is True  # never lit: every bounce at once
-    assert vol.updated_layers == [(0, 3)] and vol.gather_passes_left == 0
+    assert vol.updated_layers == [(0, 3)] and vol.method.passes_left == 0
     assert vol.update() is False  # nothing changed: no work
     before = vol.coefficients().copy()
     scene.sun.direction = np.array([0.3, 0.9, 0.1]) / np.linalg.norm([0.3, 0.9, 0.1])
@@ -189,7 +189,7 @@ def test_sun_moving_every_update_then_stopping_converges_to_the_rebuild(device):
     vol = SkyVolume(scene, cfg, device=device)
     vol.grid_origin, vol.cell_size = np.array([-4.0, 0.5, -4.0]), np.full(3, 2.0)
     vol.update()
-    g = vol._gather
+    g = vol.method.probes
     for k in range(7):  # the sun swings 7 times, one update each
         a = math.radians(60.0 - 4.0 * k)
         vol.update(sun_direction=np.array([0.0, math.sin(a), -math.cos(a)]))
@@ -219,19 +219,19 @@ def test_trace_cached_on_disk_reads_back_the_same_volume(device, tmp_path, monke
 
     first = build()
     files = list(tmp_path.glob("probegather-*.npz"))
-    assert not first._gather.from_cache and len(files) == 1
+    assert not first.method.probes.from_cache and len(files) == 1
     second = build()
-    assert second._gather.from_cache
+    assert second.method.probes.from_cache
     assert np.array_equal(first.coefficients(), second.coefficients())
     files[0].write_bytes(b"not an npz")  # a corrupt cache file: traced again, and rewritten
     third = build()
-    assert not third._gather.from_cache
+    assert not third.method.probes.from_cache
     assert np.array_equal(first.coefficients(), third.coefficients())
     scene = _plane()
     scene.materials[0].albedo = np.full(3, 0.25)  # another scene: another key
     other = SkyVolume(scene, cfg, device=device)
     other.rebuild()
-    assert not other._gather.from_cache and len(list(tmp_path.glob("probegather-*.npz"))) == 2
+    assert not other.method.probes.from_cache and len(list(tmp_path.glob("probegather-*.npz"))) == 2
 
 
 def test_first_lighting_cached_on_disk_skips_the_passes(device, tmp_path, monkeypatch):
@@ -271,7 +271,8 @@ def test_first_lighting_cached_on_disk_skips_the_passes(device, tmp_path, monkey
 def test_visibility_lookup_warp_equals_host(device):
     """The Warp lookup with the probes' visibility (the surfels' and the sky-light VPLs') equals the
     numpy twin of sky.glsl's; the octahedral map's encoding inverts its decoding."""
-    from serenity.kernels.probegather import oct_decode_np, oct_encode_np
+    from serenity.kernels.probesurfels import oct_decode_np
+    from serenity.kernels.skylookup import oct_encode_np
     from serenity.scene.procedural import build_scene
 
     uv = np.random.default_rng(6).uniform(-1, 1, size=(500, 2))
@@ -280,7 +281,7 @@ def test_visibility_lookup_warp_equals_host(device):
     vol = SkyVolume(scene, SkyConfig(method="gather", target_probes=800, gather_rays=32, fit="content"),
                     device=device)
     vol.rebuild()
-    g = vol._gather
+    g = vol.method.probes
     pick = np.arange(0, g.surfel_count, max(1, g.surfel_count // 400))
     p, n = g.surfel_positions[pick], g.surfel_normals[pick]
     assert np.allclose(vol.irradiance_wp(p, n), vol.irradiance(p, n), rtol=1e-4, atol=1e-3)
@@ -319,7 +320,7 @@ def test_reachable_probes_hold_every_lookup_and_skip_the_empty_air():
     """Every probe a lookup at a point of the triangles (moved by up to the offset along any normal)
     reads is reachable; probes far from every triangle are not; a big slanted triangle marks only the
     probes near its plane, not its whole box."""
-    from serenity.kernels.probegather import lookup_probes, reachable_probes
+    from serenity.kernels.skylookup import lookup_probes, reachable_probes
 
     rng = np.random.default_rng(3)
     # a floor (two big triangles below the grid: the lookups clamp onto the bottom layer), a small box
@@ -353,7 +354,7 @@ def test_reachable_probes_hold_every_lookup_and_skip_the_empty_air():
 def test_probes_no_lookup_reads_are_not_traced(device, monkeypatch):
     """Over a plane, a grid of 6 layers: the lookups on the plane read the lowest two, so only they are
     traced and gathered (the others hold zeros), and the plane's light is what tracing every probe gives."""
-    import serenity.kernels.skyvolume as SV
+    import serenity.kernels.skygather as SG
 
     def volume():
         cfg = SkyConfig(method="gather", resolution=(3, 6, 3), gather_rays=128, ground_albedo=0.0)
@@ -363,14 +364,14 @@ def test_probes_no_lookup_reads_are_not_traced(device, monkeypatch):
         return vol
 
     vol = volume()
-    g = vol._gather
+    g = vol.method.probes
     assert g.active.reshape(3, 6, 3)[:, :2].all() and not g.active.reshape(3, 6, 3)[:, 2:].any()
     c = vol.coefficients()
     assert np.all(c[:, 2:] == 0) and np.all(np.abs(c[:, :2]).max(axis=(2, 3)) > 0)
     assert np.all(g._surfel.numpy()[~g.active] == -2)
-    monkeypatch.setattr(SV, "reachable_probes", lambda *a: np.ones(3 * 6 * 3, bool))
+    monkeypatch.setattr(SG, "reachable_probes", lambda *a: np.ones(3 * 6 * 3, bool))
     every = volume()
-    assert every._gather.active.all()
+    assert every.method.probes.active.all()
     pts = np.array([[x, 0.0, z] for x in (-0.7, 0.2, 1.1) for z in (-0.4, 0.6)])
     up = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
     assert np.allclose(vol.irradiance(pts, up), every.irradiance(pts, up), rtol=2e-3)

@@ -276,7 +276,7 @@ def test_glossy_band_factors_filter_like_the_phong_lobe(shininess):
     """The glossy term's SH weights (1, (m+1)/(m+2), m/(m+3) over the clamped cosine's Â_l): for an
     environment of L2 SH radiance they give exactly the radiance filtered by the normalised Phong
     lobe (m+1)/(2π)·cos^m around r, here against the lobe integrated by quadrature."""
-    from serenity.kernels.skyvolume import glossy_band_factors
+    from serenity.kernels.skylookup import glossy_band_factors
 
     rng = np.random.default_rng(4)
     radiance_sh = rng.normal(size=9)

@@ -136,7 +136,7 @@ def test_sky_volume_with_probe_visibility_matches_kernels(gl_ctx, gathered):
     g.set_open_sky(gathered.open_coefficients())
     g.upload_visibility(*gathered.visibility_textures())
     rng = np.random.default_rng(5)
-    gp = gathered._gather
+    gp = gathered.method.probes
     pick = rng.choice(gp.surfel_count, 3000, replace=False)
     p = gp.surfel_positions[pick] + rng.normal(scale=0.05, size=(3000, 3))
     n = gp.surfel_normals[pick]

@@ -1,4 +1,4 @@
-"""Where the gathered probes' surfels start their shadow rays (``probegather.shadow_ray_offsets``,
+"""Where the gathered probes' surfels start their shadow rays (``probesurfels.shadow_ray_offsets``,
 ``shadow_origins``): at one of the surfel's own hits, the one nearest a point of the surfel's square
 across its normal, the points spread so that the consecutive surfels of a row (numbered along the
 grid's z first) do not start from the same place."""
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from serenity.kernels.probegather import SURFEL_SHADOW_SPREAD, shadow_origins, shadow_ray_offsets
+from serenity.kernels.probesurfels import SURFEL_SHADOW_SPREAD, shadow_origins, shadow_ray_offsets
 
 
 def test_offsets_lie_in_the_square_across_the_normal_and_spread_along_a_row():
