@@ -421,3 +421,19 @@ def test_reconfigure_changes_live_settings_and_names_the_others(courtyard):
         assert "\n" not in str(e.value) and r.config.exposure == base.exposure * 4
     assert Renderer.needs_rebuild(base, dataclasses.replace(base, indirect_scale=1))
     assert not Renderer.needs_rebuild(base, dataclasses.replace(base, lpv=dataclasses.replace(base.lpv, glossy=False)))
+
+
+def test_serial_renderer_builds_one_kd_tree(monkeypatch):
+    """A serial renderer of the traced probes (the default preset) over a scene with mirrors traces the
+    frame's rays and the probes' rays with one RayTracer: one kd-tree, one copy of the textures."""
+    from serenity.kernels.raytrace import RayTracer
+
+    built = []
+    init = RayTracer.__init__
+    monkeypatch.setattr(RayTracer, "__init__", lambda self, *a, **k: (built.append(self), init(self, *a, **k))[1])
+    serial = RenderConfig.preset("traced-probes", schedule=ScheduleConfig(overlap=False))
+    with Renderer(load("glass"), *SIZE, config=serial) as r:
+        frame = r.render()
+        assert r.sky_volume.method.probes is not None and r.tracer is not None  # both traced
+        assert len(built) == 1 and r.tracer is built[0] and r.sky_volume.ray_tracer() is built[0]
+        assert np.isfinite(frame.hdr).all()
