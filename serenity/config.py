@@ -237,7 +237,7 @@ class SkyConfig:
     gather_tolerance: float = 0.005
     """"gather": the passes stop when the bounces still missing are estimated under this fraction of
     the volume's light (successive passes' changes shrink by the share of light the scene passes on;
-    ``SkyVolume._pass_converged``); 0 = always ``gather_bounces`` passes. A fixed count fits no scene:
+    ``skygather.GatherMethod.converged``); 0 = always ``gather_bounces`` passes. A fixed count fits no scene:
     the open courtyard converges in 5 passes, the breakfast room's white walls (albedo 0.9) pass
     light on for about 20, and 12 left its image 3 % too dark (FLIP 0.127 against 0.100 with 24)."""
     gather_visibility: bool = True

@@ -1,6 +1,6 @@
 // Sky lighting for the deferred passes (paper §5, §7): the paraboloid sky map and the sky irradiance
-// volume. Mirrors serenity/kernels/atmosphere.py (sample_sky_map) and serenity/kernels/skyvolume.py
-// (SkyVolume.irradiance) exactly; tests/raster/test_sky_gl.py checks both.
+// volume. Mirrors serenity/kernels/atmosphere.py (sample_sky_map) and serenity/kernels/skylookup.py
+// (the volume's lookup, SkyVolume.irradiance) exactly; tests/raster/test_sky_gl.py checks both.
 //
 // Sky map: 2-D RGB float texture uploaded without a row flip (array row i = texture row i), linear
 // filtering, clamp to edge. (u, v) = ((d.x, d.z) / (1 + d.y) + 1) / 2, d.y clamped to >= 0 first.
@@ -67,7 +67,7 @@ void sky_sh9(vec3 d, out float y[9]) {
 // exponent m (W m^-2 sr^-1), both from the same 27 interpolated coefficients. The coefficients hold
 // E_lm = A_l L_lm (A_l = pi, 2 pi / 3, pi / 4: the clamped cosine, times SkyConfig.window's factors);
 // the Phong lobe's are 1, (m + 1) / (m + 2), m / (m + 3), so the glossy term weighs band l by
-// lobe_l / A_l (serenity/kernels/skyvolume.py, glossy_band_factors). Both clamped at 0.
+// lobe_l / A_l (serenity/kernels/skylookup.py, glossy_band_factors). Both clamped at 0.
 const float SKY_OPEN_FADE_CELLS = 2.0;
 
 #ifndef SKY_VISIBILITY
@@ -88,7 +88,7 @@ vec2 sky_oct_encode(vec3 d) {
 }
 
 // Weight of the probe in grid cell c (at grid_pos, moved by its relocation offset) for surface point p
-// with normal n, looked up at x (probegather.probe_visibility).
+// with normal n, looked up at x (skylookup.probe_visibility).
 float sky_probe_visibility(ivec3 c, vec3 grid_pos, vec3 p, vec3 x, vec3 n) {
     vec3 q = grid_pos + texelFetch(u_sky_probe_offset, c, 0).xyz;
     float b = (dot(normalize(q - p), n) + 1.0) * 0.5;
