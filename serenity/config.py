@@ -778,7 +778,7 @@ DEFAULT_QUALITY = "traced-probes"
 and ``bench`` use unless ``--quality`` says otherwise. On the speed-vs-error frontier it costs about
 what ``lpv-fast`` costs (within about 10 % in the test scenes) and is the closest to the
 path-traced reference in every scene of the frontier (FLIP 0.043–0.055 in the test scenes against
-0.104–0.114 for the LPV presets at 320×180 and 640×360, the breakfast room 0.099 against 0.57;
+0.104–0.115 for the LPV presets at 320×180 and 640×360, the breakfast room 0.100 against 0.57;
 ``benchmarks/bench_frontier.py``, ``frontier.json``). The presets that keep the paper's LPV are a ``--quality`` away."""
 
 PRESET_ALIASES = {"low": "traced-probes", "medium": "lpv-fast", "high": "lpv"}
