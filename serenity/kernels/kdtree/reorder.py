@@ -103,7 +103,7 @@ def ray_order(box_lo: wp.vec3, box_hi: wp.vec3, origins: wp.array, directions: w
         launch(sort_keys, n - simd * KEY_LANES, [box_lo, scale, origins, directions, keys], device=device,
                threads=threads, start=simd * KEY_LANES)
         return counting_order(keys, n, threads, workspace)
-    # the radix sort takes twice n of each (its second halves are its scratch); the keys are below
+    # the radix sort takes twice n of each (its second halves are its working space); the keys are below
     # 2^SORT_KEY_BITS < 2^31, so they sort as int32 in the order of their uint32 values
     keys = workspace_buffer(workspace, "keys_pairs", 2 * n, wp.int32, device)
     order = workspace_buffer(workspace, "order_pairs", 2 * n, wp.int32, device)
