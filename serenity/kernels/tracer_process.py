@@ -222,7 +222,7 @@ class TracerProcess:
     def _wait_ready(self, timeout: float | None) -> None:
         if self.build_seconds is None:
             try:
-                self.build_seconds = self._receive(READY_TIMEOUT if timeout is None else max(timeout, READY_TIMEOUT))[1]
+                self.build_seconds = self._receive(max(timeout or 0.0, READY_TIMEOUT))[1]
             finally:
                 self._remove_scene()
 

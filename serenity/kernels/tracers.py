@@ -157,9 +157,8 @@ class RestartingTracer:
         self.timeout = timeout
         self.tracer = make()
         self.restarts = 0
-        self._batches: dict[int, list] = {}
         self._handles = 0
-        self._inner: dict[int, int] = {}
+        self._pending: dict[int, tuple[list, int]] = {}  # handle -> (the frame's batches, the tracer's handle)
 
     def __getattr__(self, name):
         if name == "tracer":  # not yet set: __init__ failed
@@ -178,22 +177,21 @@ class RestartingTracer:
         self.restarts += 1
 
     def submit(self, batches: list) -> int:
-        self._batches.clear()
-        self._inner.clear()
+        self._pending.clear()  # a frame that failed before it collected its hits
         try:
             inner = self.tracer.submit(batches)
         except TracerStopped as e:
             self._restart(e)
             inner = self.tracer.submit(batches)
         self._handles += 1
-        self._batches[self._handles], self._inner[self._handles] = batches, inner
+        self._pending[self._handles] = (batches, inner)
         return self._handles
 
     def result(self, handle: int, timeout: float | None = None):
-        if handle not in self._inner:
+        if handle not in self._pending:
             raise SerenityError(f"no ray batches in flight under handle {handle}")
         timeout = self.timeout if timeout is None else timeout
-        batches, inner = self._batches.pop(handle), self._inner.pop(handle)
+        batches, inner = self._pending.pop(handle)
         try:
             return self.tracer.result(inner, timeout)
         except TracerStopped as e:
