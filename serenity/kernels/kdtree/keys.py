@@ -51,7 +51,7 @@ _SORT_DIR_CELLS = wp.constant(float(1 << SORT_DIRECTION_BITS))
 _SORT_SAMPLE_SHIFT = wp.constant(SORT_SAMPLE_SHIFT)
 
 #: the C natives' constants (``keys.h``)
-_MASKS = {"ORIGIN_MASK": (1 << SORT_ORIGIN_BITS) - 1, "DIRECTION_MASK": (1 << SORT_DIRECTION_BITS) - 1}
+KEY_MASKS = {"ORIGIN_MASK": (1 << SORT_ORIGIN_BITS) - 1, "DIRECTION_MASK": (1 << SORT_DIRECTION_BITS) - 1}
 
 
 @wp.func
@@ -63,13 +63,13 @@ def origin_cell(o: float, lo: float, scale: float) -> int:
     return int(wp.min(f, _SORT_CELLS - 1.0))
 
 
-@wp.func_native(native_body(HEADER, "spread_bits", defines=_MASKS))
+@wp.func_native(native_body(HEADER, "spread_bits", defines=KEY_MASKS))
 def spread_bits(q: int) -> int:
     """Bit b of ``q`` (b < SORT_ORIGIN_BITS) moved to bit 3b: one axis' share of a Morton code."""
     ...
 
 
-@wp.func_native(native_body(HEADER, "spread_bits2", defines=_MASKS))
+@wp.func_native(native_body(HEADER, "spread_bits2", defines=KEY_MASKS))
 def spread_bits2(q: int) -> int:
     """Bit b of ``q`` (b < SORT_DIRECTION_BITS) moved to bit 2b: one coordinate's share of a 2-D
     Morton code."""

@@ -15,6 +15,7 @@ from serenity.device import cpu_threads
 from serenity.kernels.launch import Staging, launch
 
 from ..keys import (
+    KEY_MASKS,
     SORT_DIGIT_BITS,
     SORT_DIRECTION_BITS,
     SORT_FINE_BITS,
@@ -29,6 +30,7 @@ HEADER = Path(__file__).with_name("sort.h")
 
 #: rays per thread of the CPU's key kernel (:func:`sort_keys_simd`; ``lanes16.h`` loads 16)
 KEY_LANES = 16
+assert KEY_LANES == 16  # sort_keys_simd's loads (``lanes16.h``)
 #: the CPU's counting sort gives each thread a contiguous run of at least this many keys to count
 #: (below it, one thread: zeroing and summing a thread's bins costs about as much as counting them)
 SORT_MIN_KEYS_PER_THREAD = 1 << 16
@@ -52,8 +54,7 @@ _SORT_DIGIT = wp.constant(SORT_DIGIT_BITS)
 _SORT_DIGIT_MASK = wp.constant((1 << SORT_DIGIT_BITS) - 1)
 
 #: the C natives' constants (``sort.h``)
-_C = {"KEY_LANES": KEY_LANES, "ORIGIN_MASK": (1 << SORT_ORIGIN_BITS) - 1,
-      "DIRECTION_MASK": (1 << SORT_DIRECTION_BITS) - 1, "ORIGIN_CELLS_MAX": float((1 << SORT_ORIGIN_BITS) - 1),
+_C = {"KEY_LANES": KEY_LANES, **KEY_MASKS, "ORIGIN_CELLS_MAX": float((1 << SORT_ORIGIN_BITS) - 1),
       "DIRECTION_CELLS": float(1 << SORT_DIRECTION_BITS),
       "DIRECTION_CELLS_MAX": float((1 << SORT_DIRECTION_BITS) - 1), "FINE_BITS": SORT_FINE_BITS,
       "FINE_MASK": (1 << SORT_FINE_BITS) - 1, "DIRECTION_KEY_BITS": 2 * SORT_DIRECTION_BITS, "FLT_MAX_F": FLT_MAX,
