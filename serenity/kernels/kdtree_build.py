@@ -59,7 +59,6 @@ from serenity.device import init_warp
 from serenity.errors import SerenityError
 from serenity.kernels.kdtree_build_kernels import clip_refs, emit_leaves, node_splits, scatter_refs, triangle_boxes
 from serenity.kernels.launch import launch
-from serenity.scene.cache import cache_dir  # noqa: F401 (where trees are cached; re-exported)
 
 FORMAT_VERSION = 2  # bump when the build or the cached layout changes
 CACHE_MIN_TRIANGLES = 10_000  # cache=None caches builds of at least this many triangles

@@ -70,7 +70,6 @@ import warp as wp
 from tqdm import tqdm
 
 from serenity.kernels.atmosphere_ref import sample_sky_map_np
-from serenity.kernels.kdtree_build import cache_dir
 from serenity.kernels.launch import launch
 from serenity.kernels.probesurfels import MomentWeights, SurfelMerge, hit_distances
 from serenity.kernels.sh import sh_basis, vec9
@@ -83,6 +82,7 @@ from serenity.kernels.skylookup import (
     volume_irradiance,
 )
 from serenity.memory import mapped_large_blocks
+from serenity.scene.cache import cache_dir
 from serenity.scene.model import IDENTITY_UV
 from serenity.threads import single_threaded_blas
 

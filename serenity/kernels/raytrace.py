@@ -97,8 +97,9 @@ from serenity.kernels.kdtree import (
     scatter_in_order,
     trace_kd,
 )
-from serenity.kernels.kdtree_build import CACHE_MIN_TRIANGLES, cache_dir
+from serenity.kernels.kdtree_build import CACHE_MIN_TRIANGLES
 from serenity.kernels.launch import launch
+from serenity.scene.cache import cache_dir
 from serenity.scene.model import normal_map_frame, used_vertices
 
 wp.set_module_options(TRACE_MODULE_OPTIONS)  # no FMA contraction: watertight on CUDA too (kdtree/layout.py)

@@ -108,8 +108,6 @@ def fit_grid(bounds: np.ndarray, config: SkyConfig) -> tuple[np.ndarray, np.ndar
     """(origin (3,), cell_size (3,), resolution (X, Y, Z)) of the probe grid for scene bounds (2,3),
     raised to at least ``MIN_HEIGHT_FRACTION`` of its widest side above their floor; at most the
     method's ``max_axis_probes`` along an axis."""
-    """(origin (3,), cell_size (3,), resolution (X, Y, Z)) of the probe grid for scene bounds (2,3),
-    raised to at least ``MIN_HEIGHT_FRACTION`` of its widest side above their floor."""
     lo, hi = np.array(bounds, np.float64)
     hi[1] = max(hi[1], lo[1] + MIN_HEIGHT_FRACTION * float(np.max(hi - lo)))
     extent = np.maximum(hi - lo, 0.0)
@@ -277,9 +275,6 @@ class SkyVolume:
             return np.broadcast_to(np.asarray(self.scene.sky.radiance, np.float32), (2, 2, 3)).copy()
         return self.sky.sky_map
 
-    # -- integration
-
-
     # -- updating
 
     def _sun(self, sun_direction):
@@ -354,7 +349,6 @@ class SkyVolume:
             return None
         x, y, z = self.resolution
         return self.visibility[0], np.ascontiguousarray(self.visibility[1].reshape(z, y, x, 3), np.float32)
-    # -- outputs
 
     def probe_positions(self) -> np.ndarray:
         """(P, 3) float64 probe positions, in storage order (z, y, x)."""

@@ -84,6 +84,7 @@ from PIL import Image
 
 from serenity.colour import LUMA_REC709, srgb_to_linear
 from serenity.errors import SceneError
+from serenity.io.atomic import atomic_write
 from serenity.scene import model as _model_module
 from serenity.scene import texture as _texture_module
 from serenity.scene.cache import cache_dir
@@ -285,13 +286,14 @@ def _write_mesh_cache(path: Path | None, value) -> None:
     """Cache ``value`` at ``path`` (written aside, then moved into place); an unwritable cache is ignored."""
     if path is None:
         return
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp")
+
+    def write(tmp):
         with open(tmp, "wb") as f:
             pickle.dump(value, f, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(tmp, path)
-    except OSError:
+
+    try:
+        atomic_write(path, write)
+    except (OSError, pickle.PicklingError):
         pass
 
 

@@ -22,8 +22,9 @@ import os
 import numpy as np
 from PIL import Image, ImageDraw
 
+from serenity.io.atomic import atomic_write
 from serenity.io.provenance import provenance
-from serenity.sweep.files import atomic_write, write_json
+from serenity.sweep.files import write_json
 from serenity.sweep.spec import SweepSpec, Task, scene_label
 
 MAX_COLUMNS = 12

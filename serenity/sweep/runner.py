@@ -36,12 +36,13 @@ from tqdm import tqdm
 from serenity.device import cpu_threads
 from serenity.errors import SerenityError
 from serenity.eval.metrics import tonemap
+from serenity.io.atomic import atomic_write
 from serenity.io.exr import read_exr, write_exr
 from serenity.io.png import write_png
 from serenity.optional import require
 from serenity.sweep import outputs
 from serenity.sweep import tasks as T
-from serenity.sweep.files import atomic_write, write_json
+from serenity.sweep.files import write_json
 from serenity.sweep.spec import SweepSpec, Task, expand
 from serenity.sweep.tasks import one_line
 

@@ -37,7 +37,8 @@ is, and their figures: docs/kdtree.md.
 """
 
 from serenity.config import KdBuildConfig
-from serenity.kernels.kdtree_build import CACHE_MIN_TRIANGLES, PROGRESS_MIN_TRIANGLES, KdStats, cache_dir
+from serenity.kernels.kdtree_build import CACHE_MIN_TRIANGLES, PROGRESS_MIN_TRIANGLES, KdStats
+from serenity.scene.cache import cache_dir
 
 from .cpu.packets import (
     PACKET_LANES,

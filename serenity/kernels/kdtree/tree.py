@@ -21,13 +21,13 @@ from serenity.kernels.kdtree_build import (
     PROGRESS_MIN_TRIANGLES,
     KdStats,
     build_arrays,
-    cache_dir,
     geometry_key,
     load_tree,
     save_tree,
     validate_mesh,
 )
 from serenity.kernels.launch import Staging
+from serenity.scene.cache import cache_dir
 
 from .cpu.packets import PACKET_MIN_RAYS
 from .keys import SORT_MIN_RAYS
