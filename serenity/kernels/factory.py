@@ -1,6 +1,6 @@
 """Specialised kernels: a flag that would otherwise be tested inside a hot loop (the LPV's geometry
 volume and leak guard, the sky volume's direction sequence, ...) is compiled in with ``wp.static`` by
-a cached factory, one kernel per value, as ``lpv.kernels.propagate_kernel`` does.
+a cached factory, one kernel per value, as ``lpv.propagate.propagate_kernel`` does.
 
 ``@kernel_factory(flag=(False, True))`` is ``functools.cache`` plus a declaration of the values each
 parameter can take, so that ``tests/kernels/test_cuda_compile.py`` builds every kernel a factory can

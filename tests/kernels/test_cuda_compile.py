@@ -41,7 +41,7 @@ def _compile(module, tmp_path):
 
 def test_discovery_finds_the_kernel_modules_and_factories():
     names = {m.__name__ for m in MODULES}
-    assert {"serenity.kernels.lpv.kernels", "serenity.kernels.atmosphere", "serenity.kernels.launch"} <= names
+    assert {"serenity.kernels.lpv.propagate", "serenity.kernels.atmosphere", "serenity.kernels.launch"} <= names
     assert len(SPECIALISED) >= 6  # propagate ×2, leak guard ×2, sky sequence ×2
 
 

@@ -81,7 +81,7 @@ That linear transfer is the paper's (``clamp_faces=False``). Clamped faces (``cl
 on): an L1 lobe is negative behind it (a VPL's (1 + 2 cos θ)/4π for cos θ < −1/2), and the linear
 transfer carries that negative light on: in the Cornell box the cells under the ceiling ended with
 negative DC and the ceiling got nothing. With the clamp each face's flux is Δω_f·max(0, I_src(ω_f)),
-the explicit 5-face sum (``kernels.gather_clamped``); no cell ever holds negative light, and flux is
+the explicit 5-face sum (``propagate.gather_clamped``); no cell ever holds negative light, and flux is
 no longer exactly conserved (what the clamp drops was negative). Propagation is diffusive either
 way: at each step 0.8 of a beam's flux turns into side lobes, so light covers about √N cells in N
 iterations, not N (a 4 m lit patch under 32³ × 30 iterations of 1 m cells: irradiance 8 cells above
@@ -108,7 +108,7 @@ are neither propagated nor looked up.
 Every VPL is injected into every cascade it falls in; lookups take the finest cascade (blended
 at its border, see "cascades" above).
 
-Injection (``kernels.inject_vpls``): a VPL at p with normal n goes to the point u = (p − origin)/s +
+Injection (``inject.inject_vpls``): a VPL at p with normal n goes to the point u = (p − origin)/s +
 ``injection_offset``·n (cells); along the normal's dominant axis it stays in the one layer of cells
 holding u, and across the other two axes its lobe is split bilinearly between the 4 cells whose centres
 surround u (clamped to the grid). Put in the single cell holding u, a regular grid of VPLs (an RSM's
@@ -181,15 +181,17 @@ coarse one reaches the fine ones at once). With still inputs the cascades catch 
 Early stop: per cascade, after each iteration the change Σ|ΔDC| is compared with
 ``early_stop``·Σ|DC accumulated|; in a closed lossless grid the ratio is 1/(k+1), so stopping is
 driven by light leaving the grid or being blocked.
-Files: ``basis`` (SH and transfer constants), ``cascades`` (placement, numpy), ``inputs`` (VPLs
-and surfels from the G-buffer and the RSM, numpy), ``kernels`` (Warp functions and kernels, a
-``Cascade`` struct per cascade), ``volume`` (the host class). The injection is a scatter: on the
-CPU, where Warp's ``atomic_add`` is not atomic, it goes through ``serenity.kernels.launch``'s
-``ScatterGrid`` (one private grid per worker thread, summed after); every launch is split over all
-CPU cores by ``serenity.kernels.launch``. The propagation is the exception where that split does not pay:
-a 3 × 12³ LPV's cells are too few to hand to a second thread, and a launch per iteration cost more
-Python than its cells cost to compute, so on the CPU every iteration (early stop included) runs in one
-single-threaded launch (``propagate_kernel(loop=True)``; bit for bit the per-iteration result).
+Files: ``basis`` (SH and transfer constants), ``cascades`` (placement, numpy), ``inputs`` (VPLs and
+surfels from the G-buffer and the RSM, numpy), the Warp code by stage — ``grid`` (a ``Cascade`` struct
+per cascade and the functions every stage reads a grid with), ``inject``, ``propagate`` (and
+``early_stop``: the per-iteration launches' stop, decided on the device), ``lookup`` — and ``volume``
+(the host class). The injection is a scatter: on the CPU, where Warp's ``atomic_add`` is not atomic, it
+goes through ``serenity.kernels.launch``'s ``ScatterGrid`` (one private grid per worker thread, summed
+after); every launch is split over all CPU cores by ``serenity.kernels.launch``. The propagation is the
+exception where that split does not pay: a 3 × 12³ LPV's cells are too few to hand to a second thread,
+and a launch per iteration cost more Python than its cells cost to compute, so on the CPU every
+iteration (early stop included) runs in one single-threaded launch (``propagate_kernel(loop=True)``; bit
+for bit the per-iteration result).
 """
 
 from serenity.kernels.lpv.basis import (

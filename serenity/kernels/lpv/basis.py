@@ -58,7 +58,7 @@ T_DC_AX = wp.constant(TRANSFER["DC_AX"])
 T_AX_DC = wp.constant(TRANSFER["AX_DC"])
 T_AX_AX = wp.constant(TRANSFER["AX_AX"])
 T_PERP = wp.constant(TRANSFER["PERP"])
-W_FRONT_C = wp.constant(W_FRONT)  # the clamped 5-face gather (``kernels.gather_clamped``)
+W_FRONT_C = wp.constant(W_FRONT)  # the clamped 5-face gather (``propagate.gather_clamped``)
 W_SIDE_C = wp.constant(W_SIDE)
 INV_SQRT5 = wp.constant(_INV_SQRT5)
 

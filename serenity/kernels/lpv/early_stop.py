@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from serenity.kernels.lpv.kernels import Cascade
+from serenity.kernels.lpv.grid import Cascade
 
 
 @wp.kernel(enable_backward=False)

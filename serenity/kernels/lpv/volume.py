@@ -29,18 +29,10 @@ from serenity.kernels.launch import (
 from serenity.kernels.lpv.basis import MAX_CASCADES, SH_FLUX
 from serenity.kernels.lpv.cascades import CascadeGrid, fit_cascades
 from serenity.kernels.lpv.early_stop import level_stop
-from serenity.kernels.lpv.kernels import (
-    Cascade,
-    blend_shown,
-    eval_face_transmittance,
-    hand_over_far,
-    inject_geometry,
-    inject_vpls,
-    lookup_glossy,
-    lookup_irradiance_kernel,
-    measure_cells,
-    propagate_kernel,
-)
+from serenity.kernels.lpv.grid import Cascade
+from serenity.kernels.lpv.inject import inject_geometry, inject_vpls, measure_cells
+from serenity.kernels.lpv.lookup import blend_shown, lookup_glossy, lookup_irradiance_kernel
+from serenity.kernels.lpv.propagate import eval_face_transmittance, hand_over_far, propagate_kernel
 
 
 def blend_updates(alpha: float) -> int:
