@@ -8,7 +8,9 @@ import sys
 import pytest
 
 from serenity.config import (
+    IndirectConfig,
     LPVConfig,
+    RayTracingConfig,
     RenderConfig,
     ScheduleConfig,
     ShadowConfig,
@@ -25,8 +27,17 @@ from serenity.errors import SerenityError
     (RenderConfig, {"lpv": False}, "RenderConfig.lpv"),
     (RenderConfig, {"lpv": {"resolution": 16}}, "RenderConfig.lpv"),
     (RenderConfig, {"sky": 3}, "RenderConfig.sky"),
-    (RenderConfig, {"transmissions": -1}, "RenderConfig.transmissions"),
-    (RenderConfig, {"transmissions": 2.5}, "RenderConfig.transmissions"),
+    (RenderConfig, {"rt": True}, "RenderConfig.rt"),
+    (RenderConfig, {"indirect": 2}, "RenderConfig.indirect"),
+    (RenderConfig, {"texture_taps": 0}, "RenderConfig.texture_taps"),
+    (RenderConfig, {"antialiasing": "msaa"}, "RenderConfig.antialiasing"),
+    (RayTracingConfig, {"transmissions": -1}, "RayTracingConfig.transmissions"),
+    (RayTracingConfig, {"transmissions": 2.5}, "RayTracingConfig.transmissions"),
+    (RayTracingConfig, {"osm_size": 8}, "RayTracingConfig.osm_size"),
+    (IndirectConfig, {"scale": 0}, "IndirectConfig.scale"),
+    (IndirectConfig, {"scale": 2.0}, "IndirectConfig.scale"),
+    (IndirectConfig, {"history": 0.0}, "IndirectConfig.history"),
+    (IndirectConfig, {"refine_below": 1.5}, "IndirectConfig.refine_below"),
     (RenderConfig, {"exposure": 0.0}, "RenderConfig.exposure"),
     (ShadowConfig, {"filter_samples": 0}, "ShadowConfig.filter_samples"),
     (ShadowConfig, {"contact_steps": -1}, "ShadowConfig.contact_steps"),
@@ -34,7 +45,7 @@ from serenity.errors import SerenityError
     (ShadowConfig, {"texels_per_pixel": float("nan")}, "ShadowConfig.texels_per_pixel"),
     (ShadowConfig, {"contact_pixels": 0.0}, "ShadowConfig.contact_pixels"),
     (ShadowConfig, {"contact_texels": -1.0}, "ShadowConfig.contact_texels"),
-    (RenderConfig, {"rt_sun_shadows": "pcss"}, "RenderConfig.rt_sun_shadows"),
+    (RayTracingConfig, {"sun_shadows": "pcss"}, "RayTracingConfig.sun_shadows"),
     (ScheduleConfig, {"tracer_nice": 20}, "ScheduleConfig.tracer_nice"),
     (ScheduleConfig, {"tracer_nice": -21}, "ScheduleConfig.tracer_nice"),
     (ScheduleConfig, {"tracer_session": "yes"}, "ScheduleConfig.tracer_session"),
@@ -43,10 +54,13 @@ from serenity.errors import SerenityError
     (SSAOConfig, {"steps": 0}, "SSAOConfig.steps"),
     (SkyConfig, {"window": "box"}, "SkyConfig.window"),
     (SkyConfig, {"rays_per_probe": 0}, "SkyConfig.rays_per_probe"),
+    (SkyConfig, {"layers_per_frame": 0}, "SkyConfig.layers_per_frame"),
     (LPVConfig, {"cascades": 4}, "LPVConfig.cascades"),
     (LPVConfig, {"resolution": (16, 16)}, "LPVConfig.resolution"),
     (LPVConfig, {"forward_shift": 0.5}, "LPVConfig.forward_shift"),
     (LPVConfig, {"glossy_step": 0.0}, "LPVConfig.glossy_step"),
+    (LPVConfig, {"rsm_size": 8}, "LPVConfig.rsm_size"),
+    (LPVConfig, {"sky_vpl_stride": 0}, "LPVConfig.sky_vpl_stride"),
 ])
 def test_bad_fields_name_themselves(kind, kw, field):
     with pytest.raises(SerenityError, match=field.replace(".", r"\.")):
@@ -55,7 +69,7 @@ def test_bad_fields_name_themselves(kind, kw, field):
 
 def test_good_settings_pass():
     cfg = RenderConfig(ssao=SSAOConfig(enabled=False), lpv=LPVConfig(resolution=8), sky=SkyConfig(enabled=False),
-                       transmissions=0)
+                       rt=RayTracingConfig(transmissions=0))
     assert cfg.lpv.enabled and not cfg.sky.enabled
     assert RenderConfig().lpv == LPVConfig() and RenderConfig().sky == SkyConfig()
 
@@ -101,7 +115,7 @@ def test_presets_change_what_they_name_and_nothing_else():
                     assert getattr(ours, g.name) == expect, (name, f.name, g.name)
             else:
                 assert ours == named.get(f.name, default), (name, f.name)
-    assert RenderConfig.preset("paper").lpv.resolution == 32 and RenderConfig.preset("paper").indirect_scale == 1
+    assert RenderConfig.preset("paper").lpv.resolution == 32 and RenderConfig.preset("paper").indirect.scale == 1
     assert RenderConfig.preset("paper").sky.method == "layers"
     assert RenderConfig.preset("traced-probes", exposure=0.5).exposure == 0.5
 
@@ -173,3 +187,84 @@ def test_changed_settings_names_the_fields_that_differ():
                               shadow=dataclasses.replace(base.shadow, filter="pcf", size=base.shadow.size + 1))
     assert sorted(changed_settings(base, new)) == ["exposure", "shadow.filter", "shadow.size"]
     assert changed_settings(base, base) == [] and changed_settings(ShadowConfig(), ShadowConfig()) == []
+    moved = dataclasses.replace(base, indirect=dataclasses.replace(base.indirect, scale=1),
+                                rt=dataclasses.replace(base.rt, reflections=False))
+    assert changed_settings(base, moved) == ["indirect.scale", "rt.reflections"]
+
+
+FORMER_VALUES = {"ray_tracing": False, "reflections": False, "refractions": False, "transmissions": 2,
+                 "rt_sun_shadows": "osm", "osm_size": 1024, "indirect_scale": 4, "indirect_history": 0.5,
+                 "indirect_refine_below": 0.1, "lowres_tile_balance": False, "rsm_size": 128, "sky_vpl_stride": 8,
+                 "sky_layers_per_frame": 2}
+"""A valid value other than the default for every former name of a setting."""
+
+
+@pytest.mark.parametrize("old", sorted(FORMER_VALUES))
+def test_former_setting_names_still_work_with_a_one_line_warning(old):
+    """A setting that moved into a sub-config is still taken under its former name, by every way a
+    config is built from names, and read as an attribute: each time one SettingMovedWarning (a
+    FutureWarning, shown by default) whose one line names the dotted path it has now."""
+    from serenity.config import MOVED_SETTINGS, SettingMovedWarning
+
+    assert set(FORMER_VALUES) == set(MOVED_SETTINGS)
+    new, value = MOVED_SETTINGS[old], FORMER_VALUES[old]
+    sub, name = new.split(".")
+    want = RenderConfig.from_dict({new: value})
+    assert getattr(getattr(want, sub), name) == value and want != RenderConfig()
+    assert issubclass(SettingMovedWarning, FutureWarning)
+    message = f"setting {old!r} is now called {new!r}"
+    with pytest.warns(SettingMovedWarning) as caught:
+        assert RenderConfig.from_dict({old: value}, where="render.toml") == want
+    assert [str(w.message) for w in caught] == [f"render.toml: {message}"]
+    for build in (lambda: RenderConfig(**{old: value}), lambda: dataclasses.replace(RenderConfig(), **{old: value}),
+                  lambda: RenderConfig.preset("lpv", **{old: value})):
+        with pytest.warns(SettingMovedWarning) as caught:
+            assert build() == want
+        assert [str(w.message) for w in caught] == [message]
+    with pytest.warns(SettingMovedWarning, match=f"^{message}$"):
+        assert getattr(want, old) == value
+    assert old not in {f.name for f in dataclasses.fields(RenderConfig)}
+
+
+def test_former_names_apply_on_top_of_the_sub_config_given_with_them():
+    """A former name given with its sub-config changes only its own field of that sub-config, and a
+    preset's other settings of that sub-config stay."""
+    from serenity.config import SettingMovedWarning
+
+    with pytest.warns(SettingMovedWarning):
+        cfg = RenderConfig(rt=RayTracingConfig(sun_shadows="osm"), transmissions=1)
+    assert cfg.rt == RayTracingConfig(sun_shadows="osm", transmissions=1)
+    with pytest.warns(SettingMovedWarning):
+        paper = RenderConfig.preset("paper", sky_layers_per_frame=3)
+    assert paper.sky.method == "layers" and paper.sky.layers_per_frame == 3
+
+
+def test_from_dict_takes_tables_dotted_paths_and_whole_sub_configs():
+    import warnings
+
+    base = RenderConfig.preset("lpv-fast")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the current names warn of nothing
+        cfg = RenderConfig.from_dict({"exposure": 0.05, "indirect": {"scale": 1}, "rt.sun_shadows": "osm",
+                                      "ssao": SSAOConfig(enabled=False)}, base=base)
+    assert cfg == dataclasses.replace(base, exposure=0.05, indirect=IndirectConfig(scale=1, history=0.2),
+                                      rt=RayTracingConfig(sun_shadows="osm"), ssao=SSAOConfig(enabled=False))
+    assert cfg.shadow == base.shadow and cfg.indirect.tile_balance == base.indirect.tile_balance
+    # in one step: the gathered sky volume is valid only with the LPV's diffuse light off
+    both = RenderConfig.from_dict({"sky.method": "gather", "lpv": {"diffuse": False}})
+    assert both.sky.method == "gather" and not both.lpv.diffuse
+    assert RenderConfig.from_dict({}) == RenderConfig() and RenderConfig.from_dict({}, base=base) == base
+    assert RenderConfig.preset("lpv", indirect={"scale": 4}).indirect == IndirectConfig(scale=4)
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"indirect_scal": 4}, "RenderConfig has no setting 'indirect_scal'"),
+    ({"indirect": {"sale": 4}}, r"IndirectConfig has no setting 'sale' \(indirect\.sale\)"),
+    ({"lighting.scale": 4}, "RenderConfig has no sub-config 'lighting'"),
+    ({"indirect.scale": 0}, r"IndirectConfig\.scale must be an int in 1\.\.8"),
+    ({"rt": False}, r"RenderConfig\.rt must be a RayTracingConfig"),
+])
+def test_from_dict_names_the_file_and_the_bad_setting(data, message):
+    with pytest.raises(SerenityError, match=f"^scene.toml: {message}") as e:
+        RenderConfig.from_dict(data, where="scene.toml")
+    assert "\n" not in str(e.value)
