@@ -15,3 +15,11 @@ class GLUnavailableError(SerenityError, RuntimeError):
 
 class ConfigError(SerenityError, ValueError):
     """A render setting out of range or of the wrong type; the message starts with ``Class.field``."""
+
+
+def first_line(e: BaseException) -> str:
+    """``Type: first line of its message`` (at most 200 characters): another library's error quoted
+    inside a one-line message."""
+    text = str(e).strip().splitlines()
+    msg = text[0] if text else ""
+    return f"{type(e).__name__}: {msg}"[:200] if msg else type(e).__name__
