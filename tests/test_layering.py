@@ -1,7 +1,7 @@
 """The package's import graph, read from the source with ``ast`` (nothing is imported): no cycles,
 the layers of docs/architecture.md ("Layers"), ``kernels/`` and ``raster/`` apart, ``config.py``
-free of Warp and OpenGL, and imports at module top except where the rule allows them inside a
-function."""
+free of Warp and OpenGL, imports at module top except where the rule allows them inside a
+function, and no module longer than ``MAX_LINES``."""
 
 from __future__ import annotations
 
@@ -43,6 +43,10 @@ functions, so that the tracer process and a scene without a mesh file never load
 LAZY_IMPORT_PACKAGES = ("serenity.commands",)
 """Where a function may import anything: a command imports what it runs when it runs, so that
 ``serenity --help`` does not load Warp, OpenGL or trimesh."""
+
+MAX_LINES = 700
+"""The most lines a module of the package may have: past it a file holds more than one seam, and is
+split along them (as ``kernels/kdtree/`` and ``kernels/lpv/`` are)."""
 
 PENDING_LOCAL_IMPORTS: set[str] = set()
 """Modules allowed, for now, to import required packages or serenity modules inside functions (while
@@ -223,3 +227,11 @@ def test_function_local_imports_only_where_the_rule_allows():
             continue
         bad.append(f"{_where(i)} imports {i.target} inside a function")
     assert not bad, "move these imports to the module's top (docs/architecture.md, 'Imports'):\n" + "\n".join(bad)
+
+
+def test_no_module_is_over_max_lines():
+    """Every .py file under serenity/ (packages' ``__init__`` included) has at most ``MAX_LINES`` lines."""
+    assert len(MODULES) > 100  # the walk found the package
+    long = {str(p.relative_to(PACKAGE_DIR.parent)): n for p in MODULES.values()
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    assert not long, f"modules over {MAX_LINES} lines (split them along their seams): {long}"
