@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import dataclasses
 import json
 import os
 import subprocess
@@ -69,10 +68,8 @@ def parse_config(pairs: list[str]) -> dict:
 def make_config(preset: str, overrides: dict):
     from serenity.config import RenderConfig
 
-    cfg = RenderConfig.preset(preset)
-    # in one replace: a pair of overrides may only be valid together (sky.method=gather, lpv.diffuse=false)
-    return dataclasses.replace(cfg, **{k: dataclasses.replace(getattr(cfg, k), **v) if isinstance(v, dict) else v
-                                       for k, v in overrides.items()})
+    # in one step: a pair of overrides may only be valid together (sky.method=gather, lpv.diffuse=false)
+    return RenderConfig.from_dict(overrides, where="--a-config/--b-config", base=RenderConfig.preset(preset))
 
 
 def main(argv=None) -> int:

@@ -77,7 +77,7 @@ def test_amortised_volumes_catch_up_once_things_stand_still(courtyard):
     from serenity.kernels.lpv.volume import blend_updates
 
     # the volumes, not the image history
-    fast = RenderConfig.preset("lpv-fast", indirect_history=1.0, schedule=ScheduleConfig(overlap=False))
+    fast = RenderConfig.preset("lpv-fast", indirect={"history": 1.0}, schedule=ScheduleConfig(overlap=False))
     every = dataclasses.replace(fast, sky=dataclasses.replace(fast.sky, transfer_layers=0),
                                 lpv=dataclasses.replace(fast.lpv, stagger=False, temporal_blend=1.0))
     scenes = [copy.deepcopy(courtyard), copy.deepcopy(courtyard)]
@@ -415,11 +415,11 @@ def test_reconfigure_changes_live_settings_and_names_the_others(courtyard):
         r.reconfigure(dataclasses.replace(base, exposure=base.exposure * 4))
         after = r.render(read_back={"ldr"}).ldr
         assert after.mean() > before.mean() + 5
-        with pytest.raises(SerenityError, match=r"^shadow\.size, rsm_size cannot change") as e:
-            r.reconfigure(dataclasses.replace(base, rsm_size=base.rsm_size * 2,
+        with pytest.raises(SerenityError, match=r"^shadow\.size, lpv\.rsm_size cannot change") as e:
+            r.reconfigure(dataclasses.replace(base, lpv=dataclasses.replace(base.lpv, rsm_size=base.lpv.rsm_size * 2),
                                               shadow=dataclasses.replace(base.shadow, size=base.shadow.size * 2)))
         assert "\n" not in str(e.value) and r.config.exposure == base.exposure * 4
-    assert Renderer.needs_rebuild(base, dataclasses.replace(base, indirect_scale=1))
+    assert Renderer.needs_rebuild(base, dataclasses.replace(base, indirect=dataclasses.replace(base.indirect, scale=1)))
     assert not Renderer.needs_rebuild(base, dataclasses.replace(base, lpv=dataclasses.replace(base.lpv, glossy=False)))
 
 

@@ -1,5 +1,5 @@
 """The package's import graph, read from the source with ``ast`` (nothing is imported): no cycles,
-the layers of docs/architecture.md ("Layers"), ``kernels/`` and ``raster/`` apart, ``config.py``
+the layers of docs/architecture.md ("Layers"), ``kernels/`` and ``raster/`` apart, ``config``
 free of Warp and OpenGL, imports at module top except where the rule allows them inside a
 function, and no module longer than ``MAX_LINES``."""
 

@@ -1,5 +1,5 @@
 """The per-term switches the viewer's panel exposes, on the Renderer itself: ``LPVConfig.diffuse`` /
-``.glossy`` and ``RenderConfig.reflections`` / ``.refractions``. Each switch, changed live on one
+``.glossy`` and ``RayTracingConfig.reflections`` / ``.refractions``. Each switch, changed live on one
 Renderer (as the viewer does), removes exactly its own contribution and leaves every other pixel as
 it was, to float rounding (1e-4 relative, 1e-5 of the image's maximum absolute: llvmpipe compiles
 the switched shader differently, and the composite's bilinear fetch at texel centres mixes in ~1e-5
@@ -24,13 +24,12 @@ W, H = 96, 54
 def courtyard(gl_ctx):
     """The courtyard (glass, a mirror, water) at full-resolution indirect light, so that a term's
     pixels are exactly the pixels that show it (no upsampling spreads it to neighbours)."""
-    r = Renderer(load("courtyard"), W, H, config=RenderConfig.preset("lpv-fast", indirect_scale=1))
+    r = Renderer(load("courtyard"), W, H, config=RenderConfig.preset("lpv-fast", indirect={"scale": 1}))
     base = r.config
     r.render()  # builds the volumes; from here on nothing changes between frames
 
-    def render(lpv=None, **fields):
-        r.config = dataclasses.replace(base, **fields, **({} if lpv is None else
-                                                          {"lpv": dataclasses.replace(base.lpv, **lpv)}))
+    def render(**subs):  # a sub-config's name -> the fields of it to change, e.g. lpv={"glossy": False}
+        r.config = dataclasses.replace(base, **{k: dataclasses.replace(getattr(base, k), **v) for k, v in subs.items()})
         try:
             return r.render()
         finally:
@@ -96,7 +95,7 @@ def test_lpv_self_damping_is_compiled_in_when_on(courtyard):
     LPV_DAMPING; fixed when the renderer is built, like the LPV's other lookup settings; on by
     default since round 13): the damped default renderer's LPV light is at most the undamped
     one's (never brighter), and the two differ."""
-    base = RenderConfig.preset("lpv-fast", indirect_scale=1)
+    base = RenderConfig.preset("lpv-fast", indirect={"scale": 1})
     assert base.lpv.self_damping > 0
     r = Renderer(load("courtyard"), W, H, config=dataclasses.replace(
         base, lpv=dataclasses.replace(base.lpv, self_damping=0.0)))
@@ -112,8 +111,8 @@ def test_lpv_self_damping_is_compiled_in_when_on(courtyard):
 
 def test_reflections_off_changes_only_reflecting_pixels(courtyard):
     full = courtyard.full
-    off = courtyard(reflections=False)
-    neither = courtyard(reflections=False, refractions=False)
+    off = courtyard(rt={"reflections": False})
+    neither = courtyard(rt={"reflections": False, "refractions": False})
     changed = _changed(off, full)
     traced = full.aovs["rt_mask"][..., 0] > 0
     assert changed.any() and not (changed & ~traced).any()
@@ -134,14 +133,14 @@ def test_reflections_off_changes_only_reflecting_pixels(courtyard):
 
 def test_refractions_off_changes_only_glass_pixels(courtyard):
     full = courtyard.full
-    off = courtyard(refractions=False)
+    off = courtyard(rt={"refractions": False})
     changed = _changed(off, full)
     glass = _material_mask(full, courtyard.materials, lambda m: m.transparency > 0)
     assert glass.sum() > 10
     assert changed[glass].mean() > 0.5 and not (changed & ~glass).any()
     # the Fresnel reflection stays: glass pixels are still traced, and still differ from nothing traced
     assert np.array_equal(off.aovs["rt_mask"], full.aovs["rt_mask"])
-    neither = courtyard(reflections=False, refractions=False)
+    neither = courtyard(rt={"reflections": False, "refractions": False})
     assert not np.allclose(off.hdr[glass], neither.hdr[glass], rtol=1e-3)
 
 

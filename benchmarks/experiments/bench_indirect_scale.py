@@ -1,5 +1,5 @@
 """What the quarter-resolution indirect light of the ``lpv-fast`` preset costs in accuracy and buys in
-time: ``lpv-fast`` as it is (``indirect_scale`` = 4: sky light, LPV light and SSAO at 1/4 resolution,
+time: ``lpv-fast`` as it is (``IndirectConfig.scale`` = 4: sky light, LPV light and SSAO at 1/4 resolution,
 bilaterally upsampled) against the same preset at 1/2 resolution, for the courtyard and the Cornell
 box at 320×180 and 640×360, against the frontier's 1024-spp references.
 
@@ -40,7 +40,8 @@ STAGES = (*LOW_RES_STAGES, "direct lighting")
 
 def run(frames: int) -> list[dict]:
     medium = RenderConfig.preset("lpv-fast")
-    settings = {"1/4 (lpv-fast)": medium, "1/2": dataclasses.replace(medium, indirect_scale=2)}
+    settings = {"1/4 (lpv-fast)": medium,
+                "1/2": dataclasses.replace(medium, indirect=dataclasses.replace(medium.indirect, scale=2))}
     rows = []
     for scene_name in ("courtyard", "cornell"):
         scene = load(scene_name)
@@ -60,7 +61,7 @@ def run(frames: int) -> list[dict]:
                 m = metrics.compare(f.hdr[..., :3], ref[..., :3], exposure=f.exposure)
                 stages = {s: float(np.median(v)) for s, v in out[k]["stages"].items()}
                 rows.append({"scene": scene_name, "size": [w, h], "indirect": k,
-                             "indirect_scale": settings[k].indirect_scale, "flip": m["flip"],
+                             "indirect_scale": settings[k].indirect.scale, "flip": m["flip"],
                              "rel_mse": m["rel_mse"],
                              "rel_mse_trimmed": metrics.rel_mse(f.hdr[..., :3], ref[..., :3], trim=1e-3),
                              "stages_ms": stages,

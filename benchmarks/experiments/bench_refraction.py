@@ -2,7 +2,7 @@
 
     python benchmarks/experiments/bench_refraction.py [--size 160x90] [--spp 512] [--json FILE]
 
-The ``glass`` scene (slab, ball, prism) rendered with ``RenderConfig.transmissions`` = 0 (the paper:
+The ``glass`` scene (slab, ball, prism) rendered with ``RayTracingConfig.transmissions`` = 0 (the paper:
 a refraction ray shows the first surface it hits, the solid's own back face), 1, 2 and 4 (the ray is
 bent through that many transparent interfaces first), against the full Mitsuba reference: relMSE
 and FLIP over all pixels and over the ray-traced ones, and the CPU ray-tracing ms (median of
@@ -17,7 +17,7 @@ import sys
 
 import numpy as np
 
-from serenity.config import RenderConfig, ScheduleConfig
+from serenity.config import RayTracingConfig, RenderConfig, ScheduleConfig
 from serenity.eval.metrics import compare
 from serenity.eval.reference import render_reference
 from serenity.frame import Renderer
@@ -39,7 +39,8 @@ def main(argv=None) -> int:
     ref = render_reference(scene, width, height, spp=args.spp, component="full", seed=0)
     rows = []
     for t in (0, 1, 2, 4):
-        r = Renderer(scene, width, height, config=RenderConfig(transmissions=t, schedule=ScheduleConfig(overlap=False)))
+        r = Renderer(scene, width, height, config=RenderConfig(rt=RayTracingConfig(transmissions=t),
+                                                                  schedule=ScheduleConfig(overlap=False)))
         frames = [r.render() for _ in range(max(2, args.frames))]
         f = frames[-1]
         traced = f.aovs["rt_mask"][..., 0] > 0

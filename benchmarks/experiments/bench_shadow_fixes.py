@@ -5,7 +5,7 @@
 The courtyard and the Cornell box at 320×180, default ``RenderConfig`` but for the two switches,
 against the same full references as ``bench_baseline.py`` (two cached halves, 256 / 1024 spp):
 
-- ``rt_sun_shadows``: "osm" (the paper's overlapped shadow maps light what reflections and
+- ``RayTracingConfig.sun_shadows``: "osm" (the paper's overlapped shadow maps light what reflections and
   refractions show) vs "traced" (one shadow ray per traced hit in the CPU tracer);
 - ``ShadowConfig.contact_steps``: 0 (off) vs the default screen-space contact shadow;
 
@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from serenity.config import RenderConfig, ScheduleConfig, ShadowConfig
+from serenity.config import RayTracingConfig, RenderConfig, ScheduleConfig, ShadowConfig
 from serenity.eval.metrics import compare, rel_mse
 from serenity.eval.reference import render_reference
 from serenity.eval.regions import region_report
@@ -46,12 +46,12 @@ NO_CONTACT = ShadowConfig(contact_steps=0)
 SETTINGS = {
     # diagnostics: which term of the glass was wrong (refraction off: the glass's transmitted term
     # shows its own rasterised surface) and whether finer, unbiased overlapped maps get it right
-    "OSM, refractions off, no contact shadow": RenderConfig(rt_sun_shadows="osm", refractions=False,
+    "OSM, refractions off, no contact shadow": RenderConfig(rt=RayTracingConfig(sun_shadows="osm", refractions=False),
                                                             shadow=NO_CONTACT),
     "OSM 4096², hard, no bias, no contact shadow": RenderConfig(
-        rt_sun_shadows="osm", osm_size=4096, shadow=ShadowConfig(contact_steps=0, filter="hard", bias=0.0,
-                                                                 normal_offset=0.0)),
-    "OSM, no contact shadow (before)": RenderConfig(rt_sun_shadows="osm", shadow=NO_CONTACT),
+        rt=RayTracingConfig(sun_shadows="osm", osm_size=4096),
+        shadow=ShadowConfig(contact_steps=0, filter="hard", bias=0.0, normal_offset=0.0)),
+    "OSM, no contact shadow (before)": RenderConfig(rt=RayTracingConfig(sun_shadows="osm"), shadow=NO_CONTACT),
     "traced rt shadows, no contact shadow": RenderConfig(shadow=NO_CONTACT),
     "traced rt shadows + contact shadow (default)": RenderConfig(),
 }

@@ -27,7 +27,7 @@ import sys
 
 import numpy as np
 
-from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
+from serenity.config import RayTracingConfig, RenderConfig, ShadowConfig, SSAOConfig
 from serenity.eval.exact import exact_ao, exact_sun_visibility
 from serenity.frame import Renderer
 from serenity.io.results import write_results
@@ -54,7 +54,7 @@ def bench_shadows(size, frames):
     exact, points = None, []
     for mode, kw, label in settings:
         cfg = RenderConfig(shadow=ShadowConfig(filter=mode, **kw), ssao=SSAOConfig(enabled=False),
-                           ray_tracing=False)
+                           rt=RayTracingConfig(enabled=False))
         r = Renderer(scene, *size, config=cfg)
         ms, frame = _median_ms(r, ("shadow maps (CSM)", "direct lighting"), frames)
         pos, nrm = frame.aovs["position"], frame.aovs["normal"]
@@ -82,7 +82,7 @@ def bench_ssao(size, frames):
     exact, points = None, []
     settings = [(d, s) for d in (4, 8, 12, 16, 24) for s in (2, 4, 8)]
     for d, s in settings:
-        cfg = RenderConfig(ssao=SSAOConfig(directions=d, steps=s), ray_tracing=False)
+        cfg = RenderConfig(ssao=SSAOConfig(directions=d, steps=s), rt=RayTracingConfig(enabled=False))
         r = Renderer(scene, *size, config=cfg)
         ms, frame = _median_ms(r, ("ssao",), frames)
         covered = np.isfinite(frame.aovs["depth"][..., 0])

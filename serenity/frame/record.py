@@ -22,7 +22,7 @@ STAGES = (
     "anti-aliasing", "tone map", "readback",
 )
 """Every stage a frame can time, in pipeline order (``Frame.timings`` keys are a subsequence; with
-``indirect_scale`` > 1 "sky lighting" and "lpv lighting" run at low resolution before "direct
+``indirect.scale`` > 1 "sky lighting" and "lpv lighting" run at low resolution before "direct
 lighting", which then includes their upsampling: one full-resolution pass). "rsm" includes the
 read-back of the RSM and of the G-buffer's samples; with the volume worker
 (``ScheduleConfig.overlap_volumes``) "sky volume update", "lpv inputs", "lpv inject" and "lpv

@@ -80,7 +80,7 @@ class Renderer(VolumeStages, RayTracingStages):
         self._t_frame = time.perf_counter()
         with self._stage("upload"):
             cfg = self.config
-            self.traces = cfg.ray_tracing and any(m.needs_ray_tracing for m in scene.materials)
+            self.traces = cfg.rt.enabled and any(m.needs_ray_tracing for m in scene.materials)
             self._tracing: RestartingTracer | None = None  # the ray tracer (``_ensure_tracer``)
             self._build_reported = False
             if self.traces and self._tracer_in_process():  # first: its start-up runs beside the set-up below
@@ -91,8 +91,8 @@ class Renderer(VolumeStages, RayTracingStages):
             self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl, cfg.texture_taps)
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
-            self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect_scale, cfg.lowres_tile_balance)
-            self.lowres_guide = LowResGuide(self.ctx, cfg.indirect_scale, cfg.lowres_tile_balance)
+            self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect.scale, cfg.indirect.tile_balance)
+            self.lowres_guide = LowResGuide(self.ctx, cfg.indirect.scale, cfg.indirect.tile_balance)
             for p in (self.gbuffer_pass, self.deferred_pass, self.tonemap_pass, self.ssao_pass, self.lowres_guide):
                 p.resize(self.width, self.height)
             self.fxaa_pass = FXAAPass(self.ctx) if cfg.antialiasing == "fxaa" else None
@@ -106,8 +106,8 @@ class Renderer(VolumeStages, RayTracingStages):
             if self.traces:
                 self.raycast_pass = RayCastPass(self.ctx, self.scene_gl)
                 self.raycast_pass.resize(self.width, self.height)
-                self.osm_pass = (ShadowPass(self.ctx, self.scene_gl, cfg.osm_size, 3)
-                                 if cfg.rt_sun_shadows == "osm" else None)
+                self.osm_pass = (ShadowPass(self.ctx, self.scene_gl, cfg.rt.osm_size, 3)
+                                 if cfg.rt.sun_shadows == "osm" else None)
                 self.rt_upload = RTGBufferUpload(self.ctx)
                 self.rt_upload.resize(self.width, self.height)
                 self.rt_deferred = DeferredPass(self.ctx)
@@ -261,7 +261,7 @@ class Renderer(VolumeStages, RayTracingStages):
         with self._stage("tone map"):
             self.tonemap_pass.render(out_hdr, self.config.exposure)
         #: this frame's GL textures: hdr (lit + composited, RGBA32F), ldr (tone-mapped sRGB, RGBA8),
-        #: direct, ao (None without SSAO; 1/indirect_scale resolution), the main view's gbuffer, and
+        #: direct, ao (None without SSAO; 1/indirect.scale resolution), the main view's gbuffer, and
         #: rcb (the read-back RayCastingBuffer, None without ray tracing); valid until the next render()
         self.outputs = {"hdr": out_hdr, "ldr": self.tonemap_pass.ldr, "direct": lit.direct, "ao": ao,
                         "gbuffer": gbuf, "rcb": rcb}
@@ -336,7 +336,7 @@ class Renderer(VolumeStages, RayTracingStages):
 
     def _light_main_view(self, gbuf, shadow, light: LightingInputs, ao, guide):
         """Phong + CSM/PCSS and the sky volume's and the LPV's light: at full resolution added onto
-        the lit image; at 1/indirect_scale drawn first and upsampled by the deferred pass."""
+        the lit image; at 1/indirect.scale drawn first and upsampled by the deferred pass."""
         sky_gl = self.sky_gl if self.sky_volume is not None else None
         vis = None
         if self.config.shadow.visibility != "pixel":  # the sun's visibility sampled sparsely, upsampled
@@ -362,7 +362,7 @@ class Renderer(VolumeStages, RayTracingStages):
         with self._stage("direct lighting"):  # the upsampling included (and the indirect light's history)
             history = None
             if self.indirect_history is not None:
-                history = (self.indirect_history, self.scene.camera, self.config.indirect_history)
+                history = (self.indirect_history, self.scene.camera, self.config.indirect.history)
             return self.deferred_pass.render(gbuf, shadow, light, ao, sky=sky_gl, upsample=(lo, guide, refined),
                                              visibility=vis, history=history)
 
@@ -425,21 +425,21 @@ class Renderer(VolumeStages, RayTracingStages):
         }
 
     def _full_res(self, img: np.ndarray) -> np.ndarray:
-        """A 1/indirect_scale image (SSAO) as a full-size AOV: each texel repeated over its block.
+        """A 1/indirect.scale image (SSAO) as a full-size AOV: each texel repeated over its block.
         Texel (i, j) covers the pixels (i·s.., j·s..) counted from GL's bottom-left corner, so in the
         top-down image a partial block row (height not a multiple of s) is the top one."""
-        s = self.config.indirect_scale
+        s = self.config.indirect.scale
         if s == 1:
             return img
         full = np.repeat(np.repeat(img, s, axis=0), s, axis=1)
         return np.ascontiguousarray(full[full.shape[0] - self.height:, :self.width])
 
-    LIVE_SETTINGS = frozenset({"exposure", "reflections", "refractions", "ssao.enabled", "shadow.filter",
+    LIVE_SETTINGS = frozenset({"exposure", "rt.reflections", "rt.refractions", "ssao.enabled", "shadow.filter",
                                "lpv.diffuse", "lpv.glossy"})
     """The settings every frame reads afresh (``reconfigure`` changes them between frames); every other
     setting is built into the renderer's passes, volumes or tracer, and a change of it needs a new
     ``Renderer``. (A technique switched on or off, e.g. both of the LPV's terms or both ray-traced
-    views off, is ``enabled``/``ray_tracing``: a rebuild.)"""
+    views off, is its ``enabled``, ``lpv.enabled`` or ``rt.enabled``: a rebuild.)"""
 
     @classmethod
     def needs_rebuild(cls, old: RenderConfig, new: RenderConfig) -> bool:

@@ -26,7 +26,7 @@ class RayTracingStages:
             return None, None
         with self._stage("ray casting buffer"):
             self.raycast_pass.render(view_proj, self.scene.camera, gbuf)
-            rcb = self.raycast_pass.read().select(self.config.reflections, self.config.refractions)
+            rcb = self.raycast_pass.read().select(self.config.rt.reflections, self.config.rt.refractions)
         if not rcb.count:
             return rcb, None
         tracing = self._ensure_tracer()
@@ -44,12 +44,12 @@ class RayTracingStages:
             traced = join()
         with self._stage("rt g-buffer upload"):
             view_rt = self.rt_upload.upload(rcb, *traced)
-        osm = None  # rt_sun_shadows == "traced": the tracer's shadow rays (eye.w) instead
+        osm = None  # rt.sun_shadows == "traced": the tracer's shadow rays (eye.w) instead
         if self.osm_pass is not None:
             with self._stage("shadow maps (OSM)"):
                 stagger = cfg.shadow.stagger
                 osm = self.osm_pass.render(fit_overlapped(cam.position, scene.sun.direction, self.scene_gl.bounds, 3,
-                                                          cfg.osm_size, pad=STAGGER_PAD if stagger else 0.0),
+                                                          cfg.rt.osm_size, pad=STAGGER_PAD if stagger else 0.0),
                                            stagger=stagger)
         with self._stage("rt direct lighting"):
             rt_lit = self.rt_deferred.render(view_rt, osm, light, None, rt_view=view_rt, sky=sky_gl)
@@ -134,14 +134,14 @@ class RayTracingStages:
         sun = self._traced_sun()
         out = []
         for sel, dirs, transmissions in ((rcb.reflection_rays(), rcb.reflect_dirs, 0),
-                                         (rcb.refraction_rays(), rcb.refract_dirs, self.config.transmissions)):
+                                         (rcb.refraction_rays(), rcb.refract_dirs, self.config.rt.transmissions)):
             out.append((rcb.origins[sel], dirs[sel], rcb.cone_width[sel], rcb.cone_spread[sel], transmissions, sun)
                        if sel.any() else None)
         return out
 
     def _traced_sun(self):
-        """The sun direction the tracer casts shadow rays to (``rt_sun_shadows == "traced"``), or None."""
-        if self.config.rt_sun_shadows != "traced":
+        """The sun direction the tracer casts shadow rays to (``rt.sun_shadows == "traced"``), or None."""
+        if self.config.rt.sun_shadows != "traced":
             return None
         return np.asarray(self.scene.sun.direction, np.float64)
 

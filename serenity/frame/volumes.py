@@ -36,13 +36,13 @@ class VolumeStages:
         self.lowres = None
         self.indirect_history = None
         self.indirect_refinement = None
-        if cfg.indirect_scale > 1 and (cfg.sky.enabled or cfg.lpv.enabled):
-            self.lowres = LowResIndirect(ctx, cfg.indirect_scale, cfg.lowres_tile_balance)
+        if cfg.indirect.scale > 1 and (cfg.sky.enabled or cfg.lpv.enabled):
+            self.lowres = LowResIndirect(ctx, cfg.indirect.scale, cfg.indirect.tile_balance)
             self.lowres.resize(self.width, self.height)
-            if cfg.indirect_refine_below > 0.0:  # full resolution where the upsampling has no match
-                self.indirect_refinement = IndirectRefinement(ctx, cfg.indirect_scale, cfg.indirect_refine_below)
+            if cfg.indirect.refine_below > 0.0:  # full resolution where the upsampling has no match
+                self.indirect_refinement = IndirectRefinement(ctx, cfg.indirect.scale, cfg.indirect.refine_below)
                 self.indirect_refinement.resize(self.width, self.height)
-            if cfg.indirect_history < 1.0:  # the upsampled light blended with the last frame's (raster/temporal.py)
+            if cfg.indirect.history < 1.0:  # the upsampled light blended with the last frame's (raster/temporal.py)
                 self.indirect_history = IndirectHistory(ctx)
                 self.indirect_history.resize(self.width, self.height)
         self.sky_volume = None
@@ -58,9 +58,9 @@ class VolumeStages:
             self._sky_map_version = -1
         self.lpv = None
         if cfg.lpv.enabled:
-            self.rsm_pass = RSMPass(ctx, self.scene_gl, cfg.rsm_size)
+            self.rsm_pass = RSMPass(ctx, self.scene_gl, cfg.lpv.rsm_size)
             self.lpv = LightPropagationVolume(cfg.lpv, self.device)
-            self.gbuffer_samples = GBufferSamples(ctx, cfg.sky_vpl_stride)
+            self.gbuffer_samples = GBufferSamples(ctx, cfg.lpv.sky_vpl_stride)
             self.gbuffer_samples.resize(self.width, self.height)
             self.lpv_gl = LPVTexturesGL(ctx)
             # the lookup's switches compiled in (lpv.glsl; fixed with the LPV's config when the renderer
@@ -158,14 +158,14 @@ class VolumeStages:
 
     def _compute_sky(self) -> dict | None:
         """The sky volume follows the sky (``SkyVolume.update``: the whole volume on the first
-        frame; then by transfer, or ``sky_layers_per_frame`` layers of the paper's sweep), and the
+        frame; then by transfer, or ``sky.layers_per_frame`` layers of the paper's sweep), and the
         host side of its upload is prepared: the sky map when rebaked, the open sky's coefficients,
         the texture arrays of the layers that changed. No GL: the volume worker may run it. Returns
         what ``_upload_sky`` writes, or None when no probe changed."""
         sv = self.sky_volume
         first = not self._sky_built
         with self._cpu_stage("sky volume build" if first else "sky volume update"):
-            changed = sv.update(layers=sv.resolution[1] if first else self.config.sky_layers_per_frame)
+            changed = sv.update(layers=sv.resolution[1] if first else self.config.sky.layers_per_frame)
             self._sky_built = True
             if not changed and not first:
                 return None
@@ -211,7 +211,7 @@ class VolumeStages:
             return self.rsm_pass.read()
 
     def _read_gbuffer_samples(self, gbuf) -> dict:
-        """Every ``sky_vpl_stride``-th pixel of the G-buffer, gathered on the GL side and read back
+        """Every ``lpv.sky_vpl_stride``-th pixel of the G-buffer, gathered on the GL side and read back
         (the "rsm" stage's G-buffer half, ``STAGES``)."""
         with self._stage("rsm"):
             return self.gbuffer_samples.read(gbuf)

@@ -6,7 +6,7 @@ added onto the lit image with additive blending, so that each technique is timed
 The volumes' textures and uniforms are bound by their owners (``SkyTexturesGL.bind``,
 ``LPVTexturesGL.bind``) through the ``bind`` callable given to :meth:`IndirectPass.render`.
 
-Reduced resolution (``RenderConfig.indirect_scale`` > 1, main view): the passes built with
+Reduced resolution (``IndirectConfig.scale`` > 1, main view): the passes built with
 ``lowres=True`` write the light *per unit albedo* at 1/scale of the view per axis into
 :class:`LowResIndirect`'s two targets (diffuse E/π·AO and glossy·AO), drawn before the deferred
 pass, which adds ``albedo·E + glossy`` as it lights each full-resolution pixel, with a joint

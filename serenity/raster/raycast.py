@@ -64,7 +64,7 @@ class RayCastingBuffer:
         return ((self.flags & TRACE_REFRACTION) != 0) & np.any(self.refract_dirs != 0, axis=1)
 
     def select(self, reflections: bool = True, refractions: bool = True) -> RayCastingBuffer:
-        """This buffer with only the ray kinds switched on (``RenderConfig.reflections`` /
+        """This buffer with only the ray kinds switched on (``RayTracingConfig.reflections`` /
         ``.refractions``): the other kind's flag cleared, and pixels left with no ray to trace
         dropped. The composite shows the rasterised surface where a pixel's ray is missing."""
         if reflections and refractions:

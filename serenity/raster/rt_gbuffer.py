@@ -94,7 +94,7 @@ class RTGBufferUpload:
             for n in GBUFFER_TARGETS:
                 flat[n][k] = res[n]
             # the viewer and direction of the ray's last segment (after any transmissions); eye.w:
-            # the sun's visibility from the tracer's shadow ray (RenderConfig.rt_sun_shadows)
+            # the sun's visibility from the tracer's shadow ray (RayTracingConfig.sun_shadows)
             flat["eye"][k] = res["eye"]
             flat["ray_dir"][k, :3] = res["ray_dir"][:, :3]
             points[sel, 1 + channel] = k

@@ -459,7 +459,7 @@ class Viewer:
             self._shown = False
             return  # a switched-off technique, or no reference yet: the panel says so
         # a low-resolution image (SSAO) is shown as the AOV writes it: each texel over its block of pixels
-        block = self.renderer.config.indirect_scale if self.view == "ao" else 1
+        block = self.renderer.config.indirect.scale if self.view == "ao" else 1
         self.present.draw(fbo, vp, shown[0], shown[1], exposure=self.settings.exposure, block=block,
                           render_size=(self.width, self.height))
         if self.view == "lpv cascades" and self.renderer.lpv is not None:

@@ -22,7 +22,7 @@ from serenity.scene.sun import DEFAULT_LOCATION, DEFAULT_TIME, parse_time, sun_f
 
 #: the techniques the panel switches; "live" ones change per frame, the others rebuild the Renderer.
 #: A pair (LPV diffuse/glossy, reflections/refractions) is live while one of the two stays on;
-#: switching off both turns the whole technique off (``LPVConfig.enabled``, ``ray_tracing``): a rebuild
+#: switching off both turns the whole technique off (``LPVConfig.enabled``, ``RayTracingConfig.enabled``): a rebuild
 LIVE_TOGGLES = ("ssao", "lpv_diffuse", "lpv_glossy", "reflections", "refractions", "taa")
 REBUILD_TOGGLES = ("sky_lighting",)
 SHADOW_FILTERS = ("hard", "pcf", "pcss")
@@ -170,5 +170,5 @@ class Settings:
             sky=dataclasses.replace(base.sky, enabled=bool(self.sky_lighting) and base.sky.enabled),
             lpv=dataclasses.replace(base.lpv, enabled=(self.lpv_diffuse or self.lpv_glossy) and base.lpv.enabled,
                                     diffuse=bool(self.lpv_diffuse), glossy=bool(self.lpv_glossy)),
-            ray_tracing=(self.reflections or self.refractions) and base.ray_tracing,
-            reflections=bool(self.reflections), refractions=bool(self.refractions))
+            rt=dataclasses.replace(base.rt, enabled=(self.reflections or self.refractions) and base.rt.enabled,
+                                   reflections=bool(self.reflections), refractions=bool(self.refractions)))

@@ -183,10 +183,11 @@ def test_phong_brighter_than_one_is_exported_as_rendered():
 def our_direct(scene):
     """Our direct-only frame (no ambient term, no ray tracing: Mitsuba's depth 2 has no mirror bounce
     lit by the sun either, and those pixels are left out)."""
-    from serenity.config import LPVConfig, RenderConfig, SkyConfig
+    from serenity.config import LPVConfig, RayTracingConfig, RenderConfig, SkyConfig
     from serenity.frame import Renderer
 
-    cfg = RenderConfig(ambient="none", ray_tracing=False, lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False))
+    cfg = RenderConfig(ambient="none", rt=RayTracingConfig(enabled=False), lpv=LPVConfig(enabled=False),
+                       sky=SkyConfig(enabled=False))
     frame = Renderer(scene, W, H, config=cfg).render()
     return frame.hdr, frame.aovs["depth"][..., 0]
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from serenity.config import LPVConfig, RenderConfig, SkyConfig
+from serenity.config import LPVConfig, RayTracingConfig, RenderConfig, SkyConfig
 from serenity.errors import SerenityError
 from serenity.frame import Renderer, halton
 from serenity.raster.context import is_software
@@ -13,7 +13,7 @@ from .scenes import plane_scene
 
 W, H = 64, 36
 #: direct light only on a bare plane: every covered pixel has the same radiance, the background 0
-QUICK = dict(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ray_tracing=False)
+QUICK = dict(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), rt=RayTracingConfig(enabled=False))
 
 
 def _plane_frame(**config):

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from serenity.config import RenderConfig, SSAOConfig
+from serenity.config import IndirectConfig, RayTracingConfig, RenderConfig, SSAOConfig
 from serenity.frame import Renderer
 from serenity.scene import load
 
@@ -18,10 +18,11 @@ SIZE = (128, 72)
 def _indirect(scene_name: str, scale: int, refine: float = 0.0, refined: list | None = None
               ) -> tuple[np.ndarray, np.ndarray]:
     """(indirect radiance = beauty − direct, coverage mask) of a still frame, without SSAO (its
-    noise pattern depends on the resolution); ``refine``: ``indirect_refine_below``, with the
+    noise pattern depends on the resolution); ``refine``: ``IndirectConfig.refine_below``, with the
     refined pixels' mask appended to ``refined``."""
-    r = Renderer(load(scene_name), *SIZE, config=RenderConfig(indirect_scale=scale, ssao=SSAOConfig(enabled=False),
-                                                              ray_tracing=False, indirect_refine_below=refine))
+    cfg = RenderConfig(indirect=IndirectConfig(scale=scale, refine_below=refine), ssao=SSAOConfig(enabled=False),
+                       rt=RayTracingConfig(enabled=False))
+    r = Renderer(load(scene_name), *SIZE, config=cfg)
     try:
         r.render(read_back=False)
         f = r.render()

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from serenity.config import RenderConfig, ScheduleConfig
+from serenity.config import RayTracingConfig, RenderConfig, ScheduleConfig
 from serenity.frame import Renderer
 from serenity.raster.context import RASTER_TILE, LowResLayout, low_res_layout, low_res_size
 from serenity.raster.interop import read_texture
@@ -20,7 +20,7 @@ pytestmark = pytest.mark.gl
 
 @pytest.fixture(scope="module")
 def frame():
-    r = Renderer(load("courtyard"), 203, 117, config=RenderConfig(ray_tracing=False))
+    r = Renderer(load("courtyard"), 203, 117, config=RenderConfig(rt=RayTracingConfig(enabled=False)))
     r.render(read_back=False)
     yield r
     r.close()
@@ -106,7 +106,7 @@ def test_padded_layout_changes_no_pixel(gl_ctx, preset):
     images = {}
     for balance in (True, False):
         r = Renderer(load("courtyard"), 320, 180,
-                     config=RenderConfig.preset(preset, ray_tracing=False, lowres_tile_balance=balance,
+                     config=RenderConfig.preset(preset, rt={"enabled": False}, indirect={"tile_balance": balance},
                                                 schedule=ScheduleConfig(overlap=False)))
         try:
             r.render(read_back=False)

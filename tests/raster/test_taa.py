@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from serenity.config import LPVConfig, RenderConfig, SkyConfig
+from serenity.config import LPVConfig, RayTracingConfig, RenderConfig, SkyConfig
 from serenity.errors import ConfigError, SerenityError
 from serenity.frame import Renderer
 from serenity.raster.taa import TAAConfig, jitter_offset
@@ -16,7 +16,7 @@ from serenity.scene.model import Camera, Material, Scene
 from .scenes import box, plane_scene, quad
 
 #: direct light only: cheap frames, and the only change from frame to frame is the jitter
-QUICK = dict(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ray_tracing=False)
+QUICK = dict(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), rt=RayTracingConfig(enabled=False))
 W, H = 64, 36
 
 

@@ -8,13 +8,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from serenity.config import RenderConfig, ShadowConfig, SSAOConfig
+from serenity.config import RayTracingConfig, RenderConfig, ShadowConfig, SSAOConfig
 from serenity.errors import ConfigError
 from serenity.frame import Renderer
 from serenity.raster.context import compile_program, expand_includes
 from serenity.scene import load
 
 SIZE = (128, 72)
+NO_RT = RayTracingConfig(enabled=False)
 
 OCT_PROGRAM = """
 #include "fullscreen.glsl"
@@ -33,7 +34,7 @@ void main() {
 
 def _direct(scene_name: str, mode: str) -> tuple[np.ndarray, np.ndarray]:
     """(direct sun radiance, coverage mask) of a still frame."""
-    cfg = RenderConfig(shadow=ShadowConfig(visibility=mode), ssao=SSAOConfig(enabled=False), ray_tracing=False)
+    cfg = RenderConfig(shadow=ShadowConfig(visibility=mode), ssao=SSAOConfig(enabled=False), rt=NO_RT)
     r = Renderer(load(scene_name), *SIZE, config=cfg)
     try:
         r.render(read_back=False)
@@ -114,7 +115,7 @@ def test_visibility_mode_changes_only_the_sun_visibility(gl_ctx, mode):
     """The lit image minus its direct sun term (the indirect light, the sky) is the same whatever
     the visibility's sampling: the option touches the sun's visibility and nothing else."""
     def indirect(mode):
-        cfg = RenderConfig(shadow=dataclasses.replace(ShadowConfig(), visibility=mode), ray_tracing=False)
+        cfg = RenderConfig(shadow=dataclasses.replace(ShadowConfig(), visibility=mode), rt=NO_RT)
         r = Renderer(load("cornell"), *SIZE, config=cfg)
         try:
             r.render(read_back=False)

@@ -1,4 +1,4 @@
-"""The upsampled indirect light's temporal hysteresis (``RenderConfig.indirect_history``,
+"""The upsampled indirect light's temporal hysteresis (``IndirectConfig.history``,
 ``raster/temporal.py``): a pixel's indirect light moves a fraction a of the way to this frame's at
 the same surface point, and a still view shows the light it would without it."""
 
@@ -21,7 +21,7 @@ def _pair(history: float):
     and stagger, with and without the history."""
     out = []
     for a in (history, 1.0):
-        cfg = preset_config("lpv-fast", {"indirect_history": a, "lpv.temporal_blend": 1.0, "lpv.stagger": False,
+        cfg = preset_config("lpv-fast", {"indirect.history": a, "lpv.temporal_blend": 1.0, "lpv.stagger": False,
                                          "sky.transfer_layers": 0})
         out.append(Renderer(load("courtyard"), *SIZE, config=cfg))
     return out

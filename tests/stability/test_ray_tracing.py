@@ -35,8 +35,8 @@ def test_nested_glass_of_one_index(device):
 
 
 @pytest.mark.gl
-@pytest.mark.parametrize("rt_sun_shadows, bound", [("traced", 0.01), ("osm", 0.04)])
-def test_mirror_shows_off_screen_geometry_shadowed(gl_ctx, rt_sun_shadows, bound):
+@pytest.mark.parametrize("sun_shadows, bound", [("traced", 0.01), ("osm", 0.04)])
+def test_mirror_shows_off_screen_geometry_shadowed(gl_ctx, sun_shadows, bound):
     """``mirror-box``: the mirror shows the room behind the camera, outside the main view's shadow
     cascades. For every reflected hit on a sun-facing surface, the exact sun-disc visibility (kd-tree)
     vs the shadow term the RT lighting pass applies (the tracer's shadow ray, or the overlapped
@@ -45,7 +45,7 @@ def test_mirror_shows_off_screen_geometry_shadowed(gl_ctx, rt_sun_shadows, bound
     texel-sized misses along shadow edges), the traced ray (a hard shadow: the disc's centre) only
     hits whose disc is split near half. Bounds: ≤ 1 % / 4 % wrong, and the case has shadowed hits
     (> 5 %)."""
-    case = S.mirror_shadow_case(size=(128, 72), rt_sun_shadows=rt_sun_shadows)
+    case = S.mirror_shadow_case(size=(128, 72), sun_shadows=sun_shadows)
     print(case.row())
     assert case.extra["reflected_hits"] > 200
     assert case.error_without > 0.05

@@ -93,9 +93,9 @@ def test_settings_rebuild_only_for_what_render_does_not_read_per_frame():
     off = Settings(quality=q, lpv_diffuse=False, lpv_glossy=False).config()
     assert not off.lpv.enabled and Renderer.needs_rebuild(base, off)
     rt = Settings(quality=q, refractions=False).config()
-    assert rt.ray_tracing and rt.reflections and not rt.refractions
+    assert rt.rt.enabled and rt.rt.reflections and not rt.rt.refractions
     off = Settings(quality=q, reflections=False, refractions=False).config()
-    assert not off.ray_tracing and Renderer.needs_rebuild(base, off)
+    assert not off.rt.enabled and Renderer.needs_rebuild(base, off)
     assert quality_config(DEFAULT_QUALITY) == Settings().config(), "the viewer starts at serenity render's quality"
     with pytest.raises(SerenityError, match="quality preset"):
         quality_config("ultra")

@@ -38,11 +38,11 @@ def sun_motion_sequence(frames: int = 60, step_deg: float = 0.05, size=(64, 36),
     for label, layers, angle in (("ours", 1, rebuild_angle_deg), ("converged", 1 << 10, 0.0)):
         scene = load(scene_name)
         az = float(scene.sun.azimuth_deg)
-        cfg = RenderConfig(sky_layers_per_frame=layers, **(gi or {}),
-                           sky=SkyConfig(rebuild_angle_deg=angle, resolution=probes, rays_per_probe=rays,
-                                         sky_map_size=sky_map_size))
+        cfg = RenderConfig(**(gi or {}), sky=SkyConfig(rebuild_angle_deg=angle, resolution=probes, rays_per_probe=rays,
+                                                      sky_map_size=sky_map_size, layers_per_frame=layers))
         if label == "converged":  # nothing carried over from the last frame either
-            cfg = dataclasses.replace(cfg, indirect_history=1.0, lpv=dataclasses.replace(cfg.lpv, temporal_blend=1.0))
+            cfg = dataclasses.replace(cfg, indirect=dataclasses.replace(cfg.indirect, history=1.0),
+                                      lpv=dataclasses.replace(cfg.lpv, temporal_blend=1.0))
         r = Renderer(scene, *size, device=device, config=cfg)
         imgs, ms = [], []
         for k in range(frames + 1):

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from serenity.config import LPVConfig, RenderConfig, SkyConfig, SSAOConfig
+from serenity.config import IndirectConfig, LPVConfig, RenderConfig, SkyConfig, SSAOConfig
 from serenity.eval.stability.harness import Case, brute_sky_irradiance
 from serenity.frame import Renderer
 from serenity.kernels.atmosphere import bake_sky_map, horizontal_irradiance, scene_sun_irradiance
@@ -40,9 +40,10 @@ def horizon_sweep(elevations, size=(48, 27), device=None, rebuild_angle_deg: flo
     the smallest radiance, and the largest step excess (|Δours| − |Δexact|) over the larger exact value of the
     two steps. ``probes`` / ``rays``: the sky volume's resolution (None: its default) and rays per probe."""
     scene = horizon_scene(float(elevations[0]))
-    cfg = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False), sky_layers_per_frame=1 << 10,
-                       sky=SkyConfig(rebuild_angle_deg=rebuild_angle_deg, resolution=probes, rays_per_probe=rays),
-                       indirect_history=1.0)  # each step converged: no light carried over from the last
+    cfg = RenderConfig(lpv=LPVConfig(enabled=False), ssao=SSAOConfig(enabled=False),
+                       sky=SkyConfig(rebuild_angle_deg=rebuild_angle_deg, resolution=probes, rays_per_probe=rays,
+                                     layers_per_frame=1 << 10),
+                       indirect=IndirectConfig(history=1.0))  # each step converged: no light carried over from the last
     r = Renderer(scene, *size, device=device, config=cfg)
     n_wall = np.array([-1.0, 0.0, 0.0])
     rows, finite, lo, ours, exact, images = [], True, np.inf, [], [], []

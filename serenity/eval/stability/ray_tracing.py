@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from serenity.config import LPVConfig, RenderConfig, ScheduleConfig, SkyConfig, SSAOConfig
+from serenity.config import LPVConfig, RayTracingConfig, RenderConfig, ScheduleConfig, SkyConfig, SSAOConfig
 from serenity.eval.exact import exact_sun_visibility
 from serenity.eval.stability.harness import Case, timed
 from serenity.frame import Renderer
@@ -77,16 +77,16 @@ def glass_slab_case(count: int = 64, device=None) -> Case:
                         "error": b[0][None]})
 
 
-def mirror_shadow_case(size=(160, 90), device=None, rt_sun_shadows: str = "traced") -> Case:
+def mirror_shadow_case(size=(160, 90), device=None, sun_shadows: str = "traced") -> Case:
     """Off-screen geometry seen in the ``mirror-box`` mirror (behind the camera, outside the main view's
     shadow cascades): is it shadowed? For the reflection rays, the exact sun-disc visibility at their
     hits (the kd-tree) vs the answer the RT direct-lighting pass uses (its direct term over the
-    unshadowed one): the tracer's shadow ray by default, ``rt_sun_shadows="osm"`` the overlapped
-    shadow maps. Error: fraction of hits whose shadow state (exact
-    visibility < 0.5) differs; "without" lights every hit as unshadowed."""
+    unshadowed one): the tracer's shadow ray by default, ``sun_shadows="osm"`` (``RayTracingConfig``)
+    the overlapped shadow maps. Error: fraction of hits whose shadow state (exact visibility < 0.5)
+    differs; "without" lights every hit as unshadowed."""
     scene = load("mirror-box")
     cfg = RenderConfig(lpv=LPVConfig(enabled=False), sky=SkyConfig(enabled=False), ssao=SSAOConfig(enabled=False),
-                       schedule=ScheduleConfig(overlap=False), rt_sun_shadows=rt_sun_shadows)
+                       schedule=ScheduleConfig(overlap=False), rt=RayTracingConfig(sun_shadows=sun_shadows))
     r = Renderer(scene, *size, device=device, config=cfg)
     r.render()
     f, ms = timed(r.render)
@@ -117,7 +117,7 @@ def mirror_shadow_case(size=(160, 90), device=None, rt_sun_shadows: str = "trace
     ex_img = np.full(h * w, np.nan)
     img[pix] = np.clip(ours, 0, 1.5)
     ex_img[pix] = vis
-    shadows = "overlapped shadow maps" if rt_sun_shadows == "osm" else "traced sun shadow rays"
+    shadows = "overlapped shadow maps" if sun_shadows == "osm" else "traced sun shadow rays"
     return Case("mirror: off-screen geometry in shadow", "ray tracing",
                 "fraction of reflected hits with the wrong shadow state", f"{shadows} (vs unshadowed)",
                 err_without, err_with, 0.0, f.timings.get("shadow maps (OSM)", 0.0), exact=0.0,

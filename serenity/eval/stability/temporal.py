@@ -225,8 +225,8 @@ TEMPORAL_SWITCHES = (
     ("shadow tiles all redrawn every frame", {"shadow.stagger": False}),
     ("LPV cascades all updated every frame", {"lpv.stagger": False}),
     ("LPV light switched at once", {"lpv.temporal_blend": 1.0}),
-    ("indirect light without its history", {"indirect_history": 1.0}),
-    ("sky volume all re-lit every frame", {"sky.transfer_layers": 0, "sky_layers_per_frame": 1 << 10}),
+    ("indirect light without its history", {"indirect.history": 1.0}),
+    ("sky volume all re-lit every frame", {"sky.transfer_layers": 0, "sky.layers_per_frame": 1 << 10}),
     ("no LPV", {"lpv.enabled": False}),
 )
 """The switches the temporal-stability breakdown turns, one at a time: (what it does, overrides for
@@ -241,7 +241,7 @@ def switch_applies(quality: str, overrides: dict) -> bool:
     for key in overrides:
         if key.startswith("lpv.") and not base.lpv.enabled:
             return False
-        if key == "indirect_history" and base.indirect_scale == 1:
+        if key == "indirect.history" and base.indirect.scale == 1:
             return False
         if key.startswith("sky") and base.sky.method != "layers" and base.sky.transfer_layers == 0:
             return False  # every probe is re-lit every frame already

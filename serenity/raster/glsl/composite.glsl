@@ -6,7 +6,7 @@
 //        Phong surface: the reference's blendbsdf(T, phong, dielectric) (eval/reference.py)
 //   mirror / metal (reflectivity R > 0, T = 0): F = schlick(R, cos);
 //        L = F * L_reflection + (1 - F) * L_surface
-// A pixel whose reflection (or refraction) ray was not traced (RenderConfig.reflections /
+// A pixel whose reflection (or refraction) ray was not traced (RayTracingConfig.reflections /
 // .refractions off) has L_reflection (L_refraction) = L_surface: the rasterised surface stands in.
 //
 // Drawn in place, into the lit main view, as one point per pixel of the ray-casting buffer (the

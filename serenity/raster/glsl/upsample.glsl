@@ -9,7 +9,7 @@
 // or a crease the texels of the other surface get ~no weight; when every weight vanishes (a pixel
 // unlike all four) the most similar texel is used.
 // UPSAMPLE_REFINE 1: the pixels that no texel stands for (lowres_best_similarity below
-// RenderConfig.indirect_refine_below, marked by upsample_refine.glsl) have their light computed at
+// IndirectConfig.refine_below, marked by upsample_refine.glsl) have their light computed at
 // full resolution instead (raster/lowres.IndirectRefinement), read here where alpha marks them.
 #ifndef SERENITY_UPSAMPLE_GLSL
 #define SERENITY_UPSAMPLE_GLSL
