@@ -12,6 +12,11 @@ answers two queries on a device:
   resolve to the lower triangle index.
 - :meth:`KdTree.occluded`: any hit, (N,) bool.
 
+Both take numpy rays (and give numpy results) or Warp arrays on the query's device: origins and
+directions (N,) ``wp.vec3``, tmax a scalar or (N,) float32; then the results are Warp arrays there
+(``Hits`` of four arrays, or (N,) int32 occlusion flags) and neither the rays nor the hits are copied
+to or from the host, but for the alpha test of cut-outs, which runs on the host.
+
 Degenerate rays (a zero, NaN or infinite direction, a NaN origin, tmax ≤ tmin or NaN) are misses.
 Every path — one ray per kernel thread (CUDA, small batches), 16-ray packets, reordered or not, any
 thread count, CPU or CUDA — returns the same hits bit for bit (tests); the tracing kernels are

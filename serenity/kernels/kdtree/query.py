@@ -54,19 +54,33 @@ RAYS_PER_THREAD = {1: "one_ray", PACKET_LANES: "packets"}
 @dataclass
 class Hits:
     """Closest hits of N rays: ``t`` (N,) float32 (inf = miss), ``prim`` (N,) int32 (−1 = miss),
-    barycentrics ``u``, ``v`` (N,) float32 (p = (1−u−v)·v0 + u·v1 + v·v2; 0 on a miss). From
-    :meth:`KdTree.intersect` of a reordered batch on the CPU the four are the columns of one (N, 4)
-    block of records (views with a 16-byte stride: :func:`hit_outputs`; ``np.ascontiguousarray``
-    packs one)."""
+    barycentrics ``u``, ``v`` (N,) float32 (p = (1−u−v)·v0 + u·v1 + v·v2; 0 on a miss). numpy arrays,
+    or Warp arrays on the query's device where :meth:`KdTree.intersect` was given Warp arrays
+    (:meth:`numpy` brings those to the host). From a reordered batch on the CPU the four are the
+    columns of one (N, 4) block of records (views with a 16-byte stride: :func:`hit_outputs`;
+    ``np.ascontiguousarray`` packs one)."""
 
-    t: np.ndarray
-    prim: np.ndarray
-    u: np.ndarray
-    v: np.ndarray
+    t: np.ndarray | wp.array
+    prim: np.ndarray | wp.array
+    u: np.ndarray | wp.array
+    v: np.ndarray | wp.array
+
+    @property
+    def on_device(self) -> bool:
+        """Whether the four are Warp arrays (the query was given Warp arrays)."""
+        return isinstance(self.t, wp.array)
+
+    def numpy(self) -> Hits:
+        """These hits as numpy arrays: itself for numpy hits, views of Warp arrays on the CPU, a copy
+        from a GPU."""
+        if not self.on_device:
+            return self
+        return Hits(t=self.t.numpy(), prim=self.prim.numpy(), u=self.u.numpy(), v=self.v.numpy())
 
     @property
     def hit(self) -> np.ndarray:
-        return self.prim >= 0
+        """(N,) bool numpy: the rays that hit something (through :meth:`numpy`)."""
+        return self.numpy().prim >= 0
 
 
 def plan_query(device: str, batch: str, rays_per_thread: int | None = None) -> str:
@@ -102,15 +116,21 @@ def hit_outputs(n: int, device: str, reordered: bool) -> tuple[list, wp.array | 
     return columns, records
 
 
-def ray_arrays(o: np.ndarray, d: np.ndarray, tm: np.ndarray, dev: str, tmin: float, workspace: Staging) -> list:
-    """The kernels' ray inputs (origins, directions, tmin, tmax): views of the numpy arrays on the CPU
-    (no copy: serial work before the threads start), copies on a GPU; a scalar tmax (0-d ``tm``) is
-    ``workspace``'s buffer filled with it (:meth:`Staging.filled`: refilled only when it changes)."""
+def ray_arrays(o, d, tm, dev: str, tmin: float, workspace: Staging) -> list:
+    """The kernels' ray inputs (origins, directions, tmin, tmax). Numpy rays: views on the CPU (no
+    copy: serial work before the threads start), copies on a GPU. Warp rays (vec3 arrays on ``dev``)
+    go in as they are, and so does a Warp tmax (float32 on ``dev``); a numpy (N,) tmax beside them is
+    copied to a GPU. A scalar tmax (0-d ``tm``) is ``workspace``'s buffer filled with it
+    (:meth:`Staging.filled`: refilled only when it changes)."""
     copy = not is_cpu(dev)
-    if np.ndim(tm) == 0:
-        tmax = workspace.filled("tmax_uniform", len(o), float, float(tm))
+    if isinstance(tm, wp.array):
+        tmax = tm
+    elif np.ndim(tm) == 0:
+        tmax = workspace.filled("tmax_uniform", o.shape[0], float, float(tm))
     else:
         tmax = wp.array(tm, dtype=float, device=dev, copy=copy)
+    if isinstance(o, wp.array):
+        return [o, d, float(tmin), tmax]
     return [wp.array(o, dtype=wp.vec3, device=dev, copy=copy), wp.array(d, dtype=wp.vec3, device=dev, copy=copy),
             float(tmin), tmax]
 

@@ -134,16 +134,56 @@ class KdTree:
         tm = np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, np.float32), (len(o),)))
         return o, d, tm
 
+    @staticmethod
+    def _device_rays(origins, directions, tmax, device: str | None) -> tuple[wp.array, wp.array, object, str]:
+        """Warp rays checked, and their device: ``origins`` and ``directions`` 1-D ``wp.vec3`` arrays of
+        one length on one device (the query's: ``device``, where given, must name it); ``tmax`` as
+        :meth:`_rays` makes it (a scalar stays 0-d), or a 1-D float32 Warp array there, used as it is."""
+        if not (isinstance(origins, wp.array) and isinstance(directions, wp.array)):
+            raise SerenityError("ray origins and directions: both Warp arrays or neither")
+        for name, a in (("origins", origins), ("directions", directions)):
+            if a.ndim != 1 or a.dtype != wp.vec3:
+                raise SerenityError(f"ray {name}: a 1-D Warp array of wp.vec3 expected, not "
+                                    f"{getattr(a.dtype, '__name__', a.dtype)} of shape {a.shape}")
+        dev = str(origins.device)
+        if str(directions.device) != dev:
+            raise SerenityError(f"ray origins on {dev} but directions on {directions.device}")
+        if device is not None and resolve_device(device) != dev:
+            raise SerenityError(f"rays on {dev} but the query's device is {resolve_device(device)}")
+        n = origins.shape[0]
+        if directions.shape[0] != n:
+            raise SerenityError(f"{n} ray origins but {directions.shape[0]} directions")
+        if isinstance(tmax, wp.array):
+            if tmax.ndim != 1 or tmax.dtype != wp.float32 or tmax.shape[0] != n or str(tmax.device) != dev:
+                raise SerenityError(f"tmax: a 1-D float32 Warp array of {n} on {dev} expected, not "
+                                    f"{getattr(tmax.dtype, '__name__', tmax.dtype)} of shape {tmax.shape} on "
+                                    f"{tmax.device}")
+            return origins, directions, tmax, dev
+        if np.ndim(tmax) == 0:
+            return origins, directions, np.float32(tmax), dev
+        return origins, directions, np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, np.float32), (n,))), dev
+
+    def _batch(self, origins, directions, tmax, device: str | None) -> tuple:
+        """(origins, directions, tmax, device, whether the rays are Warp arrays): numpy rays through
+        :meth:`_rays` on the resolved ``device``, Warp rays through :meth:`_device_rays` on theirs."""
+        if isinstance(origins, wp.array) or isinstance(directions, wp.array):
+            return (*self._device_rays(origins, directions, tmax, device), True)
+        return (*self._rays(origins, directions, tmax), resolve_device(device), False)
+
     def _query_inputs(self, o, d, tm, dev: str, tmin: float, sort: bool | None,
                       threads: int | None) -> tuple[list, wp.array, bool]:
         """The query kernels' inputs (the tree, the rays in their traced order) and that order (empty:
         as given; else ray i of the kernel is the caller's ray ``order[i]``). ``tm``: :meth:`_rays`'
         tmax, 0-d when every ray has the same (then it needs no reordering). Third: whether a batch
-        left in its order is coherent (:func:`batch_is_coherent`; on the CPU it is traced in packets)."""
+        left in its order is coherent (:func:`batch_is_coherent`; on the CPU it is traced in packets).
+        Warp rays on a GPU: ``sort=None`` sorts every batch of ≥ ``SORT_MIN_RAYS`` rays, without the
+        coherence test, whose sample would come back to the host."""
         data = self.device_data(dev)
         workspace = self.workspace(dev)
         origins, directions, tmin, tmax = ray_arrays(o, d, tm, dev, tmin, workspace)
-        n = len(o)
+        n = o.shape[0]
+        if sort is None and isinstance(o, wp.array) and not is_cpu(dev):
+            sort = n >= SORT_MIN_RAYS
         order = ray_order(data.box_lo, data.box_hi, origins, directions, n, sort, dev, threads, workspace)
         coherent = False
         if order.shape[0]:
@@ -163,18 +203,33 @@ class KdTree:
         order (:func:`ray_order`; None = for batches of ≥ ``SORT_MIN_RAYS``); ``rays_per_thread``:
         1 (one ray per kernel thread) or ``PACKET_LANES`` (packets), CPU only; None = the traversal
         of ``query.TRAVERSAL`` for the device and the batch (on the CPU packets when reordered or
-        coherent, else one ray). The results are the same either way, in the caller's order."""
-        dev = resolve_device(device)
-        o, d, tm = self._rays(origins, directions, tmax)
-        hits = self._closest(o, d, tm, dev, tmin, threads, sort, rays_per_thread)
-        if self._masked is not None and len(o):
-            self._through_cutouts(hits, o, d, tm, dev, tmin, threads)
+        coherent, else one ray). The results are the same either way, in the caller's order.
+
+        Warp rays in, Warp hits out: ``origins`` and ``directions`` as (N,) ``wp.vec3`` arrays on one
+        device (the query's; ``device`` may be left out) and ``tmax`` a scalar or an (N,) float32 Warp
+        array there give :class:`Hits` of Warp arrays on that device, with no copy of rays or hits
+        to or from the host (a numpy (N,) ``tmax`` is copied there). The one exception is a tree with
+        an alpha test (:meth:`set_alpha_test`), which runs on the host: from a GPU the hits on its
+        triangles go through the host and back."""
+        o, d, tm, dev, on_device = self._batch(origins, directions, tmax, device)
+        hits = self._closest(o, d, tm, dev, tmin, threads, sort, rays_per_thread, on_device)
+        if self._masked is not None and o.shape[0]:
+            if on_device:
+                host = hits.numpy()  # views on the CPU, a copy from a GPU
+                self._through_cutouts(host, o.numpy(), d.numpy(), _host_tmax(tm), dev, tmin, threads)
+                if not is_cpu(dev):
+                    for dst, src in zip((hits.t, hits.prim, hits.u, hits.v), (host.t, host.prim, host.u, host.v),
+                                        strict=True):
+                        dst.assign(src)
+            else:
+                self._through_cutouts(hits, o, d, tm, dev, tmin, threads)
         return hits
 
     def _closest(self, o, d, tm, dev: str, tmin: float, threads: int | None, sort: bool | None,
-                 rays_per_thread: int | None) -> Hits:
-        """The closest-hit query of :meth:`intersect` without the alpha test."""
-        n = len(o)
+                 rays_per_thread: int | None, on_device: bool = False) -> Hits:
+        """The closest-hit query of :meth:`intersect` without the alpha test; ``on_device``: the hits as
+        the Warp arrays they were traced into."""
+        n = o.shape[0]
         if n:
             args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
             columns, records = hit_outputs(n, dev, order.shape[0] > 0)
@@ -182,6 +237,8 @@ class KdTree:
                           records)
         else:
             columns, _ = hit_outputs(0, dev, False)
+        if on_device:
+            return Hits(*columns)
         out_t, out_p, out_u, out_v = (a.numpy() for a in columns)
         return Hits(t=out_t, prim=out_p, u=out_u, v=out_v)
 
@@ -213,20 +270,38 @@ class KdTree:
 
     def occluded(self, origins, directions, tmax=np.inf, device: str | None = None, *, tmin: float = 0.0,
                  threads: int | None = None, sort: bool | None = None,
-                 rays_per_thread: int | None = None) -> np.ndarray:
+                 rays_per_thread: int | None = None) -> np.ndarray | wp.array:
         """(N,) bool: does anything lie on each ray with tmin < t < tmax? (any hit: the traversal
-        stops at the first one; ``sort`` and ``rays_per_thread`` as for :meth:`intersect`)"""
-        dev = resolve_device(device)
-        o, d, tm = self._rays(origins, directions, tmax)
-        n = len(o)
+        stops at the first one; ``sort`` and ``rays_per_thread`` as for :meth:`intersect`). Warp rays
+        (as for :meth:`intersect`) give an (N,) int32 Warp array on their device, 1 where occluded."""
+        o, d, tm, dev, on_device = self._batch(origins, directions, tmax, device)
+        n = o.shape[0]
         out = wp.zeros(n, dtype=wp.int32, device=dev)
         if n:
             args, order, coherent = self._query_inputs(o, d, tm, dev, tmin, sort, threads)
             launch_query(True, n, args, order, [out], dev, threads, rays_per_thread, self.workspace(dev), coherent)
+        if on_device:
+            if self._masked is not None and n:
+                occ = out.numpy()  # a view on the CPU, a copy from a GPU
+                if occ.any():
+                    self._recheck_occluded(occ, o.numpy(), d.numpy(), _host_tmax(tm), dev, tmin, threads)
+                    if not is_cpu(dev):
+                        out.assign(occ)
+            return out
         occ = out.numpy().astype(bool)
         if self._masked is not None and occ.any():
-            # an any hit may be a rejected cut-out: the occluded rays look for their nearest kept hit
-            idx = np.flatnonzero(occ)
-            tmi = tm if np.ndim(tm) == 0 else tm[idx]
-            occ[idx] = self.intersect(o[idx], d[idx], tmi, dev, tmin=tmin, threads=threads).prim >= 0
+            self._recheck_occluded(occ, o, d, tm, dev, tmin, threads)
         return occ
+
+    def _recheck_occluded(self, occ: np.ndarray, o, d, tm, dev: str, tmin: float, threads: int | None) -> None:
+        """An any hit may be a rejected cut-out: the occluded rays (``occ``, in place) look for their
+        nearest kept hit."""
+        idx = np.flatnonzero(occ)
+        tmi = tm if np.ndim(tm) == 0 else tm[idx]
+        occ[idx] = self.intersect(o[idx], d[idx], tmi, dev, tmin=tmin, threads=threads).prim >= 0
+
+
+def _host_tmax(tm):
+    """A query's tmax (:meth:`KdTree._batch`) for the host's alpha test: numpy as it is, a Warp array's
+    values (a view on the CPU)."""
+    return tm.numpy() if isinstance(tm, wp.array) else tm
