@@ -29,6 +29,8 @@ _EXPORTS = {
     "SkyConfig": "serenity.config",
     "LPVConfig": "serenity.config",
     "ScheduleConfig": "serenity.config",
+    "IndirectConfig": "serenity.config",
+    "RayTracingConfig": "serenity.config",
     "SerenityError": "serenity.errors",
     "SceneError": "serenity.errors",
     "load": "serenity.scene",
