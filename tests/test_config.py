@@ -216,13 +216,15 @@ def test_former_setting_names_still_work_with_a_one_line_warning(old):
     with pytest.warns(SettingMovedWarning) as caught:
         assert RenderConfig.from_dict({old: value}, where="render.toml") == want
     assert [str(w.message) for w in caught] == [f"render.toml: {message}"]
+    assert caught[0].filename == __file__  # the line that used the name, not the config package's
     for build in (lambda: RenderConfig(**{old: value}), lambda: dataclasses.replace(RenderConfig(), **{old: value}),
                   lambda: RenderConfig.preset("lpv", **{old: value})):
         with pytest.warns(SettingMovedWarning) as caught:
             assert build() == want
         assert [str(w.message) for w in caught] == [message]
-    with pytest.warns(SettingMovedWarning, match=f"^{message}$"):
+    with pytest.warns(SettingMovedWarning, match=f"^{message}$") as caught:
         assert getattr(want, old) == value
+    assert caught[0].filename == __file__
     assert old not in {f.name for f in dataclasses.fields(RenderConfig)}
 
 

@@ -120,11 +120,10 @@ class RenderConfig:
         former name of a setting (``MOVED_SETTINGS``, with a one-line ``SettingMovedWarning``). An
         unknown name or a bad value is a ``ConfigError`` naming it, prefixed with ``where`` (e.g. a file)
         when given."""
-        settings = _merge_settings({}, data, where, stacklevel=2)
         try:
-            return _apply_settings(cls() if base is None else base, settings)
+            return _apply_settings(cls() if base is None else base, _merge_settings({}, data, where, stacklevel=2))
         except ConfigError as e:
-            if where is None:
+            if where is None or str(e).startswith(f"{where}: "):
                 raise
             raise ConfigError(f"{where}: {e}") from None
 
