@@ -46,16 +46,29 @@ class CulledRanges:
         self.ranges = list(ranges)
         self.lo = np.array([r.lo for r in self.ranges], np.float64).reshape(-1, 3)
         self.hi = np.array([r.hi for r in self.ranges], np.float64).reshape(-1, 3)
-        #: ranges kept by the last ``visible`` (``len(ranges)`` with culling off)
+        self.mesh = np.array([r.mesh for r in self.ranges], np.int64)
+        self.level = np.array([r.level for r in self.ranges], np.int64)
+        #: ranges kept by the last ``visible`` (``candidates`` with culling off) ...
         self.drawn = len(self.ranges)
+        #: ... of the ranges at the levels of detail it drew (``len(ranges)`` without levels of detail)
+        self.candidates = len(self.ranges)
 
-    def visible(self, view_proj: np.ndarray | None, merge_materials: bool = False) -> list:
+    def visible(self, view_proj: np.ndarray | None, merge_materials: bool = False,
+                levels: np.ndarray | None = None) -> list:
         """The ranges whose box may touch the frustum of ``view_proj`` (all of them for None), in
         index-buffer order, adjacent ones merged into one range when they share a material (any
-        material with ``merge_materials``; the merged range keeps the first one's material)."""
-        keep = (np.ones(len(self.ranges), bool) if view_proj is None or not self.ranges
-                else boxes_in_frustum(view_proj, self.lo, self.hi))
+        material with ``merge_materials``; the merged range keeps the first one's material). With
+        ``levels`` (a level of detail per scene mesh, ``SceneGL.levels``) only the ranges of each
+        mesh's level; without, only level 0 (the meshes' own triangles)."""
+        if levels is None:
+            at_level = self.level == 0
+        else:
+            at_level = self.level == np.where(self.mesh >= 0, np.asarray(levels)[np.maximum(self.mesh, 0)], 0)
+        keep = at_level.copy()
+        if view_proj is not None and self.ranges:
+            keep &= boxes_in_frustum(view_proj, self.lo, self.hi)
         self.drawn = int(np.count_nonzero(keep))
+        self.candidates = int(np.count_nonzero(at_level))
         out = []
         for r, k in zip(self.ranges, keep, strict=True):
             if not k:

@@ -14,6 +14,7 @@ import numpy as np
 
 from serenity.raster.context import load_program, uniform
 from serenity.raster.culling import CulledRanges
+from serenity.raster.scene_gl import LOD_PIXEL_ERROR
 from serenity.scene.model import normal_map_frame
 
 
@@ -51,9 +52,12 @@ class GBufferPass:
             self.program_textured, self.vao_textured = self._variant(True, False, False)
         self.size = None
         self.gbuffer = None
-        self.ranges = CulledRanges(scene_gl.ranges)
+        self.ranges = CulledRanges(scene_gl.ranges + scene_gl.lod_ranges)
         #: skip the draw ranges outside the view frustum (``culling.py``; the image is the same)
         self.cull = True
+        #: draw each dense mesh at the coarsest level of detail within this many pixels of its surface
+        #: (``SceneGL.levels``; 0 = the full meshes)
+        self.lod_pixel_error = LOD_PIXEL_ERROR
         #: (draw ranges drawn, draw ranges) of the last ``render``
         self.last_draws = (0, len(self.ranges.ranges))
 
@@ -104,7 +108,8 @@ class GBufferPass:
             cam = tuple(float(x) for x in camera_pos)
             sgl = self.scene_gl
             ready = set()  # programs whose per-frame uniforms are set
-            for r in self.ranges.visible(view_proj if self.cull else None):
+            levels = sgl.levels(view_proj, self.size[0], self.size[1], self.lod_pixel_error)
+            for r in self.ranges.visible(view_proj if self.cull else None, levels=levels):
                 m = sgl.materials[r.material]
                 tex = sgl.textures.get(r.material)
                 ntex = sgl.normal_textures.get(r.material)
@@ -133,6 +138,6 @@ class GBufferPass:
                 p["u_material"].value = (float(m.shininess), float(m.reflectivity), float(m.transparency),
                                          float(m.ior))
                 vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
-            self.last_draws = (self.ranges.drawn, len(self.ranges.ranges))
+            self.last_draws = (self.ranges.drawn, self.ranges.candidates)
             ctx.disable(moderngl.DEPTH_TEST)
         return self.gbuffer

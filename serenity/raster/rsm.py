@@ -22,6 +22,7 @@ import numpy as np
 from serenity.raster.context import load_program
 from serenity.raster.culling import CulledRanges
 from serenity.raster.interop import read_texture
+from serenity.raster.scene_gl import LOD_PIXEL_ERROR
 from serenity.raster.shadow import look_at, ortho
 
 
@@ -64,9 +65,12 @@ class RSMPass:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth = ctx.depth_texture((size, size))
         self.fbo = ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
-        self.ranges = CulledRanges(scene_gl.ranges)
+        self.ranges = CulledRanges(scene_gl.ranges + scene_gl.lod_ranges)
         #: skip the draw ranges outside the sun's view (``culling.py``; the map is the same)
         self.cull = True
+        #: draw each dense mesh at the coarsest level of detail within this many texels of its surface
+        #: (``SceneGL.levels``; 0 = the full meshes)
+        self.lod_texel_error = LOD_PIXEL_ERROR
         #: (draw ranges drawn, draw ranges) of the last ``render``
         self.last_draws = (0, len(self.ranges.ranges))
 
@@ -85,7 +89,8 @@ class RSMPass:
                     q["u_sun_dir"].value = tuple(float(x) for x in sun_direction)
                     q["u_sun_irradiance"].value = tuple(float(x) for x in sun_irradiance)
                     q["u_texel_area"].value = float(self.texel_area)
-            for r in self.ranges.visible(vp if self.cull else None):
+            levels = self.scene_gl.levels(vp, self.size, self.size, self.lod_texel_error)
+            for r in self.ranges.visible(vp if self.cull else None, levels=levels):
                 m = self.scene_gl.materials[r.material]
                 albedo = np.asarray(m.albedo, np.float64) * self.scene_gl.mean_texture_albedo.get(r.material, 1.0)
                 q, vao = (self.program_masked, self.vao_masked) if m.alpha_tested else (p, self.vao)
@@ -93,7 +98,7 @@ class RSMPass:
                     self.scene_gl.bind_alpha_test(q, r.material)
                 q["u_albedo"].value = tuple(float(x) for x in albedo)
                 vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
-            self.last_draws = (self.ranges.drawn, len(self.ranges.ranges))
+            self.last_draws = (self.ranges.drawn, self.ranges.candidates)
             ctx.disable(moderngl.DEPTH_TEST)
 
     def read(self) -> VPLs:

@@ -10,7 +10,10 @@ Index buffer order: the shadow casters' opaque triangles, then the casters of al
 materials (cut-outs: ``Material.alpha_tested``), then the bottom plane's triangles, each group by
 material and within it by mesh — so the shadow pass draws the opaque casters it does not cull in
 one call per run of adjacent ranges and the cut-outs, which need their texture's alpha, range by
-range.
+range. After them come the coarser levels of detail of the dense meshes (``serenity.scene.lod``;
+only meshes of opaque, rasterised materials off the bottom plane have them), mesh by mesh, level by
+level and material by material: index lists into the same vertices. ``SceneGL.levels`` picks a
+level per mesh for a view; a pass draws the ranges of those levels (``CulledRanges.visible``).
 """
 
 from __future__ import annotations
@@ -21,6 +24,12 @@ import numpy as np
 
 from serenity.raster.context import anisotropy
 from serenity.raster.interop import upload_texture
+from serenity.scene.lod import scene_levels
+
+#: the default bound on a level of detail's error, in pixels of the image it is drawn into (or texels
+#: of a shadow map): a mesh is drawn at the coarsest level whose surface lies at most this far from
+#: its own, measured at the mesh's nearest point (0 = always the full mesh)
+LOD_PIXEL_ERROR = 1.0
 
 
 @dataclass
@@ -30,6 +39,8 @@ class DrawRange:
     count: int   # number of indices
     lo: np.ndarray | None = None  # (3,) world box of its triangles (float32 values)
     hi: np.ndarray | None = None
+    mesh: int = -1   # the scene mesh its triangles belong to (-1: several)
+    level: int = 0   # its level of detail (0: the mesh's own triangles; ``serenity.scene.lod``)
 
 
 def bottom_plane_triangles(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -63,6 +74,8 @@ class SceneGL:
         order = np.lexsort((fmat, masked, floor))
         faces, fmat, floor, masked, mesh = faces[order], fmat[order], floor[order], masked[order], mesh[order]
         self.ranges: list[DrawRange] = []
+        #: the coarser levels' draw ranges (after ``ranges`` in the index buffer)
+        self.lod_ranges: list[DrawRange] = []
         if len(fmat):
             group = np.stack([fmat, floor, mesh], axis=1)
             starts = np.concatenate([[0], np.flatnonzero(np.any(np.diff(group, axis=0), axis=1)) + 1])
@@ -71,7 +84,8 @@ class SceneGL:
             lo = np.minimum.reduceat(corners.min(axis=1), starts).astype(np.float64)
             hi = np.maximum.reduceat(corners.max(axis=1), starts).astype(np.float64)
             for k, (s, e) in enumerate(zip(starts, ends, strict=True)):
-                self.ranges.append(DrawRange(int(fmat[s]), int(s) * 3, int(e - s) * 3, lo[k], hi[k]))
+                self.ranges.append(DrawRange(int(fmat[s]), int(s) * 3, int(e - s) * 3, lo[k], hi[k],
+                                             mesh=int(mesh[s])))
         self.caster_index_count = int(np.count_nonzero(~floor)) * 3
         """Indices of the triangles that can cast a sun shadow: all but the bottom plane's, which
         come last in the index buffer (``bottom_plane_triangles``)."""
@@ -82,10 +96,15 @@ class SceneGL:
         self.masked_caster_ranges = [r for r in self.ranges if scene.materials[r.material].alpha_tested
                                      and r.first < self.caster_index_count]
         """Draw ranges of the alpha-tested casters (drawn with the alpha test by the shadow pass)."""
+        tangents = scene.merged_tangents() if scene.has_normal_maps else None
+        lod_vertices, lod_faces = self._levels_of_detail(scene, floor, mesh, len(faces) * 3, len(pos))
         vertices = np.hstack([pos, nrm, uv]).astype(np.float32)
-        self.vbo = ctx.buffer(vertices.tobytes())
-        self.ibo = ctx.buffer(faces.astype(np.int32).tobytes())
-        self.tangent_vbo = ctx.buffer(scene.merged_tangents().tobytes()) if scene.has_normal_maps else None
+        # a level's vertex: its own position, the normal, uv and tangent of the vertex it came from
+        levels = [np.hstack([p, vertices[src, 3:]]) for p, src in lod_vertices]
+        self.vbo = ctx.buffer(np.concatenate([vertices, *levels]).astype(np.float32).tobytes())
+        self.ibo = ctx.buffer(np.concatenate([faces.astype(np.int32), *lod_faces]).tobytes())
+        self.tangent_vbo = None if tangents is None else ctx.buffer(
+            np.concatenate([tangents, *(tangents[src] for _, src in lod_vertices)]).astype(np.float32).tobytes())
         self.materials = scene.materials
         self.textures = {}
         aniso = anisotropy(ctx)
@@ -109,6 +128,70 @@ class SceneGL:
                 self.normal_textures[i] = upload_texture(ctx, nt.mips[0][..., :3], dtype="f2",
                                                          mips=[mm[..., :3] for mm in nt.mips], anisotropy=aniso)
         self.triangle_count = len(faces)
+
+    def _levels_of_detail(self, scene, floor: np.ndarray, face_mesh: np.ndarray, first: int, vertex_base: int):
+        """Build the coarser levels (``lod_ranges``, the per-mesh boxes and errors ``levels`` reads);
+        returns their vertices, as (positions, merged index of the vertex whose attributes each takes)
+        per level, appended to the vertex buffer from ``vertex_base`` on, and their faces in
+        index-buffer order from index ``first``."""
+        meshes = scene.meshes
+        n = len(meshes)
+        self.mesh_lo = np.zeros((n, 3))
+        self.mesh_hi = np.zeros((n, 3))
+        for i, m in enumerate(meshes):
+            if len(m.faces):
+                used = m.positions[m.faces.reshape(-1)]
+                self.mesh_lo[i], self.mesh_hi[i] = used.min(axis=0), used.max(axis=0)
+        on_floor = np.zeros(n, bool)
+        on_floor[face_mesh[floor]] = True
+        kept = [bool(m.faces.size) and not on_floor[i]
+                and not any(scene.materials[k].alpha_tested or scene.materials[k].needs_ray_tracing
+                            for k in np.unique(m.face_material))
+                for i, m in enumerate(meshes)]
+        levels = scene_levels(meshes, kept)
+        depth = max((len(lv) for lv in levels if lv is not None), default=0)
+        #: (meshes, 1 + levels) metres each level's surface may lie from the mesh's (inf: no such level)
+        self.lod_error = np.full((n, depth + 1), np.inf)
+        self.lod_error[:, 0] = 0.0
+        vertices, out = [], []
+        base = np.concatenate([[0], np.cumsum([len(m.positions) for m in meshes])])
+        for i, lv in enumerate(levels):
+            if lv is None:
+                continue
+            self.lod_error[i, 1:len(lv) + 1] = lv.error
+            material = meshes[i].face_material
+            for k in range(len(lv)):
+                vertices.append((lv.positions[k], lv.vertex_source[k] + base[i]))
+                fm = material[lv.source[k]]
+                order = np.argsort(fm, kind="stable")
+                faces, fm = lv.faces[k][order] + vertex_base, fm[order]
+                vertex_base += len(lv.positions[k])
+                starts = np.concatenate([[0], np.flatnonzero(np.diff(fm)) + 1, [len(fm)]])
+                for a, b in zip(starts[:-1], starts[1:], strict=True):
+                    self.lod_ranges.append(DrawRange(int(fm[a]), first, int(b - a) * 3, self.mesh_lo[i],
+                                                     self.mesh_hi[i], mesh=i, level=k + 1))
+                    first += int(b - a) * 3
+                out.append(faces.astype(np.int32))
+        return vertices, out
+
+    def levels(self, view_proj: np.ndarray, width: int, height: int,
+               max_error: float = LOD_PIXEL_ERROR) -> np.ndarray | None:
+        """The level of detail to draw each mesh at in a ``width``×``height`` view through ``view_proj``
+        (world → clip; perspective or orthographic): the coarsest whose error, projected at the point
+        of the mesh's box nearest the eye (the smallest clip w), is at most ``max_error`` pixels.
+        None when no mesh has levels or ``max_error`` is 0 (draw every mesh whole)."""
+        if self.lod_error.shape[1] == 1 or max_error <= 0.0:
+            return None
+        m = np.asarray(view_proj, np.float64)
+        c, e = (self.mesh_lo + self.mesh_hi) * 0.5, (self.mesh_hi - self.mesh_lo) * 0.5
+        w = c @ m[3, :3] - e @ np.abs(m[3, :3]) + m[3, 3]     # the box's smallest clip w
+        # pixels per metre: clip x and y change by at most |row| per metre, NDC spans 2 per image side
+        per_m = max(np.linalg.norm(m[0, :3]) * width, np.linalg.norm(m[1, :3]) * height) * 0.5
+        px = self.lod_error * (per_m / np.maximum(w, 1e-9))[:, None]
+        ok = px <= max_error
+        ok[w <= 1e-6] = False                                  # the eye inside or behind its box's near side
+        ok[:, 0] = True
+        return ok.shape[1] - 1 - np.argmax(ok[:, ::-1], axis=1)
 
     def vao(self, program, with_attributes=("in_position", "in_normal", "in_uv", "in_tangent")):
         """A VAO binding this scene's buffers to ``program``'s attributes (unused ones skipped)."""

@@ -46,6 +46,7 @@ import numpy as np
 
 from serenity.raster.context import clear_depth_rect, load_program
 from serenity.raster.culling import CulledRanges
+from serenity.raster.scene_gl import LOD_PIXEL_ERROR
 
 MAX_CASCADES = 4
 #: how much larger than its sphere a tile is fitted when tiles are staggered (fraction of the radius)
@@ -264,10 +265,14 @@ class ShadowPass:
         self._previous: list[Cascade | None] = [None] * cascades  # each tile before its last redraw
         #: tiles drawn by the last ``render`` (the others were still valid)
         self.redrawn = 0
-        self.opaque_ranges = CulledRanges(scene_gl.opaque_caster_ranges)
+        self.opaque_ranges = CulledRanges(scene_gl.opaque_caster_ranges + scene_gl.lod_ranges)
         self.masked_ranges = CulledRanges(scene_gl.masked_caster_ranges)
         #: skip the casters' draw ranges outside each tile's light box (``culling.py``; the maps are the same)
         self.cull = True
+        #: draw each dense caster at the coarsest level of detail within this many texels of its surface
+        #: (``SceneGL.levels``; 0 = the full meshes): half the depth bias's texel, so that a level
+        #: never moves a caster's depth past the bias that keeps a surface from shadowing itself
+        self.lod_texel_error = 0.5 * LOD_PIXEL_ERROR
         #: (caster draw ranges drawn, caster draw ranges × tiles drawn) of the last ``render``
         self.last_draws = (0, 0)
 
@@ -342,7 +347,8 @@ class ShadowPass:
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
                 cull = c.view_proj if self.cull else None
                 # the casters (the bottom plane shadows nothing): runs of adjacent ranges, one call each
-                for r in self.opaque_ranges.visible(cull, merge_materials=True):
+                levels = self.scene_gl.levels(c.view_proj, self.size, self.size, self.lod_texel_error)
+                for r in self.opaque_ranges.visible(cull, merge_materials=True, levels=levels):
                     self.vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
                 if self.program_masked is not None:
                     self.program_masked["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
@@ -352,7 +358,7 @@ class ShadowPass:
                 self._kept[i] = c
                 self.redrawn += 1
                 self.last_draws = (self.last_draws[0] + self.opaque_ranges.drawn + self.masked_ranges.drawn,
-                                   self.last_draws[1] + len(self.opaque_ranges.ranges) + len(self.masked_ranges.ranges))
+                                   self.last_draws[1] + self.opaque_ranges.candidates + self.masked_ranges.candidates)
             self.fbo.viewport = (0, 0, self.depth.width, self.depth.height)
             ctx.disable(moderngl.DEPTH_TEST)
         used = []
