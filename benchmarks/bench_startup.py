@@ -112,6 +112,7 @@ def child(path: str, argv: list[str]) -> None:
     import serenity.kernels.raytrace as rt
     import serenity.kernels.skygather as sg
     import serenity.kernels.tracer_process as tp
+    import serenity.raster.scene_gl as scene_gl
     import serenity.scene
 
     mark("imports", t0, 0, c0)
@@ -137,6 +138,7 @@ def child(path: str, argv: list[str]) -> None:
     timed(tp.TracerProcess, "__init__", "tracer process start")
     timed(tp.TracerProcess, "result", "wait for the tracer process")
     timed(rt.RayTracer, "__init__", "ray tracer (kd-tree)")
+    timed(scene_gl, "scene_levels", "levels of detail")
     timed(pg.ProbeGather, "_build", "probe rays (trace, surfels, moments)")
     timed(pg.ProbeGather, "_load", "probe cache read")
     timed(pg.ProbeGather, "gather", "probe gathers")

@@ -35,10 +35,11 @@ OPTIONAL_PACKAGES = {"mitsuba", "flip_evaluator", "matplotlib", "embreex", "pyoi
 """Third-party packages of the extras: imported inside the function that uses them (or through
 ``serenity.optional.require``), never at a module's top."""
 
-HEAVY_PACKAGES = {"trimesh"}
-"""Required packages that take most of a second to import (trimesh, and the scipy it pulls in) and
-that a few functions use (reading and writing mesh files, building spheres): imported inside those
-functions, so that the tracer process and a scene without a mesh file never load them."""
+HEAVY_PACKAGES = {"trimesh", "scipy", "fast_simplification"}
+"""Required packages that take a large part of a second to import (trimesh, and the scipy it pulls
+in; the mesh simplifier) and that a few functions use (reading and writing mesh files, building
+spheres, simplifying a dense mesh): imported inside those functions, so that the tracer process and
+a scene without a mesh file or a dense mesh never load them."""
 
 LAZY_IMPORT_PACKAGES = ("serenity.commands",)
 """Where a function may import anything: a command imports what it runs when it runs, so that

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -55,6 +56,12 @@ class RenderConfig:
     texture filtering in the shader (``glsl/gbuffer.glsl``); 1 = GL's isotropic trilinear, which
     blurs textures seen at grazing angles (courtyard ground FLIP 0.148 -> 0.124 with 4 taps,
     ``benchmarks/bench_aa.py``)."""
+    lod_pixel_error: float = 1.0
+    """Levels of detail (``serenity.scene.lod``): the rasterised passes draw each mesh of 2048
+    triangles or more at the coarsest of its levels whose error, projected at the mesh's nearest
+    point, stays within this many pixels (shadow maps: half as many texels); 0 = every mesh whole.
+    The ray tracer always traces the full meshes. 2 pixels already moves the breakfast room's FLIP
+    and relMSE (``benchmarks/bench_lod.py``)."""
     antialiasing: str = "none"
     """Edge anti-aliasing of the final HDR frame, one pass before the tone map: "none", "fxaa"
     (``serenity.raster.fxaa``: it gains little FLIP against the reference and fills 1-pixel black
@@ -85,6 +92,9 @@ class RenderConfig:
             raise ConfigError(f"RenderConfig.ambient must be 'none' or 'constant', got {self.ambient!r}")
         if not (isinstance(self.texture_taps, int) and 1 <= self.texture_taps <= 16):
             raise ConfigError(f"RenderConfig.texture_taps must be an int in 1..16, got {self.texture_taps!r}")
+        if not (isinstance(self.lod_pixel_error, (int, float)) and math.isfinite(self.lod_pixel_error)
+                and 0.0 <= self.lod_pixel_error <= 64.0):
+            raise ConfigError(f"RenderConfig.lod_pixel_error must be a number in 0..64, got {self.lod_pixel_error!r}")
         if self.antialiasing not in ANTIALIASING:
             raise ConfigError(f"RenderConfig.antialiasing must be 'none', 'fxaa' or 'taa', got {self.antialiasing!r}")
         for name, kind in SUB_CONFIGS.items():

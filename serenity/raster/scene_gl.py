@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from serenity.config import RenderConfig
 from serenity.raster.context import anisotropy
 from serenity.raster.interop import upload_texture
 from serenity.scene.lod import scene_levels
@@ -29,7 +30,7 @@ from serenity.scene.lod import scene_levels
 #: the default bound on a level of detail's error, in pixels of the image it is drawn into (or texels
 #: of a shadow map): a mesh is drawn at the coarsest level whose surface lies at most this far from
 #: its own, measured at the mesh's nearest point (0 = always the full mesh)
-LOD_PIXEL_ERROR = 1.0
+LOD_PIXEL_ERROR = RenderConfig.lod_pixel_error
 
 
 @dataclass
