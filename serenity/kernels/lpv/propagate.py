@@ -4,9 +4,10 @@ transmittance and openness from the geometry volume, the gather of each cell fro
 the hand-over of the coarser cascades' far light into the finer ones.
 
 Arrays (Warp, on the volume's device): the SH grids (vec4 per cell and channel, the package's
-layout), per-cell arrays (transmittance of the faces towards −x, −y, −z and +x, +y, +z as vec3,
-openness and blocker planes of the high faces as vec3, the cells' |DC| sums as float), the level
-table (``grid.Cascade``, offsets only) and the cascade table (origin and cell size too).
+layout); per-cell arrays: ``trans_pos`` / ``trans_neg`` (vec3 over x, y, z) the transmittance of the
+face through which a cell gathers from its neighbour at −axis / +axis, the openness of its high faces
+and where their blockers lie (vec3), the cells' |DC| sums (float); the level table (``grid.Cascade``,
+offsets only) and the cascade table (origin and cell size too).
 """
 
 from __future__ import annotations
