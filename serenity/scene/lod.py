@@ -111,26 +111,32 @@ def _point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.
     return np.where(inside, plane, edges)
 
 
-#: barycentric points each triangle is represented by in ``_surface_distance``'s search
+#: barycentric points each triangle is represented by in ``_Surface``'s search
 _SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
 
-def _surface_distance(q: np.ndarray, points: np.ndarray, faces: np.ndarray, near: int = 3) -> np.ndarray:
-    """(N,) distances from the points ``q`` to the surface ``faces`` of ``points``: to the nearest of
-    the triangles of the ``near`` sample points nearest each point (4 per triangle: its centre and a
-    point towards each corner), so at least the distance to the surface."""
-    from scipy.spatial import cKDTree  # scipy and the simplifier load only for a scene with dense meshes
+class _Surface:
+    """A triangle surface prepared for ``distance`` queries: 4 sample points per triangle (its centre
+    and a point towards each corner) in a k-d tree."""
 
-    tri = points[faces].astype(np.float64)                             # (F, 3, 3)
-    samples = np.einsum("sk,fkd->fsd", _SAMPLES, tri).reshape(-1, 3)
-    k = min(near, len(samples))
-    _, idx = cKDTree(samples).query(q, k=k)
-    idx = idx.reshape(len(q), k) // len(_SAMPLES)
-    best = np.full(len(q), np.inf)
-    for j in range(k):
-        t = tri[idx[:, j]]
-        best = np.minimum(best, _point_triangle_distance(q, t[:, 0], t[:, 1], t[:, 2]))
-    return best
+    def __init__(self, points: np.ndarray, faces: np.ndarray):
+        from scipy.spatial import cKDTree  # scipy and the simplifier load only for a scene with dense meshes
+
+        self.tri = points[faces].astype(np.float64)                    # (F, 3, 3)
+        samples = np.einsum("sk,fkd->fsd", _SAMPLES, self.tri).reshape(-1, 3)
+        self.tree = cKDTree(samples, balanced_tree=False, compact_nodes=False)
+
+    def distance(self, q: np.ndarray, near: int = 3) -> np.ndarray:
+        """(N,) distances from the points ``q`` to the surface: to the nearest of the triangles of the
+        ``near`` sample points nearest each point, so at least the distance to the surface."""
+        k = min(near, self.tree.n)
+        _, idx = self.tree.query(q, k=k)
+        idx = idx.reshape(len(q), k) // len(_SAMPLES)
+        best = np.full(len(q), np.inf)
+        for j in range(k):
+            t = self.tri[idx[:, j]]
+            best = np.minimum(best, _point_triangle_distance(q, t[:, 0], t[:, 1], t[:, 2]))
+        return best
 
 
 def _copies(inv: np.ndarray, n_welded: int):
@@ -140,7 +146,7 @@ def _copies(inv: np.ndarray, n_welded: int):
     return order, starts
 
 
-def _level(mesh, up, inv, wf, kept, copies, collapses):
+def _level(mesh, up, inv, wf, kept, copies, collapses, surface: _Surface):
     """One level from a prefix of the collapse sequence: (positions, vertex source, faces, face source,
     error), or None when every face collapsed."""
     import fast_simplification
@@ -194,8 +200,8 @@ def _level(mesh, up, inv, wf, kept, copies, collapses):
     # face centres from the mesh's surface
     mesh_points = up[np.unique(wf)].astype(np.float64)
     level_points = np.concatenate([positions, positions[faces].mean(axis=1)]).astype(np.float64)
-    error = max(float(_surface_distance(mesh_points, positions, faces).max()),
-                float(_surface_distance(level_points, up, wf).max()))
+    error = max(float(_Surface(positions, faces).distance(mesh_points).max()),
+                float(surface.distance(level_points).max()))
     return positions, vertex_source.astype(np.int32), faces.astype(np.int32), source.astype(np.int32), error
 
 
@@ -218,13 +224,16 @@ def build_levels(mesh) -> MeshLevels | None:
     # a collapse removes about two faces: the prefix that reaches the first level's count
     prefixes = [min(len(collapses), max(0, (len(wf) - first) // 2)), len(collapses)]
     copies = _copies(inv, len(up))
+    surface = None  # the mesh's own, for the levels' errors
     out = MeshLevels([], [], [], [], np.zeros(0))
     error = []
     previous = n
     for k in sorted(set(prefixes)):
         if k == 0:
             continue
-        level = _level(mesh, up, inv, wf, kept, copies, collapses[:k])
+        if surface is None:
+            surface = _Surface(up, wf)
+        level = _level(mesh, up, inv, wf, kept, copies, collapses[:k], surface)
         if level is None or len(level[2]) > LOD_MIN_GAIN * previous:
             continue
         for field, value in zip(("positions", "vertex_source", "faces", "source"), level[:4], strict=True):
