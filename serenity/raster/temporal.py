@@ -1,7 +1,7 @@
-"""Temporal hysteresis of the main view's upsampled indirect light (``RenderConfig.indirect_history``;
+"""Temporal hysteresis of the main view's upsampled indirect light (``IndirectConfig.history``;
 ``glsl/indirect_history.glsl``).
 
-With ``indirect_scale`` > 1 the sky volume's and the LPV's light (and SSAO) are computed once per
+With ``IndirectConfig.scale`` > 1 the sky volume's and the LPV's light (and SSAO) are computed once per
 low-res texel, at the G-buffer pixel the texel stands for, and upsampled. When the camera moves by a
 fraction of a pixel those points slide over the surfaces and the upsampled light slides with them:
 the LPV's light, which varies within a cell (its leak guard and damping), stepped by a few per cent a

@@ -1,5 +1,5 @@
 // Deferred lighting of a G-buffer (paper §3, §6, §9): Phong + sun shadows, the indirect terms (with
-// indirect_scale > 1, the low-res sky and LPV light upsampled: upsample.glsl), and the sky behind
+// IndirectConfig.scale > 1, the low-res sky and LPV light upsampled: upsample.glsl), and the sky behind
 // uncovered pixels. Linear HDR radiance out. The same program lights the main view
 // (rasterised G-buffer, view-fitted cascades, SSAO) and the ray-traced views (ray-traced G-buffer,
 // the tracer's shadow rays or the overlapped shadow maps, no SSAO; the viewer of a pixel is its
