@@ -697,7 +697,8 @@ def viewer_cost(data: dict) -> str:
         f"\n\nThe read-back of HDR, LDR and AOVs that the viewer skips: {f1(data['readback_ms'])} ms per frame.")
 
 
-STARTUP_PHASES = ("imports", "scene load", "renderer set-up", "tracer process start", "frame", "sky volume (gather)",
+STARTUP_PHASES = ("imports", "scene load", "renderer set-up", "tracer process start", "levels of detail", "frame",
+                  "sky volume (gather)",
                   "ray tracer (kd-tree)", "probe rays (trace, surfels, moments)", "probe cache read",
                   "surfel shadow rays", "surfel updates", "probe gathers", "wait for the tracer process", "write PNG",
                   "write EXR", "close (tracer process stops)")
@@ -732,6 +733,25 @@ def startup(data: dict) -> str:
         rows.append([label, *("–" if c is None else f"{c['seconds']:.2f}" for c in cells)])
     return md([f"{Path(data['scene']).stem} {size_label(data['size'])}, `{preset(data['quality'])}`",
                "empty caches", "warm caches"], rows)
+
+
+@table("lod", "results/lod.json")
+def lod(data: dict) -> str:
+    """Levels of detail: triangles drawn, error against the reference and G-buffer cost per bound."""
+    rows = []
+    for size in data["sizes"]:
+        base = size["bounds"]["0.0"]
+        for rec in size["bounds"].values():
+            label = "whole meshes" if rec["bound"] == 0 else f"{rec['bound']:g} px" + (
+                " (default)" if rec["bound"] == data["default_bound"] else "")
+            rows.append([size_label(size["size"]), label, f"{rec['triangles']:,}",
+                         "–" if rec["flip"] is None else f"{rec['flip']:.4f}",
+                         "–" if rec["rel_mse"] is None else f"{rec['rel_mse']:.3f}", f"{rec['gbuffer_ms_median']:.1f}",
+                         f"{rec['frame_ms_median'] / base['frame_ms_median']:.2f}"])
+    return md([f"{Path(data['scene']).stem}, `{preset('traced-probes')}`", "level error bound",
+               "G-buffer triangles", "FLIP", "relMSE", "G-buffer ms", "frame ÷ whole meshes"], rows) + (
+        f"\n\nBuilding the levels of its {data['meshes_with_levels']} dense meshes on an empty cache: "
+        f"{data['build_seconds']:.1f} s.")
 
 
 # ----------------------------------------------------------------------------------- the documents

@@ -33,7 +33,8 @@ AMBIENT = ("none", "constant")
 @dataclass(frozen=True)
 class RenderConfig:
     """Everything one ``serenity.frame.Renderer`` renders with: the image's own settings (exposure,
-    the ambient baseline, texture filtering, anti-aliasing) and one sub-config per part of the frame:
+    the ambient baseline, texture filtering, levels of detail, anti-aliasing) and one sub-config per
+    part of the frame:
     the sun's shadows (``shadow``), SSAO (``ssao``), the sky lighting volume (``sky``), the light
     propagation volumes (``lpv``), how the main view computes their indirect light (``indirect``),
     the ray-traced reflections and refractions (``rt``) and the schedule (``schedule``). Each
@@ -56,12 +57,13 @@ class RenderConfig:
     texture filtering in the shader (``glsl/gbuffer.glsl``); 1 = GL's isotropic trilinear, which
     blurs textures seen at grazing angles (courtyard ground FLIP 0.148 -> 0.124 with 4 taps,
     ``benchmarks/bench_aa.py``)."""
-    lod_pixel_error: float = 1.0
+    lod_pixel_error: float = 0.5
     """Levels of detail (``serenity.scene.lod``): the rasterised passes draw each mesh of 2048
     triangles or more at the coarsest of its levels whose error, projected at the mesh's nearest
     point, stays within this many pixels (shadow maps: half as many texels); 0 = every mesh whole.
-    The ray tracer always traces the full meshes. 2 pixels already moves the breakfast room's FLIP
-    and relMSE (``benchmarks/bench_lod.py``)."""
+    The ray tracer always traces the full meshes. Half a pixel: a level moves the high-frequency
+    light on a surface with it (the blinds' shadows on the breakfast room's chairs), and at 1 pixel
+    its FLIP rises by 0.0016 against 0.0009 at 0.5 (``benchmarks/bench_lod.py``)."""
     antialiasing: str = "none"
     """Edge anti-aliasing of the final HDR frame, one pass before the tone map: "none", "fxaa"
     (``serenity.raster.fxaa``: it gains little FLIP against the reference and fills 1-pixel black

@@ -9,8 +9,8 @@ pixels can show.
 
 How a level is made. The mesh is welded (vertices at one position are one, whatever their normals
 or uvs) and simplified by quadric error metrics (Garland & Heckbert 1997; the ``fast-simplification``
-package) to a sixteenth of its triangles; a prefix of its collapse sequence down to a quarter of the
-triangles is the first level, the whole sequence the second. A level's vertex is a vertex of the
+package) to a sixteenth of its triangles; the prefixes of its collapse sequence down to a half and a
+quarter of the triangles are the first two levels, the whole sequence the third. A level's vertex is a vertex of the
 mesh moved to where its collapses put it; it keeps that vertex's normal, uv and tangent. At a
 vertex that the file splits (a uv seam, a hard edge), a face's corner takes the copy nearest in uv
 and normal to the copy it had, so a level keeps the seam; where the seam's vertex collapsed onto one
@@ -18,9 +18,9 @@ that the seam does not split, the corner keeps its own copy's attributes at the 
 
 A level's error estimates how far the surface moved, both ways (a Hausdorff distance sampled at
 vertices): the farthest a vertex of the mesh lies from the level's triangles, or a vertex or face
-centre of the level from the mesh's (each to the nearest of the triangles a nearest-point search over
-4 points per triangle finds). On a sphere it is within a factor of 1–4 of the farthest the level's surface lies from
-the sphere (``tests/scene/test_lod.py``). A pass draws each mesh
+centre of the level from the mesh's (a nearest-point search over 4 points per triangle bounds each
+distance from above, and the largest are refined against every triangle that could be nearer, until
+the bound is within 25 % of the exact largest distance). A pass draws each mesh
 at the coarsest level whose error, projected at the mesh's nearest point, stays below its bound
 (``SceneGL.levels``). Meshes with alpha cut-outs, ray-traced materials or the ground plane keep
 their triangles.
@@ -43,9 +43,8 @@ from serenity.scene.cache import cache_dir
 
 #: meshes with fewer triangles keep theirs (a draw of a few thousand triangles costs little)
 LOD_MIN_TRIANGLES = 2048
-#: the coarsest level aims at this fraction of the mesh's triangles, the first at LOD_FIRST_FRACTION
-LOD_LAST_FRACTION = 1 / 16
-LOD_FIRST_FRACTION = 1 / 4
+#: the fractions of the mesh's triangles the levels aim at, finest first
+LOD_FRACTIONS = (1 / 2, 1 / 4, 1 / 16)
 #: ... and never below this many triangles
 LOD_MIN_LEVEL_TRIANGLES = 96
 #: a level is kept only if it has at most this fraction of the triangles of the level before it
@@ -54,7 +53,7 @@ LOD_MIN_GAIN = 0.8
 #: distance) of the copy it had keeps that copy's attributes (a uv seam or hard edge collapsed away)
 LOD_ATTRIBUTE_JUMP = 0.25
 #: bump when what a cached level holds changes in a way its key does not see
-LOD_CACHE_VERSION = 1
+LOD_CACHE_VERSION = 2
 
 
 @dataclass
@@ -115,27 +114,77 @@ def _point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.
 _SAMPLES = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
 
 
+def _grid_samples(m: int) -> np.ndarray:
+    """Barycentric centres of the m x m upward sub-triangles of a triangle."""
+    i, j = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+    keep = i + j <= m - 1
+    a, b = (i[keep] + 1 / 3) / m, (j[keep] + 1 / 3) / m
+    return np.stack([a, b, 1.0 - a - b], axis=1)
+
+
 class _Surface:
-    """A triangle surface prepared for ``distance`` queries: 4 sample points per triangle (its centre
-    and a point towards each corner) in a k-d tree."""
+    """A triangle surface prepared for distance queries: sample points on its triangles in a k-d tree."""
 
     def __init__(self, points: np.ndarray, faces: np.ndarray):
         from scipy.spatial import cKDTree  # scipy and the simplifier load only for a scene with dense meshes
 
         self.tri = points[faces].astype(np.float64)                    # (F, 3, 3)
-        samples = np.einsum("sk,fkd->fsd", _SAMPLES, self.tri).reshape(-1, 3)
-        self.tree = cKDTree(samples, balanced_tree=False, compact_nodes=False)
+        centre = self.tri.mean(axis=1)
+        reach = np.linalg.norm(self.tri - centre[:, None], axis=2).max(axis=1)  # centre to farthest corner
+        #: the reach of the usual triangle (95th percentile)
+        self.reach = float(np.quantile(reach, 0.95)) if len(reach) else 0.0
+        # sample points: 4 per usual triangle, and on a larger one the centres of an m x m
+        # subdivision, m its reach in usual reaches (at most 8), so that a point over a large
+        # triangle finds it among its nearest samples
+        m = np.clip(np.ceil(reach / max(self.reach, 1e-300)), 1, 8).astype(np.int64)
+        samples, owner = [], []
+        for k in np.unique(m):
+            ts = np.flatnonzero(m == k)
+            bary = _SAMPLES if k == 1 else _grid_samples(int(k))
+            samples.append(np.einsum("sk,fkd->fsd", bary, self.tri[ts]).reshape(-1, 3))
+            owner.append(np.repeat(ts, len(bary)))
+        self.owner = np.concatenate(owner)
+        self.tree = cKDTree(np.concatenate(samples), balanced_tree=False, compact_nodes=False)
+        self.lo, self.hi = self.tri.min(axis=1), self.tri.max(axis=1)  # each triangle's box
 
     def distance(self, q: np.ndarray, near: int = 3) -> np.ndarray:
         """(N,) distances from the points ``q`` to the surface: to the nearest of the triangles of the
         ``near`` sample points nearest each point, so at least the distance to the surface."""
         k = min(near, self.tree.n)
         _, idx = self.tree.query(q, k=k)
-        idx = idx.reshape(len(q), k) // len(_SAMPLES)
+        idx = self.owner[idx.reshape(len(q), k)]
         best = np.full(len(q), np.inf)
         for j in range(k):
             t = self.tri[idx[:, j]]
             best = np.minimum(best, _point_triangle_distance(q, t[:, 0], t[:, 1], t[:, 2]))
+        return best
+
+    def exact(self, x: np.ndarray, bound: np.ndarray) -> np.ndarray:
+        """(N,) distances from the points ``x`` to the surface, given upper ``bound``s of them: to the
+        nearest of the triangles whose boxes lie within each bound."""
+        b = bound[:, None, None]
+        near = np.all((x[:, None] >= self.lo[None] - b) & (x[:, None] <= self.hi[None] + b), axis=2)  # (N, F)
+        point, tri = np.nonzero(near)
+        t = self.tri[tri]
+        d = _point_triangle_distance(x[point], t[:, 0], t[:, 1], t[:, 2])
+        out = np.full(len(x), np.inf)
+        np.minimum.at(out, point, d)
+        return out
+
+    def farthest(self, q: np.ndarray, slack: float = 1.25, batch: int = 64) -> float:
+        """An upper bound, within ``slack`` times, of the largest distance from the points ``q`` to
+        the surface: the search's estimates (upper bounds) refined exactly from the largest down, a
+        batch at a time, until the largest left is within ``slack`` of the largest exact distance."""
+        if not len(q):
+            return 0.0
+        estimate = self.distance(q)
+        order = np.argsort(-estimate)
+        best = 0.0
+        for start in range(0, len(order), batch):
+            idx = order[start:start + batch]
+            if estimate[idx[0]] <= slack * best:
+                return max(best, float(estimate[idx[0]]))
+            best = max(best, float(self.exact(q[idx], estimate[idx]).max()))
         return best
 
 
@@ -200,8 +249,7 @@ def _level(mesh, up, inv, wf, kept, copies, collapses, surface: _Surface):
     # face centres from the mesh's surface
     mesh_points = up[np.unique(wf)].astype(np.float64)
     level_points = np.concatenate([positions, positions[faces].mean(axis=1)]).astype(np.float64)
-    error = max(float(_Surface(positions, faces).distance(mesh_points).max()),
-                float(surface.distance(level_points).max()))
+    error = max(_Surface(positions, faces).farthest(mesh_points), surface.farthest(level_points))
     return positions, vertex_source.astype(np.int32), faces.astype(np.int32), source.astype(np.int32), error
 
 
@@ -216,13 +264,13 @@ def build_levels(mesh) -> MeshLevels | None:
         return None
     import fast_simplification
 
-    last = max(LOD_MIN_LEVEL_TRIANGLES, int(len(wf) * LOD_LAST_FRACTION))
+    last = max(LOD_MIN_LEVEL_TRIANGLES, int(len(wf) * LOD_FRACTIONS[-1]))
     _, tris, collapses = fast_simplification.simplify(up.astype(np.float64), wf, target_count=last,
                                                       return_collapses=True)
     collapses = np.asarray(collapses, np.int64).reshape(-1, 2)
-    first = int(len(wf) * LOD_FIRST_FRACTION)
-    # a collapse removes about two faces: the prefix that reaches the first level's count
-    prefixes = [min(len(collapses), max(0, (len(wf) - first) // 2)), len(collapses)]
+    # a collapse removes about two faces: the prefixes that reach each level's count
+    prefixes = [min(len(collapses), max(0, (len(wf) - int(len(wf) * f)) // 2)) for f in LOD_FRACTIONS[:-1]]
+    prefixes.append(len(collapses))
     copies = _copies(inv, len(up))
     surface = None  # the mesh's own, for the levels' errors
     out = MeshLevels([], [], [], [], np.zeros(0))
@@ -279,7 +327,7 @@ def scene_levels(meshes, eligible, cache: bool = True, progress=None) -> list[Me
     if not any(eligible):
         return [None] * len(meshes)
     h = hashlib.blake2b(digest_size=16)
-    h.update(f"lod{LOD_CACHE_VERSION} {LOD_MIN_TRIANGLES} {LOD_FIRST_FRACTION} {LOD_LAST_FRACTION} "
+    h.update(f"lod{LOD_CACHE_VERSION} {LOD_MIN_TRIANGLES} {LOD_FRACTIONS} "
              f"{LOD_MIN_LEVEL_TRIANGLES} {LOD_MIN_GAIN} {LOD_ATTRIBUTE_JUMP}".encode())
     for m, e in zip(meshes, eligible, strict=True):
         h.update(b"+" if e else b"-")

@@ -51,9 +51,10 @@ def _surface_samples(positions, faces, per_face=12, seed=0):
 def test_levels_are_coarser_index_lists_whose_error_bounds_the_surface():
     mesh = _sphere()
     levels = lod.build_levels(mesh)
-    assert levels is not None and len(levels) == 2
-    counts = [len(f) for f in levels.faces]
-    assert counts[0] <= 0.3 * len(mesh.faces) and counts[1] <= 0.3 * counts[0]
+    assert levels is not None and len(levels) == len(lod.LOD_FRACTIONS)
+    counts = [len(mesh.faces)] + [len(f) for f in levels.faces]
+    for fraction, count in zip(lod.LOD_FRACTIONS, counts[1:], strict=True):
+        assert count <= 1.1 * fraction * counts[0]
     assert np.all(np.diff(levels.error) >= 0) and levels.error[0] > 0
     for k, error in enumerate(levels.error):
         pos, vsrc, faces, source = (getattr(levels, f)[k] for f in ("positions", "vertex_source", "faces", "source"))
