@@ -1,6 +1,7 @@
 // Reprojection into the last frame's view, shared by the indirect light's history
-// (indirect_history.glsl) and the temporal anti-aliasing (taa.glsl). A last-frame image stores rgb and
-// the view depth of the surface each pixel showed (a; < 0: no surface, the sky).
+// (indirect_history.glsl: q, zp and tol, and one bilinear fetch instead of the taps below) and the
+// temporal anti-aliasing (taa.glsl). A last-frame image stores rgb and the view depth of the surface
+// each pixel showed (a; < 0: no surface, the sky).
 //   q   = surface point p projected with the last frame's world -> clip (integers at pixel centres),
 //         plus ``shift`` pixels (TAA: this frame's jitter, so that q is the pixel centre's, not the
 //         jittered sample's), snapped to the pixel within 1e-3 of one (a still view)
@@ -43,16 +44,26 @@ vec4 prev_taps(sampler2D prev, vec2 q, bool sky, float zp, float tol) {
     return sum;
 }
 
+// q snapped to the pixel within 1e-3 of one: a still view reads that pixel alone.
+vec2 snap_still(vec2 q) { return mix(q, floor(q + 0.5), lessThan(abs(q - floor(q + 0.5)), vec2(1e-3))); }
+
+// zp and tol (above) of surface point p (unit normal n).
+void reproject_depth(vec3 p, vec3 n, vec3 prev_camera_pos, vec3 prev_camera_forward, float pixel_angle,
+                     out float zp, out float tol) {
+    vec3 v = p - prev_camera_pos;
+    zp = dot(v, prev_camera_forward);
+    float cosv = max(abs(dot(n, normalize(v))), 0.05);
+    tol = zp * (0.02 + 1.5 * pixel_angle * sqrt(max(1.0 - cosv * cosv, 0.0)) / cosv);
+}
+
 // Sum of the taps' weight * rgb (xyz) and of their weights (w); q (the last frame's pixel coordinate)
 // returned, for a caller that filters the last frame otherwise where every tap is taken.
 vec4 reproject_bilinear(sampler2D prev, mat4 prev_view_proj, vec3 prev_camera_pos, vec3 prev_camera_forward,
                         float pixel_angle, vec3 p, vec3 n, vec2 shift, out vec2 q) {
     if (!prev_pixel(prev_view_proj * vec4(p, 1.0), vec2(textureSize(prev, 0)), shift, q)) return vec4(0.0);
-    q = mix(q, floor(q + 0.5), lessThan(abs(q - floor(q + 0.5)), vec2(1e-3)));  // a still view: that pixel
-    vec3 v = p - prev_camera_pos;
-    float zp = dot(v, prev_camera_forward);
-    float cosv = max(abs(dot(n, normalize(v))), 0.05);
-    float tol = zp * (0.02 + 1.5 * pixel_angle * sqrt(max(1.0 - cosv * cosv, 0.0)) / cosv);
+    q = snap_still(q);
+    float zp, tol;
+    reproject_depth(p, n, prev_camera_pos, prev_camera_forward, pixel_angle, zp, tol);
     return prev_taps(prev, q, false, zp, tol);
 }
 #endif
