@@ -1,8 +1,10 @@
 """What several ``serenity`` subcommands share: defaults, ``--size`` parsing, placing the sun from
-``--time``/``--lat``/``--lon``, output paths, and the one-line error report."""
+``--time``/``--lat``/``--lon``, posing an animation at ``--at``, output paths, and the one-line
+error report."""
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 
@@ -50,6 +52,26 @@ def apply_time(scene, args) -> None:
     new = sun_from_time(when, lat, lon)
     new.angular_diameter_deg = old.angular_diameter_deg
     scene.sun = new
+
+
+def add_animation_argument(parser) -> None:
+    """``--at``: the scene's animated meshes posed at a time (see :func:`apply_animation`)."""
+    parser.add_argument("--at", type=float, metavar="SECONDS",
+                        help="animation time in seconds: the meshes a scene file's [[animation]] moves, posed then")
+
+
+def apply_animation(scene, args):
+    """``scene`` posed at ``args.at`` seconds (``serenity.scene.animation.pose_scene``); the scene as
+    it is without ``--at``. ``--at`` on a scene without an animation, or not finite, is an error."""
+    if args.at is None:
+        return scene
+    if not math.isfinite(args.at):
+        raise SerenityError(f"--at must be a finite number of seconds, got {args.at}")
+    if scene.animation is None:
+        raise SerenityError(f"--at: scene {scene.name!r} has no animation (a scene file's [[animation]] tables)")
+    from serenity.scene.animation import pose_scene
+
+    return pose_scene(scene, args.at)
 
 
 def scene_stem(name: str) -> str:

@@ -13,7 +13,14 @@ from __future__ import annotations
 import os
 import time
 
-from serenity.commands.common import DEFAULT_OUT_DIR, make_parent_dir, parse_size, scene_stem
+from serenity.commands.common import (
+    DEFAULT_OUT_DIR,
+    add_animation_argument,
+    apply_animation,
+    make_parent_dir,
+    parse_size,
+    scene_stem,
+)
 from serenity.errors import SerenityError
 
 
@@ -29,6 +36,7 @@ def register(subparsers) -> None:
                    help="direct (depth 2) | one-bounce (3) | full | indirect = full - direct (default %(default)s)")
     g.add_argument("--depth", type=int, help="path integrator max depth instead (-1 = unlimited; 2 = direct)")
     r.add_argument("--seed", type=int, default=0, help="sampler seed (default %(default)s)")
+    add_animation_argument(r)
     r.add_argument("--no-cache", action="store_true", help="render even if a cached result exists")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=run)
@@ -42,7 +50,7 @@ def run(args) -> int:
     if args.component not in COMPONENTS:
         raise SerenityError(f"--component must be one of {', '.join(COMPONENTS)}, got {args.component!r}")
     width, height = parse_size(args.size)
-    scene = load(args.scene)
+    scene = apply_animation(load(args.scene), args)
     out = args.output or os.path.join(DEFAULT_OUT_DIR, f"{scene_stem(args.scene)}_ref.exr")
     t0 = time.perf_counter()
     info: dict = {}

@@ -11,8 +11,10 @@ from serenity.commands.common import (
     DEFAULT_SCENE,
     DEFAULT_SIZE,
     DEVICE_HELP,
+    add_animation_argument,
     add_quality_argument,
     add_time_arguments,
+    apply_animation,
     apply_time,
     make_parent_dir,
     parse_size,
@@ -28,6 +30,7 @@ def register(subparsers) -> None:
     r.add_argument("--exr", help="EXR path (default: beside the PNG)")
     r.add_argument("--size", default=f"{DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]}", help="WxH (default %(default)s)")
     add_time_arguments(r)
+    add_animation_argument(r)
     add_quality_argument(r)
     r.add_argument("--device", help=DEVICE_HELP)
     r.add_argument("--exposure", type=float, default=DEFAULT_EXPOSURE,
@@ -66,7 +69,7 @@ def run(args) -> int:
 
     width, height = parse_size(args.size)
     t0 = time.perf_counter()
-    scene = load(args.scene)
+    scene = apply_animation(load(args.scene), args)
     apply_time(scene, args)
     load_ms = (time.perf_counter() - t0) * 1e3
     png = args.output or os.path.join(DEFAULT_OUT_DIR, f"{scene_stem(args.scene)}.png")

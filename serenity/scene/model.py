@@ -522,6 +522,9 @@ class Scene:
     source: str | None = None  # file the scene was loaded from, if any
     #: (latitude, longitude) in degrees where the scene stands (north/east positive), for suns set by time
     location: tuple[float, float] | None = None
+    #: rigid motion of some meshes over time (``serenity.scene.animation.Animation``), or None: a
+    #: still scene. The meshes hold their pose as loaded; ``pose_scene(scene, t)`` gives time t
+    animation: object | None = None
 
     def __post_init__(self):
         self.validate()
@@ -538,6 +541,12 @@ class Scene:
         names = [m.name for m in self.materials]
         if len(set(names)) != len(names):
             raise SceneError(f"{where}: material names must be unique")
+        if self.animation is not None:
+            meshes = {m.name for m in self.meshes}
+            for name in sorted(self.animation.mesh_names - meshes):
+                some = ", ".join(sorted(meshes)[:8]) + (", ..." if len(meshes) > 8 else "")
+                raise SceneError(f"{where}: the animation moves mesh {name!r}, which the scene does not have "
+                                 f"({some})")
 
     @property
     def bounds(self) -> np.ndarray:

@@ -41,6 +41,16 @@ the default sun and sky, no quads)::
     ior = 1.5
     albedo_texture = "glass.png"   # sRGB image, relative to the TOML file
 
+    [[animation]]                  # rigid motion of a mesh (serenity.scene.animation)
+    mesh = "car"                   # a mesh of the file (a glTF node's name)
+    times = [0.0, 4.0]             # seconds of the keyframes
+    translation = [[0.0, 0.0, 0.0], [12.0, 0.0, 0.0]]   # metres moved at each keyframe
+    rotation_deg = [0.0, 90.0]     # optional: degrees about axis (default [0, 1, 0]) through pivot,
+                                   # or rotation = quaternions [x, y, z, w]; scale = [[sx, sy, sz], ...]
+    pivot = [0.0, 0.0, 0.0]        # optional: default the mesh's bounds centre as loaded
+    interpolation = "linear"       # or "step"
+    repeat = "loop"                # "once" (hold the last keyframe), "loop" or "pingpong"
+
 Unknown tables or keys are errors (a typo must not be silently ignored). :func:`save_toml` writes
 the exact values (sun as a direction, all material fields), so ``export_glb`` + ``save_toml``
 load back identically.
@@ -60,6 +70,7 @@ except ImportError:  # Python 3.10
     import tomli as tomllib
 
 from serenity.errors import SceneError
+from serenity.scene.animation import Animation, Track, axis_angle_quaternion
 from serenity.scene.mesh_io import load_mesh_file, scene_from_meshes
 from serenity.scene.model import Camera, Material, OcclusionQuad, Scene, Sky, Sun, direction_from_angles
 from serenity.scene.sun import parse_time, sun_from_time
@@ -67,7 +78,9 @@ from serenity.scene.texture import load_texture
 
 __all__ = ["load_toml", "save_toml"]
 
-_TABLES = {"scene", "camera", "sun", "sky", "occlusion_quads", "materials"}
+_TABLES = {"scene", "camera", "sun", "sky", "occlusion_quads", "materials", "animation"}
+_ANIMATION_KEYS = {"mesh", "times", "translation", "rotation", "rotation_deg", "axis", "scale", "pivot",
+                   "interpolation", "repeat"}
 _CAMERA_KEYS = {"position", "target", "up", "fov_y_deg", "near", "far"}
 _SUN_KEYS = {"time", "latitude", "longitude", "utc_offset", "elevation_deg", "azimuth_deg", "direction",
              "irradiance", "angular_diameter_deg"}
@@ -177,6 +190,7 @@ def load_toml(path) -> Scene:
             if missing:
                 raise SceneError(f"[[occlusion_quads]] #{i + 1}: missing {', '.join(sorted(missing))}")
             scene.occlusion_quads.append(OcclusionQuad(**q))
+        scene.animation = _animation(doc.get("animation"))
         scene.validate()
         return scene
     except SceneError as e:
@@ -184,6 +198,34 @@ def load_toml(path) -> Scene:
         raise SceneError(msg if msg.startswith(path) else f"{path}: {msg}") from None
     except (TypeError, ValueError) as e:
         raise SceneError(f"{path}: {e}") from None
+
+
+def _animation(tables) -> Animation | None:
+    """The ``[[animation]]`` tracks (module docstring), or None."""
+    if tables is None:
+        return None
+    if not isinstance(tables, list):
+        raise SceneError("animation must be an array of tables ([[animation]])")
+    tracks = []
+    for i, a in enumerate(tables):
+        where = f"[[animation]] #{i + 1}"
+        _check_keys(where, a, _ANIMATION_KEYS)
+        if "mesh" not in a or "times" not in a:
+            raise SceneError(f"{where}: needs mesh and times")
+        if "rotation" in a and "rotation_deg" in a:
+            raise SceneError(f"{where}: give rotation (quaternions) or rotation_deg (angles about axis), not both")
+        rotation = a.get("rotation")
+        if "rotation_deg" in a:
+            axis = np.asarray(a.get("axis", [0.0, 1.0, 0.0]), np.float64)
+            if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) == 0:
+                raise SceneError(f"{where}: axis must be a non-zero 3-vector, got {a.get('axis')!r}")
+            rotation = [axis_angle_quaternion(axis, float(deg)) for deg in a["rotation_deg"]]
+        try:
+            tracks.append(Track(str(a["mesh"]), a["times"], a.get("translation"), rotation, a.get("scale"),
+                                a.get("interpolation", "linear"), a.get("repeat", "once"), a.get("pivot")))
+        except SceneError as e:
+            raise SceneError(f"{where}: {e}") from None
+    return Animation(tracks)
 
 
 def _fmt(v) -> str:
