@@ -47,8 +47,8 @@ def test_repeats(repeat, at, x):
 
 def test_posed_scene_moves_only_the_animated_mesh():
     scene = build_scene("cornell")
-    scene.animation = Animation([Track("red", [0.0, 1.0], translation=[[0, 0, 0], [0.0, 2.0, 0.0]],
-                                       rotation=[axis_angle_quaternion((0, 0, 1), 0), axis_angle_quaternion((0, 0, 1), 90)])])
+    turn = [axis_angle_quaternion((0, 0, 1), 0), axis_angle_quaternion((0, 0, 1), 90)]
+    scene.animation = Animation([Track("red", [0.0, 1.0], translation=[[0, 0, 0], [0.0, 2.0, 0.0]], rotation=turn)])
     posed = pose_scene(scene, 1.0)
     before = {m.name: m for m in scene.meshes}
     after = {m.name: m for m in posed.meshes}
