@@ -53,7 +53,7 @@ LOD_MIN_GAIN = 0.8
 #: distance) of the copy it had keeps that copy's attributes (a uv seam or hard edge collapsed away)
 LOD_ATTRIBUTE_JUMP = 0.25
 #: bump when what a cached level holds changes in a way its key does not see
-LOD_CACHE_VERSION = 2
+LOD_CACHE_VERSION = 3
 
 
 @dataclass
