@@ -171,7 +171,7 @@ class _Surface:
         np.minimum.at(out, point, d)
         return out
 
-    def farthest(self, q: np.ndarray, slack: float = 1.25, batch: int = 64) -> float:
+    def farthest(self, q: np.ndarray, slack: float = 1.25, batch: int = 16) -> float:
         """An upper bound, within ``slack`` times, of the largest distance from the points ``q`` to
         the surface: the search's estimates (upper bounds) refined exactly from the largest down, a
         batch at a time, until the largest left is within ``slack`` of the largest exact distance."""
