@@ -44,14 +44,18 @@ class CulledRanges:
 
     def __init__(self, ranges):
         self.ranges = list(ranges)
-        self.lo = np.array([r.lo for r in self.ranges], np.float64).reshape(-1, 3)
-        self.hi = np.array([r.hi for r in self.ranges], np.float64).reshape(-1, 3)
+        self.refresh()
         self.mesh = np.array([r.mesh for r in self.ranges], np.int64)
         self.level = np.array([r.level for r in self.ranges], np.int64)
         #: ranges kept by the last ``visible`` (``candidates`` with culling off) ...
         self.drawn = len(self.ranges)
         #: ... of the ranges at the levels of detail it drew (``len(ranges)`` without levels of detail)
         self.candidates = len(self.ranges)
+
+    def refresh(self) -> None:
+        """Read the ranges' boxes again (after their meshes moved: ``SceneGL.update_meshes``)."""
+        self.lo = np.array([r.lo for r in self.ranges], np.float64).reshape(-1, 3)
+        self.hi = np.array([r.hi for r in self.ranges], np.float64).reshape(-1, 3)
 
     def visible(self, view_proj: np.ndarray | None, merge_materials: bool = False,
                 levels: np.ndarray | None = None) -> list:

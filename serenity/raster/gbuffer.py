@@ -13,7 +13,6 @@ import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program, uniform
-from serenity.raster.culling import CulledRanges
 from serenity.raster.scene_gl import LOD_PIXEL_ERROR
 from serenity.scene.model import normal_map_frame
 
@@ -52,7 +51,7 @@ class GBufferPass:
             self.program_textured, self.vao_textured = self._variant(True, False, False)
         self.size = None
         self.gbuffer = None
-        self.ranges = CulledRanges(scene_gl.ranges + scene_gl.lod_ranges)
+        self.ranges = scene_gl.culled(scene_gl.ranges + scene_gl.lod_ranges)
         #: skip the draw ranges outside the view frustum (``culling.py``; the image is the same)
         self.cull = True
         #: draw each dense mesh at the coarsest level of detail within this many pixels of its surface

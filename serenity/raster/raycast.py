@@ -109,10 +109,9 @@ class RayCastPass:
         self.any_traced_material = bool(traced)
         #: which way the last ``render`` found the pixels: "gbuffer", "geometry" or None (nothing to find)
         self.last_method: str | None = None
-        #: world boxes (R, 3) of the reflective and refractive draw ranges: the pass shades only the
-        #: screen tiles they cover
-        self.traced_lo = np.array([r.lo for r in traced], np.float64).reshape(-1, 3)
-        self.traced_hi = np.array([r.hi for r in traced], np.float64).reshape(-1, 3)
+        #: the reflective and refractive draw ranges' world boxes (``lo``, ``hi``: (R, 3), following
+        #: moving meshes): the pass shades only the screen tiles they cover
+        self.traced_culled = scene_gl.culled(traced)
         #: rectangles (x, y, w, h) the last ``render`` shaded (the fullscreen way)
         self.last_rects: list[tuple[int, int, int, int]] = []
         self.counter = ctx.buffer(reserve=4)
@@ -141,7 +140,7 @@ class RayCastPass:
         camera): a fullscreen pass over a courtyard whose mirror fills 2 % of the view cost 4 times
         the geometry it replaces."""
         w, h = self.size
-        lo, hi = self.traced_lo[visible], self.traced_hi[visible]
+        lo, hi = self.traced_culled.lo[visible], self.traced_culled.hi[visible]
         if not len(lo):
             return []
         corners = np.stack([np.where(np.array([(k >> a) & 1 for a in range(3)], bool), hi, lo)
@@ -177,7 +176,7 @@ class RayCastPass:
         self.last_rects, self.last_method = [], None
         if not self.traced_ranges:
             return
-        visible = boxes_in_frustum(view_proj, self.traced_lo, self.traced_hi)
+        visible = boxes_in_frustum(view_proj, self.traced_culled.lo, self.traced_culled.hi)
         rects = self.tiles(view_proj, visible)
         if not rects:
             return

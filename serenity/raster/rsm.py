@@ -20,7 +20,6 @@ import moderngl
 import numpy as np
 
 from serenity.raster.context import load_program
-from serenity.raster.culling import CulledRanges
 from serenity.raster.interop import read_texture
 from serenity.raster.scene_gl import LOD_PIXEL_ERROR
 from serenity.raster.shadow import look_at, ortho
@@ -65,7 +64,7 @@ class RSMPass:
             t.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth = ctx.depth_texture((size, size))
         self.fbo = ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
-        self.ranges = CulledRanges(scene_gl.ranges + scene_gl.lod_ranges)
+        self.ranges = scene_gl.culled(scene_gl.ranges + scene_gl.lod_ranges)
         #: skip the draw ranges outside the sun's view (``culling.py``; the map is the same)
         self.cull = True
         #: draw each dense mesh at the coarsest level of detail within this many texels of its surface

@@ -24,6 +24,7 @@ import numpy as np
 
 from serenity.config import RenderConfig
 from serenity.raster.context import anisotropy
+from serenity.raster.culling import CulledRanges
 from serenity.raster.interop import upload_texture
 from serenity.scene.lod import scene_levels
 
@@ -62,6 +63,13 @@ class SceneGL:
 
     def __init__(self, ctx, scene):
         self.ctx = ctx
+        animation = getattr(scene, "animation", None)
+        #: indices of the meshes the scene's animation moves (``update_meshes`` rewrites their vertices)
+        self.animated = sorted(i for i, m in enumerate(scene.meshes)
+                               if animation is not None and m.name in animation.mesh_names)
+        #: first vertex of each mesh in the vertex buffer (and one past the last)
+        self.vertex_base = np.concatenate([[0], np.cumsum([len(m.positions) for m in scene.meshes])]).astype(np.int64)
+        self._culled = []  # the CulledRanges made by ``culled``, refreshed when meshes move
         self.bounds = scene.bounds
         """(2, 3) the uploaded geometry's bounds (``Scene.bounds`` gathers every mesh's vertices: ~0.6 ms
         for the courtyard's, which the frame asked for up to four times)."""
@@ -145,7 +153,7 @@ class SceneGL:
                 self.mesh_lo[i], self.mesh_hi[i] = used.min(axis=0), used.max(axis=0)
         on_floor = np.zeros(n, bool)
         on_floor[face_mesh[floor]] = True
-        kept = [bool(m.faces.size) and not on_floor[i]
+        kept = [bool(m.faces.size) and not on_floor[i] and i not in self.animated
                 and not any(scene.materials[k].alpha_tested or scene.materials[k].needs_ray_tracing
                             for k in np.unique(m.face_material))
                 for i, m in enumerate(meshes)]
@@ -193,6 +201,40 @@ class SceneGL:
         ok[w <= 1e-6] = False                                  # the eye inside or behind its box's near side
         ok[:, 0] = True
         return ok.shape[1] - 1 - np.argmax(ok[:, ::-1], axis=1)
+
+    def culled(self, ranges) -> CulledRanges:
+        """``CulledRanges`` of ``ranges`` whose boxes follow ``update_meshes``."""
+        c = CulledRanges(ranges)
+        self._culled.append(c)
+        return c
+
+    def update_meshes(self, scene) -> None:
+        """Move the animated meshes to their pose in ``scene`` (this scene posed at another time,
+        ``serenity.scene.animation.pose_scene``: the same meshes in the same order): their vertices
+        in the vertex buffers, their draw ranges' boxes and the uploaded bounds."""
+        if not self.animated:
+            return
+        tangents = scene.merged_tangents() if self.tangent_vbo is not None else None
+        for i in self.animated:
+            m = scene.meshes[i]
+            a, b = int(self.vertex_base[i]), int(self.vertex_base[i + 1])
+            if len(m.positions) != b - a:
+                raise ValueError(f"mesh {m.name!r}: {len(m.positions)} vertices, uploaded with {b - a}")
+            block = np.hstack([m.positions, m.normals, m.uvs]).astype(np.float32)
+            self.vbo.write(block.tobytes(), offset=a * block.shape[1] * 4)
+            if tangents is not None:
+                self.tangent_vbo.write(np.ascontiguousarray(tangents[a:b], np.float32).tobytes(), offset=a * 16)
+            used = m.positions[m.faces.reshape(-1)] if len(m.faces) else m.positions
+            self.mesh_lo[i], self.mesh_hi[i] = used.min(axis=0), used.max(axis=0)
+        for r in self.ranges:
+            if r.mesh in self.animated:
+                m = scene.meshes[r.mesh]
+                sel = m.faces[m.face_material == r.material]
+                corners = m.positions[sel.reshape(-1)]
+                r.lo, r.hi = corners.min(axis=0).astype(np.float64), corners.max(axis=0).astype(np.float64)
+        self.bounds = scene.bounds
+        for c in self._culled:
+            c.refresh()
 
     def vao(self, program, with_attributes=("in_position", "in_normal", "in_uv", "in_tangent")):
         """A VAO binding this scene's buffers to ``program``'s attributes (unused ones skipped)."""

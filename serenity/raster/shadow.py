@@ -45,7 +45,6 @@ import moderngl
 import numpy as np
 
 from serenity.raster.context import clear_depth_rect, load_program
-from serenity.raster.culling import CulledRanges
 from serenity.raster.scene_gl import LOD_PIXEL_ERROR
 
 MAX_CASCADES = 4
@@ -265,8 +264,8 @@ class ShadowPass:
         self._previous: list[Cascade | None] = [None] * cascades  # each tile before its last redraw
         #: tiles drawn by the last ``render`` (the others were still valid)
         self.redrawn = 0
-        self.opaque_ranges = CulledRanges(scene_gl.opaque_caster_ranges + scene_gl.lod_ranges)
-        self.masked_ranges = CulledRanges(scene_gl.masked_caster_ranges)
+        self.opaque_ranges = scene_gl.culled(scene_gl.opaque_caster_ranges + scene_gl.lod_ranges)
+        self.masked_ranges = scene_gl.culled(scene_gl.masked_caster_ranges)
         #: skip the casters' draw ranges outside each tile's light box (``culling.py``; the maps are the same)
         self.cull = True
         #: draw each dense caster at the coarsest level of detail within this many texels of its surface
