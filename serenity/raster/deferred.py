@@ -231,7 +231,7 @@ class DeferredPass(FullscreenPass):
             if history is not None:
                 hist, camera, alpha = history
                 hist.begin()
-                hist.set_uniforms(draws[1][0], HISTORY_UNIT, camera, alpha)
+                hist.set_uniforms(draws[1][0], HISTORY_UNIT, camera, alpha, light.view_proj)
             # the sky's half draws into ours only; the surfaces' into the history's target too
             fbos = (self._split_fbo(gbuffer.depth),
                     self._split_fbo(gbuffer.depth, None if history is None else history[0].target))

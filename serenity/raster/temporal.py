@@ -110,9 +110,14 @@ class IndirectHistory(HistoryTargets):
         """Clear this frame's target to 'no surface' (view depth −1): the sky's pixels keep that."""
         self.fbo.clear(0.0, 0.0, 0.0, -1.0)
 
-    def set_uniforms(self, p, unit: int, camera, alpha: float) -> None:
+    def set_uniforms(self, p, unit: int, camera, alpha: float, view_proj: np.ndarray) -> None:
         """The uniforms of ``glsl/indirect_history.glsl`` in program ``p``, the last frame's output
-        bound to texture unit ``unit``."""
+        bound to texture unit ``unit``; ``view_proj``: this frame's world → clip. Drawn from the last
+        frame's view exactly, the last frame is read by its nearest texel, the pixel itself (the
+        bilinear filter's weights at a texel's centre may miss 1 and 0 by a rounding, and an unchanged
+        view would then drift by that every frame), else bilinearly."""
+        still = self.prev is not None and np.array_equal(self.prev[0], np.asarray(view_proj, np.float64))
+        self.last.filter = (moderngl.NEAREST, moderngl.NEAREST) if still else (moderngl.LINEAR, moderngl.LINEAR)
         self.last.use(location=unit)
         self.set_reproject_uniforms(p, camera)
         for name, value in (("u_prev_irr", unit), ("u_history_alpha", float(alpha))):

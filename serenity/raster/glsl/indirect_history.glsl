@@ -12,7 +12,7 @@
 // the upsampled light slid with them: a moving camera stepped the LPV's light by a few per cent a frame.
 // The deferred pass writes I and the pixel's view depth (rgb, a; a = -1 where it shows the sky: the
 // target is cleared so) for the next frame to read.
-uniform sampler2D u_prev_irr;       // the last frame's I (rgb) and view depth (a), bilinear filtered
+uniform sampler2D u_prev_irr;       // the last frame's I (rgb) and view depth (a), filtered bilinearly
 uniform mat4 u_prev_view_proj;      // the last frame's world -> clip
 uniform vec3 u_prev_camera_pos;
 uniform vec3 u_prev_camera_forward;
@@ -31,7 +31,8 @@ vec3 history_blend(vec3 p, vec3 n, vec3 irr) {
     if (any(lessThan(q, vec2(-0.5))) || any(greaterThan(q, size - 0.5))) return irr;  // outside the last view
     float zp, tol;
     reproject_depth(p, n, u_prev_camera_pos, u_prev_camera_forward, u_pixel_angle, zp, tol);
-    vec4 before = texture(u_prev_irr, (snap_still(q) + 0.5) / size);  // a still view: exactly its pixel
+    // a still view: its pixel's centre, read by the nearest texel (IndirectHistory.set_uniforms)
+    vec4 before = texture(u_prev_irr, (snap_still(q) + 0.5) / size);
     if (abs(before.w - zp) > tol) return irr;
     return before.rgb + u_history_alpha * (irr - before.rgb);  // exactly the light itself when it did not change
 }
