@@ -20,6 +20,7 @@ os.environ.setdefault("LP_NUM_THREADS", "0")
 import numpy as np  # noqa: E402
 
 import serenity.frame as frame_module  # noqa: E402
+import serenity.frame.renderer as frame_renderer  # noqa: E402
 from serenity.bench import camera_path, sun_path  # noqa: E402
 from serenity.config import QUALITY_PRESETS, RenderConfig, ScheduleConfig  # noqa: E402
 from serenity.scene import load  # noqa: E402
@@ -34,7 +35,7 @@ def main() -> int:
     ap.add_argument("--static", action="store_true", help="keep the camera and the sun still")
     args = ap.parse_args()
     w, h = (int(x) for x in args.size.split("x"))
-    frame_module.time.perf_counter = time.process_time  # the stages' clock: CPU seconds
+    frame_renderer.time.perf_counter = time.process_time  # the stages' clock: CPU seconds
     scene = copy.deepcopy(load(args.scene))
     base_cam, base_sun = scene.camera, scene.sun.direction.copy()
     config = RenderConfig.preset(args.quality, schedule=ScheduleConfig(overlap=False))
