@@ -47,6 +47,15 @@ def scenes_equal(a, b) -> list[str]:
         diffs.append("sky")
     if len(a.occlusion_quads) != len(b.occlusion_quads):
         diffs.append("occlusion quad count")
+    ta = {t.mesh: t for t in (a.animation.tracks if a.animation else [])}
+    tb = {t.mesh: t for t in (b.animation.tracks if b.animation else [])}
+    if set(ta) != set(tb):
+        diffs.append("animated meshes")
+    for name in set(ta) & set(tb):
+        for t in (0.0, 1.3, 5.7, 13.1):  # the poses agree at a few times
+            if not np.allclose(ta[name].matrix(t, np.zeros(3)), tb[name].matrix(t, np.zeros(3)), atol=1e-9):
+                diffs.append(f"animation of {name}")
+                break
     for qa, qb in zip(a.occlusion_quads, b.occlusion_quads, strict=False):
         if not all(np.allclose(getattr(qa, k), getattr(qb, k)) for k in ("center", "up", "right", "half_up",
                                                                          "half_right")):

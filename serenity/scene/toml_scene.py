@@ -239,7 +239,7 @@ def _fmt(v) -> str:
 
 
 def save_toml(scene: Scene, path, mesh_file: str) -> None:
-    """Write ``scene``'s camera, sun, sky, quads and exact material values beside ``mesh_file``
+    """Write ``scene``'s camera, sun, sky, quads, animation and exact material values beside ``mesh_file``
     (a path relative to the TOML file, written separately by ``export_glb``). Albedo textures
     stay in the mesh file; the TOML does not override them."""
     lines = ["# Serenity scene file (see serenity/scene/toml_scene.py for the format)", "[scene]",
@@ -254,6 +254,14 @@ def save_toml(scene: Scene, path, mesh_file: str) -> None:
     for q in scene.occlusion_quads:
         lines += ["", "[[occlusion_quads]]"] + [f"{k} = {_fmt(getattr(q, k))}" for k in
                                                 ("center", "up", "right", "half_up", "half_right")]
+    for t in (scene.animation.tracks if scene.animation is not None else []):
+        lines += ["", "[[animation]]", f"mesh = {_fmt(t.mesh)}", f"times = {_fmt(t.times)}"]
+        for k in ("translation", "rotation", "scale", "pivot"):
+            value = getattr(t, k)
+            if value is not None:
+                rows = np.atleast_2d(value) if k != "pivot" else value
+                lines.append(f"{k} = " + ("[" + ", ".join(_fmt(r) for r in rows) + "]" if k != "pivot" else _fmt(rows)))
+        lines += [f"interpolation = {_fmt(t.interpolation.lower())}", f"repeat = {_fmt(t.repeat)}"]
     for m in scene.materials:
         lines += ["", f"[materials.{_fmt(m.name)}]"]
         lines += [f"{k} = {_fmt(getattr(m, k))}" for k in

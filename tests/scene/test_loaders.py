@@ -22,7 +22,7 @@ def _example():
     return mod
 
 
-@pytest.mark.parametrize("name", ["courtyard", "cornell", "mirror-box"])
+@pytest.mark.parametrize("name", ["courtyard", "cornell", "mirror-box", "courtyard-van"])
 def test_glb_plus_toml_load_back_identically(name, tmp_path):
     ex = _example()
     toml = ex.export_scene(name, str(tmp_path))
