@@ -43,6 +43,7 @@ def test_discovery_finds_the_kernel_modules_and_factories():
     names = {m.__name__ for m in MODULES}
     assert {"serenity.kernels.lpv.propagate", "serenity.kernels.atmosphere", "serenity.kernels.launch"} <= names
     assert len(SPECIALISED) >= 6  # propagate ×2, leak guard ×2, sky sequence ×2
+    assert sum(n.startswith("serenity.kernels.dynamic.trace_dynamic_kernel(") for n, _ in SPECIALISED) == 4
 
 
 def test_every_kernel_factory_is_declared():
