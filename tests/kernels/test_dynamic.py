@@ -259,6 +259,7 @@ def test_closest_and_any_hits_match_a_kdtree_of_the_posed_scene(device, top_leve
         got = two.intersect(o, d)
         ref = ref_tree.intersect(o, d)
         assert_agree(got, ref, v, f, o, d)
+        assert np.all(got.prim[-500:] == -1) and np.all(np.isinf(got.t[-500:]))  # the rays into the sky
         dynamic_hits += np.count_nonzero(got.prim >= len(static[1]))
         occ, occ_ref = two.occluded(o, d), ref_tree.occluded(o, d)
         # any hit differs only where a closest hit did (a grazed edge)
