@@ -252,7 +252,7 @@ def test_closest_and_any_hits_match_a_kdtree_of_the_posed_scene(device, top_leve
     rng = np.random.default_rng(1)
     static, _, dyn, two = make(device, top_level)
     dynamic_hits = 0
-    for pose in range(6):
+    for pose in range(8):
         dyn.set_transforms(random_poses(rng, uneven=pose % 3 == 2))
         ref_tree, v, f = posed_reference(static, dyn)
         o, d = scene_rays(rng, dyn)
