@@ -42,8 +42,9 @@ import numpy as np
 
 from serenity.device import cpu_threads, init_warp
 from serenity.io.results import write_results
-from serenity.kernels.dynamic import TOP_LEVELS, DynamicGeometry, TwoLevelTracer
+from serenity.kernels.dynamic import TOP_LEVELS, DynamicGeometry
 from serenity.kernels.kdtree import Hits, KdTree
+from serenity.kernels.two_level import TwoLevelTracer
 from serenity.scene.procedural import build_scene
 
 _T0 = time.perf_counter()

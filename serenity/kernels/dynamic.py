@@ -44,18 +44,10 @@ object's first triangle (objects numbered in the order they were added, each aft
 those before it) + the face's index in the object (−1 on a miss), and the barycentrics in the
 kd-tree's convention p = (1−u−v)·v0 + u·v1 + v·v2 (those of an affine image are the object-space
 ones). A caller puts the dynamic triangles after the static ones with ``prim_base`` = the static
-triangle count (:class:`TwoLevelTracer` does). There is no alpha test for dynamic triangles.
+triangle count (``two_level.TwoLevelTracer`` does). There is no alpha test for dynamic triangles.
 
-:class:`TwoLevelTracer` answers a :class:`KdTree` (static) and a :class:`DynamicGeometry` together,
-static first: the kd-tree's query is its own, unchanged (its reordering, packets and scalar-tmax
-fast path), and the dynamic kernel then takes each ray's static hit as its tmax and replaces it where
-an object is nearer, in place, so the top level culls every object behind the static hit; equal t
-keep the static hit (the lower index). With no dynamic object its results are the kd-tree's, bit for
-bit. The other order (the dynamic query first, its hits the kd-tree's per-ray tmax, then a merge)
-cost as much or more: CPU seconds of the courtyard's 320x180 camera rays 37.5 ms static first against
-39.1 (10 objects of 10k triangles) and 22.3 against 24.5 (one of 100k), 64k random rays among the
-objects 45.7 against 44.7 and 40.2 against 40.4 (2 threads; ``benchmarks/bench_dynamic.py``'s
-``order`` figures time both).
+:class:`serenity.kernels.two_level.TwoLevelTracer` traces a static kd-tree and a
+:class:`DynamicGeometry` as one scene.
 """
 
 from __future__ import annotations
@@ -465,7 +457,7 @@ def triangle_bvh(tris: np.ndarray, device: str) -> wp.Bvh:
     return wp.Bvh(lo, hi, constructor="sah", leaf_size=BVH_LEAF_SIZE)
 
 
-def _ray_batch(origins, directions, tmax, device: str) -> tuple:
+def ray_batch(origins, directions, tmax, device: str) -> tuple:
     """(origins, directions, tmax, whether the rays are Warp arrays): the kd-tree's checks
     (``KdTree._rays`` / ``KdTree._device_rays``); numpy rays become Warp arrays on ``device`` (a view
     on the CPU, a copy on a GPU), a numpy (N,) tmax too."""
@@ -488,7 +480,7 @@ class DynamicGeometry:
 
     ``add(positions, faces)`` an object (object space; id = its index), ``set_transforms(matrices)``
     each frame, then :meth:`intersect` (closest hit) and :meth:`occluded` (any hit), or both beside a
-    kd-tree through :class:`TwoLevelTracer`. ``prim_base`` is added to every hit's triangle index.
+    kd-tree through ``two_level.TwoLevelTracer``. ``prim_base`` is added to every hit's triangle index.
     """
 
     def __init__(self, device: str | None = None, *, prim_base: int = 0, top_level: str = TOP_LEVEL):
@@ -620,7 +612,7 @@ class DynamicGeometry:
     def intersect(self, origins, directions, tmax=np.inf, *, tmin: float = 0.0, threads: int | None = None) -> Hits:
         """Closest hits among the objects (module docstring): numpy rays give numpy :class:`Hits`,
         Warp rays on this device Warp ones."""
-        o, d, tm, on_device = _ray_batch(origins, directions, tmax, self.device)
+        o, d, tm, on_device = ray_batch(origins, directions, tmax, self.device)
         n = o.shape[0]
         dev = self.device
         hits = Hits(t=wp.full(n, np.inf, dtype=float, device=dev), prim=wp.full(n, -1, dtype=wp.int32, device=dev),
@@ -632,7 +624,7 @@ class DynamicGeometry:
                  threads: int | None = None) -> np.ndarray | wp.array:
         """(N,) bool: does an object lie on each ray with tmin < t < tmax? Warp rays give an (N,) int32
         Warp array on this device, 1 where occluded."""
-        o, d, tm, on_device = _ray_batch(origins, directions, tmax, self.device)
+        o, d, tm, on_device = ray_batch(origins, directions, tmax, self.device)
         out = wp.zeros(o.shape[0], dtype=wp.int32, device=self.device)
         self.occlude_into(out, o, d, tm, tmin, threads)
         return out if on_device else out.numpy().astype(bool)
@@ -669,35 +661,3 @@ class DynamicGeometry:
         none_i = wp.empty(0, dtype=wp.int32, device=dev)
         self._launch(True, o.shape[0], o, d, tm, tmin, 0, [none_f, none_i, none_f, none_f, occluded], threads)
 
-
-class TwoLevelTracer:
-    """A static :class:`KdTree` and a :class:`DynamicGeometry` traced as one scene (module docstring):
-    triangles numbered static first (the kd-tree's 0 … F−1), then the dynamic ones from F on (the
-    ``DynamicGeometry``'s own ``prim_base`` is not used). Queries on the dynamic geometry's device,
-    in :class:`KdTree`'s forms: numpy in and out, or Warp arrays there in and out."""
-
-    def __init__(self, tree: KdTree, dynamic: DynamicGeometry):
-        self.tree = tree
-        self.dynamic = dynamic
-        self.device = dynamic.device
-
-    @property
-    def prim_base(self) -> int:
-        """The first dynamic triangle's index: the static triangle count."""
-        return len(self.tree.faces)
-
-    def intersect(self, origins, directions, tmax=np.inf, *, tmin: float = 0.0, threads: int | None = None,
-                  sort: bool | None = None) -> Hits:
-        """Closest hits, static or dynamic (``sort`` as ``KdTree.intersect``'s, for the static query)."""
-        o, d, tm, on_device = _ray_batch(origins, directions, tmax, self.device)
-        hits = self.tree.intersect(o, d, tm, self.device, tmin=tmin, threads=threads, sort=sort)
-        self.dynamic.trace_into(hits, o, d, tm, tmin, self.prim_base, threads)
-        return hits if on_device else hits.numpy()
-
-    def occluded(self, origins, directions, tmax=np.inf, *, tmin: float = 0.0, threads: int | None = None,
-                 sort: bool | None = None) -> np.ndarray | wp.array:
-        """Any hit, static or dynamic: (N,) bool, or an (N,) int32 Warp array for Warp rays."""
-        o, d, tm, on_device = _ray_batch(origins, directions, tmax, self.device)
-        occ = self.tree.occluded(o, d, tm, self.device, tmin=tmin, threads=threads, sort=sort)
-        self.dynamic.occlude_into(occ, o, d, tm, tmin, threads)
-        return occ if on_device else occ.numpy().astype(bool)
