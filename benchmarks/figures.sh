@@ -42,6 +42,7 @@ STEPS=(
   "aa|2|$PY benchmarks/bench_aa.py"
   "startup|3|$PY benchmarks/bench_startup.py --runs 2"
   "lod|2|$PY benchmarks/bench_lod.py"
+  "dynamic-tracing|3|$PY benchmarks/bench_dynamic.py"
   "sky|2|$PY benchmarks/bench_sky.py --json $R/sky.json --chart $R/sky.png"
   "sky-sh|1|$PY benchmarks/bench_sky_sh.py"
   "sky-anchor|1|$PY benchmarks/bench_sky_anchor.py"
