@@ -754,6 +754,27 @@ def lod(data: dict) -> str:
         f"{data['build_seconds']:.1f} s.")
 
 
+@table("dynamic-tracing", "results/dynamic_tracing.json")
+def dynamic_tracing(data: dict) -> str:
+    """Two-level ray tracing: a frame's update of the moving objects and their extra traversal, beside
+    a kd-tree rebuilt over the posed scene."""
+    st = data["settings"]
+    w, h = st["camera_rays"]
+    rows = []
+    for label, runs in (("in one object", data["triangles"]["one_object"]),
+                        ("over 10 objects", data["triangles"]["ten_objects"]),
+                        ("objects of ~1k triangles", data["objects"][data["top_level_faster"]])):
+        for r in runs:
+            rows.append([f"{r['triangles']:,}", f"{r['objects']}", label, f"{r['update_ms']:.1f}",
+                         f"{r['camera.extra_ms']:.1f}", f"{r['random.extra_ms']:.1f}", f"{r['rebuild_ms']:.0f}",
+                         f"{r['camera.rebuilt_query_ms']:.1f}"])
+    return md(["moving triangles", "objects", "arranged", "update (ms)", f"extra, {w}×{h} camera rays (ms)",
+               f"extra, {st['random_rays'] // 1000}k random rays (ms)", "kd-tree rebuilt over the posed scene (ms)",
+               "camera rays through it (ms)"], rows) + (
+        f"\n\nStatic part: the {st['scene']} ({st['static_triangles']:,} triangles); {st['threads']} threads, "
+        f"median of {st['frames']} frames; top level `{data['top_level_faster']}`.")
+
+
 # ----------------------------------------------------------------------------------- the documents
 
 
