@@ -41,8 +41,7 @@ BREAKFAST = ROOT / "scenes" / "breakfast_room" / "breakfast_room.toml"
 
 def _set_bound(renderer, bound: float) -> None:
     """What ``RenderConfig.lod_pixel_error`` sets, on a built renderer (the passes read it per draw)."""
-    renderer.gbuffer_pass.lod_pixel_error = bound
-    renderer.shadow_pass.lod_texel_error = 0.5 * bound
+    renderer.gbuffer_pass.lod_pixel_error = renderer.shadow_pass.lod_pixel_error = bound
     renderer.shadow_pass.invalidate()
 
 

@@ -89,8 +89,7 @@ class Renderer(VolumeStages, RayTracingStages):
             self.shadow_size = cfg.shadow.size_for(self.width, self.height)
             self.shadow_pass = ShadowPass(self.ctx, self.scene_gl, self.shadow_size, cfg.shadow.cascades)
             self.gbuffer_pass = GBufferPass(self.ctx, self.scene_gl, cfg.texture_taps)
-            self.gbuffer_pass.lod_pixel_error = cfg.lod_pixel_error
-            self.shadow_pass.lod_texel_error = 0.5 * cfg.lod_pixel_error
+            self.gbuffer_pass.lod_pixel_error = self.shadow_pass.lod_pixel_error = cfg.lod_pixel_error
             self.deferred_pass = DeferredPass(self.ctx)
             self.tonemap_pass = TonemapPass(self.ctx)
             self.ssao_pass = SSAOPass(self.ctx, cfg.ssao, cfg.indirect.scale, cfg.indirect.tile_balance)
@@ -111,7 +110,7 @@ class Renderer(VolumeStages, RayTracingStages):
                 self.osm_pass = (ShadowPass(self.ctx, self.scene_gl, cfg.rt.osm_size, 3)
                                  if cfg.rt.sun_shadows == "osm" else None)
                 if self.osm_pass is not None:
-                    self.osm_pass.lod_texel_error = 0.5 * cfg.lod_pixel_error
+                    self.osm_pass.lod_pixel_error = cfg.lod_pixel_error
                 self.rt_upload = RTGBufferUpload(self.ctx)
                 self.rt_upload.resize(self.width, self.height)
                 self.rt_deferred = DeferredPass(self.ctx)

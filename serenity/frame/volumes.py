@@ -59,7 +59,7 @@ class VolumeStages:
         self.lpv = None
         if cfg.lpv.enabled:
             self.rsm_pass = RSMPass(ctx, self.scene_gl, cfg.lpv.rsm_size)
-            self.rsm_pass.lod_texel_error = cfg.lod_pixel_error
+            self.rsm_pass.lod_pixel_error = cfg.lod_pixel_error
             self.lpv = LightPropagationVolume(cfg.lpv, self.device)
             self.gbuffer_samples = GBufferSamples(ctx, cfg.lpv.sky_vpl_stride)
             self.gbuffer_samples.resize(self.width, self.height)

@@ -459,13 +459,13 @@ def triangle_bvh(tris: np.ndarray, device: str) -> wp.Bvh:
 
 def ray_batch(origins, directions, tmax, device: str) -> tuple:
     """(origins, directions, tmax, whether the rays are Warp arrays): the kd-tree's checks
-    (``KdTree._rays`` / ``KdTree._device_rays``); numpy rays become Warp arrays on ``device`` (a view
+    (``KdTree.host_rays`` / ``KdTree.device_rays``); numpy rays become Warp arrays on ``device`` (a view
     on the CPU, a copy on a GPU), a numpy (N,) tmax too."""
     if isinstance(origins, wp.array) or isinstance(directions, wp.array):
-        o, d, tm, _ = KdTree._device_rays(origins, directions, tmax, device)
+        o, d, tm, _ = KdTree.device_rays(origins, directions, tmax, device)
         on_device = True
     else:
-        o, d, tm = KdTree._rays(origins, directions, tmax)
+        o, d, tm = KdTree.host_rays(origins, directions, tmax)
         copy = not device.startswith("cpu")
         o = wp.array(o, dtype=wp.vec3, device=device, copy=copy)
         d = wp.array(d, dtype=wp.vec3, device=device, copy=copy)

@@ -67,9 +67,9 @@ class RSMPass:
         self.ranges = scene_gl.culled(scene_gl.ranges + scene_gl.lod_ranges)
         #: skip the draw ranges outside the sun's view (``culling.py``; the map is the same)
         self.cull = True
-        #: draw each dense mesh at the coarsest level of detail within this many texels of its surface
-        #: (``SceneGL.levels``; 0 = the full meshes)
-        self.lod_texel_error = LOD_PIXEL_ERROR
+        #: ``RenderConfig.lod_pixel_error``: each dense mesh is drawn at the coarsest level of detail
+        #: within this many texels of its surface (``SceneGL.levels``; 0 = the full meshes)
+        self.lod_pixel_error = LOD_PIXEL_ERROR
         #: (draw ranges drawn, draw ranges) of the last ``render``
         self.last_draws = (0, len(self.ranges.ranges))
 
@@ -88,7 +88,7 @@ class RSMPass:
                     q["u_sun_dir"].value = tuple(float(x) for x in sun_direction)
                     q["u_sun_irradiance"].value = tuple(float(x) for x in sun_irradiance)
                     q["u_texel_area"].value = float(self.texel_area)
-            levels = self.scene_gl.levels(vp, self.size, self.size, self.lod_texel_error)
+            levels = self.scene_gl.levels(vp, self.size, self.size, self.lod_pixel_error)
             for r in self.ranges.visible(vp if self.cull else None, levels=levels):
                 m = self.scene_gl.materials[r.material]
                 albedo = np.asarray(m.albedo, np.float64) * self.scene_gl.mean_texture_albedo.get(r.material, 1.0)

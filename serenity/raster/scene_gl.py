@@ -27,6 +27,7 @@ from serenity.raster.context import anisotropy
 from serenity.raster.culling import CulledRanges
 from serenity.raster.interop import upload_texture
 from serenity.scene.lod import scene_levels
+from serenity.scene.model import used_vertices, vertex_tangents
 
 #: the default bound on a level of detail's error, in pixels of the image it is drawn into (or texels
 #: of a shadow map): a mesh is drawn at the coarsest level whose surface lies at most this far from
@@ -149,8 +150,7 @@ class SceneGL:
         self.mesh_hi = np.zeros((n, 3))
         for i, m in enumerate(meshes):
             if len(m.faces):
-                used = m.positions[m.faces.reshape(-1)]
-                self.mesh_lo[i], self.mesh_hi[i] = used.min(axis=0), used.max(axis=0)
+                self.mesh_lo[i], self.mesh_hi[i] = _used_box(m)
         on_floor = np.zeros(n, bool)
         on_floor[face_mesh[floor]] = True
         kept = [bool(m.faces.size) and not on_floor[i] and i not in self.animated
@@ -214,7 +214,6 @@ class SceneGL:
         in the vertex buffers, their draw ranges' boxes and the uploaded bounds."""
         if not self.animated:
             return
-        tangents = scene.merged_tangents() if self.tangent_vbo is not None else None
         for i in self.animated:
             m = scene.meshes[i]
             a, b = int(self.vertex_base[i]), int(self.vertex_base[i + 1])
@@ -222,10 +221,10 @@ class SceneGL:
                 raise ValueError(f"mesh {m.name!r}: {len(m.positions)} vertices, uploaded with {b - a}")
             block = np.hstack([m.positions, m.normals, m.uvs]).astype(np.float32)
             self.vbo.write(block.tobytes(), offset=a * block.shape[1] * 4)
-            if tangents is not None:
-                self.tangent_vbo.write(np.ascontiguousarray(tangents[a:b], np.float32).tobytes(), offset=a * 16)
-            used = m.positions[m.faces.reshape(-1)] if len(m.faces) else m.positions
-            self.mesh_lo[i], self.mesh_hi[i] = used.min(axis=0), used.max(axis=0)
+            if self.tangent_vbo is not None:  # this mesh's only (Scene.merged_tangents computes every mesh's)
+                t = vertex_tangents(m.positions, m.normals, m.uvs, m.faces)
+                self.tangent_vbo.write(np.ascontiguousarray(t, np.float32).tobytes(), offset=a * 16)
+            self.mesh_lo[i], self.mesh_hi[i] = _used_box(m)
         for r in self.ranges:
             if r.mesh in self.animated:
                 m = scene.meshes[r.mesh]
@@ -269,6 +268,12 @@ class SceneGL:
             self.tangent_vbo.release()
         for t in (*self.textures.values(), *self.normal_textures.values()):
             t.release()
+
+
+def _used_box(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The box of the vertices ``mesh``'s faces use."""
+    p = mesh.positions[used_vertices(mesh.faces, len(mesh.positions))]
+    return p.min(axis=0), p.max(axis=0)
 
 
 def _channels(a: np.ndarray, c: int) -> np.ndarray:

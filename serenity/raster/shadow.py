@@ -268,10 +268,11 @@ class ShadowPass:
         self.masked_ranges = scene_gl.culled(scene_gl.masked_caster_ranges)
         #: skip the casters' draw ranges outside each tile's light box (``culling.py``; the maps are the same)
         self.cull = True
-        #: draw each dense caster at the coarsest level of detail within this many texels of its surface
-        #: (``SceneGL.levels``; 0 = the full meshes): half the depth bias's texel, so that a level
-        #: never moves a caster's depth past the bias that keeps a surface from shadowing itself
-        self.lod_texel_error = 0.5 * LOD_PIXEL_ERROR
+        #: ``RenderConfig.lod_pixel_error``: each dense caster is drawn at the coarsest level of detail
+        #: within half this many texels of its surface (``SceneGL.levels``; 0 = the full meshes), half
+        #: so that a level never moves a caster's depth past the bias that keeps a surface from
+        #: shadowing itself (one texel)
+        self.lod_pixel_error = LOD_PIXEL_ERROR
         #: (caster draw ranges drawn, caster draw ranges × tiles drawn) of the last ``render``
         self.last_draws = (0, 0)
 
@@ -346,7 +347,7 @@ class ShadowPass:
                 self.program["u_light_view_proj"].write(c.view_proj.T.astype(np.float32).tobytes())
                 cull = c.view_proj if self.cull else None
                 # the casters (the bottom plane shadows nothing): runs of adjacent ranges, one call each
-                levels = self.scene_gl.levels(c.view_proj, self.size, self.size, self.lod_texel_error)
+                levels = self.scene_gl.levels(c.view_proj, self.size, self.size, 0.5 * self.lod_pixel_error)
                 for r in self.opaque_ranges.visible(cull, merge_materials=True, levels=levels):
                     self.vao.render(moderngl.TRIANGLES, vertices=r.count, first=r.first)
                 if self.program_masked is not None:

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from serenity.errors import SceneError
+from serenity.scene.model import used_vertices
 
 INTERPOLATIONS = ("LINEAR", "STEP")
 REPEATS = ("once", "loop", "pingpong")
@@ -175,7 +176,8 @@ class Animation:
 
 
 def _bounds_centre(mesh) -> np.ndarray:
-    p = mesh.positions[np.unique(mesh.faces)] if len(mesh.faces) else mesh.positions
+    """The centre of the box of the vertices ``mesh``'s faces use (all of them for a mesh without faces)."""
+    p = mesh.positions[used_vertices(mesh.faces, len(mesh.positions))] if len(mesh.faces) else mesh.positions
     return (p.min(axis=0).astype(np.float64) + p.max(axis=0)) * 0.5
 
 

@@ -131,12 +131,11 @@ class _Surface:
         self.tri = points[faces].astype(np.float64)                    # (F, 3, 3)
         centre = self.tri.mean(axis=1)
         reach = np.linalg.norm(self.tri - centre[:, None], axis=2).max(axis=1)  # centre to farthest corner
-        #: the reach of the usual triangle (95th percentile)
-        self.reach = float(np.quantile(reach, 0.95)) if len(reach) else 0.0
+        usual = float(np.quantile(reach, 0.95)) if len(reach) else 0.0  # the usual triangle's reach
         # sample points: 4 per usual triangle, and on a larger one the centres of an m x m
         # subdivision, m its reach in usual reaches (at most 8), so that a point over a large
         # triangle finds it among its nearest samples
-        m = np.clip(np.ceil(reach / max(self.reach, 1e-300)), 1, 8).astype(np.int64)
+        m = np.clip(np.ceil(reach / max(usual, 1e-300)), 1, 8).astype(np.int64)
         samples, owner = [], []
         for k in np.unique(m):
             ts = np.flatnonzero(m == k)

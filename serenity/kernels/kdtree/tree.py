@@ -124,7 +124,9 @@ class KdTree:
     # -- queries --------------------------------------------------------------------------------
 
     @staticmethod
-    def _rays(origins, directions, tmax) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def host_rays(origins, directions, tmax) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """numpy rays checked (as many origins as directions) and packed float32; ``tmax`` a 0-d
+        float32 for one value, else (N,) float32 (also what ``serenity.kernels.dynamic`` queries with)."""
         o = np.ascontiguousarray(np.asarray(origins, np.float32).reshape(-1, 3))
         d = np.ascontiguousarray(np.asarray(directions, np.float32).reshape(-1, 3))
         if len(o) != len(d):
@@ -135,10 +137,10 @@ class KdTree:
         return o, d, tm
 
     @staticmethod
-    def _device_rays(origins, directions, tmax, device: str | None) -> tuple[wp.array, wp.array, object, str]:
+    def device_rays(origins, directions, tmax, device: str | None) -> tuple[wp.array, wp.array, object, str]:
         """Warp rays checked, and their device: ``origins`` and ``directions`` 1-D ``wp.vec3`` arrays of
         one length on one device (the query's: ``device``, where given, must name it); ``tmax`` as
-        :meth:`_rays` makes it (a scalar stays 0-d), or a 1-D float32 Warp array there, used as it is."""
+        :meth:`host_rays` makes it (a scalar stays 0-d), or a 1-D float32 Warp array there, used as it is."""
         if not (isinstance(origins, wp.array) and isinstance(directions, wp.array)):
             raise SerenityError("ray origins and directions: both Warp arrays or neither")
         for name, a in (("origins", origins), ("directions", directions)):
@@ -165,15 +167,15 @@ class KdTree:
 
     def _batch(self, origins, directions, tmax, device: str | None) -> tuple:
         """(origins, directions, tmax, device, whether the rays are Warp arrays): numpy rays through
-        :meth:`_rays` on the resolved ``device``, Warp rays through :meth:`_device_rays` on theirs."""
+        :meth:`host_rays` on the resolved ``device``, Warp rays through :meth:`device_rays` on theirs."""
         if isinstance(origins, wp.array) or isinstance(directions, wp.array):
-            return (*self._device_rays(origins, directions, tmax, device), True)
-        return (*self._rays(origins, directions, tmax), resolve_device(device), False)
+            return (*self.device_rays(origins, directions, tmax, device), True)
+        return (*self.host_rays(origins, directions, tmax), resolve_device(device), False)
 
     def _query_inputs(self, o, d, tm, dev: str, tmin: float, sort: bool | None,
                       threads: int | None) -> tuple[list, wp.array, bool]:
         """The query kernels' inputs (the tree, the rays in their traced order) and that order (empty:
-        as given; else ray i of the kernel is the caller's ray ``order[i]``). ``tm``: :meth:`_rays`'
+        as given; else ray i of the kernel is the caller's ray ``order[i]``). ``tm``: :meth:`host_rays`'
         tmax, 0-d when every ray has the same (then it needs no reordering). Third: whether a batch
         left in its order is coherent (:func:`batch_is_coherent`; on the CPU it is traced in packets).
         Warp rays on a GPU: ``sort=None`` sorts every batch of ≥ ``SORT_MIN_RAYS`` rays, without the
@@ -188,7 +190,7 @@ class KdTree:
         coherent = False
         if order.shape[0]:
             origins, directions = gather_in_order(order, [origins, directions], dev, threads, workspace)
-            if np.ndim(tm) > 0:  # a scalar tmax (0-d ``tm``, :meth:`_rays`) needs no reordering
+            if np.ndim(tm) > 0:  # a scalar tmax (0-d ``tm``, :meth:`host_rays`) needs no reordering
                 (tmax,) = gather_in_order(order, [tmax], dev, threads, workspace)
         elif is_cpu(dev) and n >= PACKET_MIN_RAYS:
             # with sort=None, ray_order leaves a big batch in its order only when it found it coherent
@@ -262,7 +264,7 @@ class KdTree:
             step = eps / np.maximum(np.linalg.norm(di, axis=1), 1e-30)
             oi = (o[idx] + t0[:, None] * di).astype(np.float32)
             tmax_i = (np.broadcast_to(tm, (len(o),))[idx] - t0).astype(np.float32)
-            oi, di32, tmax_i = self._rays(oi, d[idx], tmax_i)
+            oi, di32, tmax_i = self.host_rays(oi, d[idx], tmax_i)
             again = self._closest(oi, di32, tmax_i, dev, float(step.min()), threads, None, None)
             hit = again.prim >= 0
             hits.t[idx] = np.where(hit, (t0 + again.t).astype(np.float32), np.inf)
